@@ -1,0 +1,524 @@
+"""Sound pose-and-velocity tracking through Type 2 singularities (Algorithm 1).
+
+At every sample ``k`` the tracker holds boxes ``[x]_k`` and ``[xd]_k`` that
+contain the true end-effector pose and velocity, for a batch of ``B``
+scenarios at once:
+
+1. **prediction** over the sampling interval ``t_s``, from ``|xdd| <= a_max``
+   (Taylor with Lagrange remainder, one component at a time)::
+
+       [xd]_{k+1} = [xd]_k + t_s [a]
+       [x]_{k+1}  = [x]_k  + t_s [xd]_k + (t_s^2 / 2) [a]
+
+   (Algorithm 1 line 7 as printed adds ``t_s [xd]_k`` with the velocity
+   contracted *at* ``t_k`` only, which does not enclose the velocity over the
+   interval; the Taylor form does.)
+2. **measurement**: ``[q]_{k+1} = q_meas + [-eps_q, eps_q]``; the joint
+   velocity from the finite difference ``(q_{k+1} - q_k) / t_s`` plus its
+   error: quantisation ``2 eps_q / t_s`` and, in the sound model, truncation
+   ``(t_s / 2) max |qdd|`` over the interval (Taylor again).  The joint
+   acceleration bound is either given or *derived* every step from the boxes
+   of the previous step and ``a_max`` (see :func:`_qdd_over_step`).
+3. **contraction** to a fixpoint: HC4Revise and interval Newton on
+   ``f(x, q, xi) = 0`` for the pose, Gauss–Seidel on ``J_x xd = -J_q qd`` for
+   the velocity; optionally the calibration box ``[xi]`` is kept contracted
+   from step to step (the true geometry is constant).
+4. **mode**: +1 / -1 when ``mode_sign * det J_x`` has that sign over the whole
+   box, else 0.
+
+If a box becomes empty, some assumption (``a_max``, ``[xi]``, ``eps_q``, the
+initial box, the joint-acceleration bound) was violated: the scenario is
+reported ``inconsistent`` at that step and never given a verdict.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import numpy as np
+
+from . import interval as I
+from .contractors import hc4_pose, mode_of, newton, pose_solutions, velocity
+from .errors import InputError
+from .linalg import linear_enclosure
+
+__all__ = [
+    "Verdict",
+    "VelocityModel",
+    "TrackerSettings",
+    "TrackResult",
+    "BatchResult",
+    "initial_box_from_mode",
+    "track",
+    "track_batch",
+]
+
+
+class Verdict(str, Enum):
+    """Outcome of a tracked run (a value, never ``None``)."""
+
+    MODE_CHANGED = "mode-changed"
+    MODE_UNCHANGED = "mode-unchanged"
+    UNKNOWN = "unknown"
+    INCONSISTENT = "inconsistent"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class VelocityModel(str, Enum):
+    """Error model of the finite-difference joint velocity."""
+
+    #: quantisation 2 eps_q / t_s plus truncation (t_s / 2) max|qdd| (default).
+    SOUND = "sound"
+    #: the paper's quantisation-only bound 2 eps_q / t_s.  NOT sound: the
+    #: finite difference's truncation error is ignored (kept to reproduce the
+    #: paper's Table II).
+    PAPER = "paper"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class TrackerSettings:
+    """Bounds and options of the tracker.
+
+    Parameters
+    ----------
+    t_s : float
+        Sampling period, s.
+    eps_q : float or array (n,)
+        Encoder error bound, rad: ``|q_meas - q_true| <= eps_q``.
+    a_max : array (n,)
+        End-effector acceleration bound, m/s^2 (componentwise ``|xdd_i| <= a_max_i``).
+    v_max : array (n,)
+        End-effector velocity bound, m/s (``inf`` = none).
+    xd0 : array (n,)
+        Initial velocity bound, m/s: ``|xd(0)| <= xd0`` (the paper's 0.1 m/s).
+    velocity_model : VelocityModel
+        ``SOUND`` (default) or ``PAPER`` (quantisation only, unsound).
+    qdd_bound : float or array (n,) or None
+        Assumed bound on ``|qdd|``, rad/s^2.  ``None`` (default) derives a bound
+        at every step from the boxes and ``a_max``; a number is an assumption
+        the user vouches for (intersected with the derived one).
+    keep_xi : bool
+        Keep the calibration box contracted across steps.
+    max_iter : int
+        Maximal fixpoint iterations per step.
+    rel_tol : float
+        The fixpoint stops when no box width shrinks by more than this fraction.
+    """
+
+    t_s: float
+    eps_q: float | np.ndarray
+    a_max: np.ndarray
+    v_max: np.ndarray | None = None
+    xd0: np.ndarray | None = None
+    velocity_model: VelocityModel = VelocityModel.SOUND
+    qdd_bound: float | np.ndarray | None = None
+    keep_xi: bool = False
+    max_iter: int = 6
+    rel_tol: float = 0.02
+
+    def validated(self, n: int) -> "TrackerSettings":
+        """Check values and broadcast vectors to shape ``(n,)``."""
+
+        def vec(v, name, default=None, allow_inf=False):
+            if v is None:
+                v = default
+            a = np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)).copy()
+            if np.any(np.isnan(a)) or np.any(a < 0) or (not allow_inf and not np.all(np.isfinite(a))):
+                raise InputError(f"{name} must be {'non-negative' if allow_inf else 'finite and non-negative'}, got {v}")
+            return a
+
+        if not (np.isfinite(self.t_s) and self.t_s > 0):
+            raise InputError(f"sampling period t_s must be positive and finite, got {self.t_s}")
+        if int(self.max_iter) < 1:
+            raise InputError("max_iter must be at least 1")
+        qdd = None if self.qdd_bound is None else vec(self.qdd_bound, "qdd_bound", allow_inf=True)
+        return replace(
+            self,
+            eps_q=vec(self.eps_q, "eps_q"),
+            a_max=vec(self.a_max, "a_max"),
+            v_max=vec(self.v_max, "v_max", np.inf, allow_inf=True),
+            xd0=vec(self.xd0, "xd0", np.inf, allow_inf=True),
+            velocity_model=VelocityModel(self.velocity_model),
+            qdd_bound=qdd,
+        )
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """Per-scenario summaries of a batched run (arrays of shape ``(B,)``).
+
+    ``initial_mode``/``final_mode``: certified mode at the first/last sample
+    (0 = not certified); ``certified_at_step``: first sample from which the
+    final mode stays certified to the end (-1 if none); ``inconsistent_at_step``:
+    first sample where a box became empty (-1 if none);
+    ``max_width_pose``/``max_width_velocity``: largest box side over the run
+    (m, m/s) before any inconsistency.
+    """
+
+    verdict: np.ndarray
+    initial_mode: np.ndarray
+    final_mode: np.ndarray
+    certified_at_step: np.ndarray
+    inconsistent_at_step: np.ndarray
+    max_width_pose: np.ndarray
+    max_width_velocity: np.ndarray
+    steps: int
+    elapsed_s: float
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    """One tracked run with its per-step boxes.
+
+    Attributes
+    ----------
+    verdict : Verdict
+    initial_mode, final_mode : int
+        Certified modes at the first and last sample (0 = not certified).
+    certified_at_step, inconsistent_at_step : int
+        See :class:`BatchResult` (-1 = none).
+    max_width_pose, max_width_velocity : float
+        ``m_x`` (m) and ``m_xd`` (m/s) of the paper's Table II.
+    x_lo, x_hi, xd_lo, xd_hi : array (K, n)
+        Pose (m) and velocity (m/s) boxes at every sample.
+    mode : array (K,)
+        Certified mode at every sample.
+    qdd_bound : array (K, n)
+        Joint-acceleration bound used at every sample, rad/s^2 (``inf`` where none).
+    steps : int
+    elapsed_s : float
+    """
+
+    verdict: Verdict
+    initial_mode: int
+    final_mode: int
+    certified_at_step: int
+    inconsistent_at_step: int
+    max_width_pose: float
+    max_width_velocity: float
+    x_lo: np.ndarray
+    x_hi: np.ndarray
+    xd_lo: np.ndarray
+    xd_hi: np.ndarray
+    mode: np.ndarray
+    qdd_bound: np.ndarray
+    steps: int
+    elapsed_s: float
+    settings: TrackerSettings = field(repr=False, default=None)
+
+    def summary(self) -> dict:
+        """JSON-ready summary (SI units)."""
+        return {
+            "verdict": self.verdict.value,
+            "initial_mode": int(self.initial_mode),
+            "final_mode": int(self.final_mode),
+            "certified_at_step": None if self.certified_at_step < 0 else int(self.certified_at_step),
+            "inconsistent_at_step": None if self.inconsistent_at_step < 0 else int(self.inconsistent_at_step),
+            "steps": int(self.steps),
+            "max_width_pose_m": float(self.max_width_pose),
+            "max_width_velocity_mps": float(self.max_width_velocity),
+            "elapsed_s": float(self.elapsed_s),
+        }
+
+
+def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_box=None, x_search=None):
+    """Enclosure of the pose in assembly mode ``mode`` for the first sample.
+
+    Encloses every solution of ``f(x, q, xi) = 0`` with ``q in q0 + [eps_q]``,
+    ``xi in [xi]``, inside ``x_search`` (the robot's ``x_bounds``), and returns
+    the hull of the solution boxes of the requested mode.
+
+    Raises
+    ------
+    InputError
+        If no solution of that mode exists (the mode does not match the data),
+        or a solution box's mode cannot be certified (start too close to a
+        Type 2 singularity).
+    """
+    s = settings.validated(model.n)
+    q0 = np.asarray(q0, dtype=np.float64)
+    Q = I.sub(q0, q0, s.eps_q, s.eps_q)[0], I.add(q0, q0, s.eps_q, s.eps_q)[1]
+    XI = model.xi_box() if xi_box is None else xi_box
+    if x_search is None:
+        lo, hi = model.robot.x_bounds
+        x_search = (np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
+    sols = pose_solutions(model, Q, XI, x_search)
+    if sols is None:
+        raise InputError("could not isolate the forward-kinematics solutions of the first sample; give --x0 instead")
+    if not sols:
+        raise InputError("the first joint sample has no forward-kinematics solution with the calibration box: check the robot and the data")
+    if any(m == 0 for _, m in sols):
+        raise InputError(
+            "the first sample is too close to a Type 2 singularity to certify its assembly mode; give --x0 instead"
+        )
+    mine = [b for b, m in sols if m == mode]
+    if not mine:
+        found = sorted({m for _, m in sols})
+        raise InputError(
+            f"initial mode {mode:+d} does not match the data: the first sample only admits mode(s) {', '.join(f'{m:+d}' for m in found)}"
+        )
+    lo = np.min([b[0] for b in mine], axis=0)
+    hi = np.max([b[1] for b in mine], axis=0)
+    return lo, hi
+
+
+def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
+    """Bound ``|qdd|`` over ``[t_k, t_{k+1}]`` from the boxes at ``t_k``.
+
+    Over the interval, ``x`` lies in ``[x]_k + [0, t_s][xd]_k + [0, t_s^2/2][a]``
+    and ``xd`` in ``[xd]_k + [0, t_s][a]``.  The joints are enclosed by Newton
+    on ``f = 0`` in ``q`` from a generous box around both samples; because the
+    joint path is continuous and always solves ``f = 0``, it cannot leave that
+    box if the contracted result lies strictly inside it.  Then
+    ``qd = -J_q^{-1} J_x xd`` and ``qdd = -J_q^{-1}(J_x xdd + h)`` are enclosed
+    by :func:`linear_enclosure`.  Returns ``(lo, hi)`` of ``qdd`` (``-inf, inf``
+    where no bound could be proved).
+    """
+    ts = s.t_s
+    Xs = I.add(*X, *I.mul(0.0, ts, *XD))
+    Xs = I.add(*Xs, *I.mul(0.0, 0.5 * ts * ts, *A))
+    XDs = I.add(*XD, *I.mul(0.0, ts, *A))
+    ql, qh = I.hull(*Q_prev, *Q_now)
+    margin = 0.05  # rad; the result must land strictly inside this box
+    Q0 = (ql - margin, qh + margin)
+    Qs = Q0
+    for _ in range(3):
+        Qs = newton(model, Xs, Qs, XI, "q")
+        Qs = (np.where(Qs[0] > Qs[1], Q0[0], Qs[0]), np.where(Qs[0] > Qs[1], Q0[1], Qs[1]))
+    inside = np.all((Qs[0] > Q0[0]) & (Qs[1] < Q0[1]), axis=-1)
+    Jq = model.tape_jq.evaluate([Xs, Qs, XI])[0]
+    R = model.tape_jx_xd.evaluate([Xs, Qs, XI, XDs])[0]
+    QDs = linear_enclosure(*Jq, -R[1], -R[0])
+    R2 = model.tape_accel_rhs.evaluate([Xs, Qs, XI, XDs, QDs, A])[0]
+    QDD = linear_enclosure(*Jq, -R2[1], -R2[0])
+    ok = inside[:, None] & np.isfinite(QDD[0]) & np.isfinite(QDD[1]) & ~(QDD[0] > QDD[1])
+    return np.where(ok, QDD[0], -np.inf), np.where(ok, QDD[1], np.inf)
+
+
+def _widths(B):
+    return I.width(*B).max(axis=-1)
+
+
+def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None):
+    """Run the tracker on ``B`` scenarios at once.
+
+    Parameters
+    ----------
+    model : verifier.model.IntervalModel
+    q_meas : array (B, K, n)
+        Encoder readings, rad, sampled every ``settings.t_s``.
+    settings : TrackerSettings
+    x0 : (lo, hi)
+        Initial pose boxes, arrays ``(B, n)`` or ``(n,)``, m.
+    xi_box : (lo, hi), optional
+        Calibration box ``(m,)`` or ``(B, m)``; the robot's by default.
+    record : bool
+        Also return every box (memory ``O(B K n)``).
+    progress : callable, optional
+        Called as ``progress(k)`` after each sample.
+
+    Returns
+    -------
+    BatchResult, and when ``record`` a dict of arrays ``x_lo, x_hi, xd_lo,
+    xd_hi`` ``(B, K, n)``, ``mode`` ``(B, K)``, ``qdd_hi`` ``(B, K, n)``.
+    """
+    t0 = time.perf_counter()
+    s = settings.validated(model.n)
+    q_meas = np.asarray(q_meas, dtype=np.float64)
+    if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
+        raise InputError(f"q_meas must have shape (B, K, {model.n}), got {q_meas.shape}")
+    if not np.all(np.isfinite(q_meas)):
+        raise InputError("joint samples must be finite (found NaN or inf)")
+    B, K, n = q_meas.shape
+    ts = s.t_s
+    eps = s.eps_q
+    A = (np.broadcast_to(-s.a_max, (B, n)), np.broadcast_to(s.a_max, (B, n)))
+    ts_A = I.scale(ts, *A)
+    half_ts2_A = I.scale(0.5 * ts * ts, *A)
+    vmax = (-s.v_max, s.v_max)
+    XI = model.xi_box() if xi_box is None else xi_box
+    XI = (np.array(np.broadcast_to(XI[0], (B, model.m)), dtype=float), np.array(np.broadcast_to(XI[1], (B, model.m)), dtype=float))
+    X = (np.array(np.broadcast_to(x0[0], (B, n)), dtype=float), np.array(np.broadcast_to(x0[1], (B, n)), dtype=float))
+    XD = (np.broadcast_to(-s.xd0, (B, n)).copy(), np.broadcast_to(s.xd0, (B, n)).copy())
+    quant = I.div(*I.scale(2.0, -eps, eps), ts, ts)  # 2 eps / t_s
+
+    init_mode = np.zeros(B, np.int8)
+    cur_mode = np.zeros(B, np.int8)
+    streak = np.full(B, -1, np.int64)
+    bad_at = np.full(B, -1, np.int64)
+    mwx = np.zeros(B)
+    mwv = np.zeros(B)
+    rec = None
+    if record:
+        rec = {k: np.full((B, K, n), np.nan) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "qdd_hi")}
+        rec["mode"] = np.zeros((B, K), np.int8)
+    Q_prev = None
+    for k in range(K):
+        qk = q_meas[:, k, :]
+        Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
+        alive = bad_at < 0
+        QDD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
+        if k == 0:
+            QD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
+        else:
+            if s.velocity_model is VelocityModel.SOUND:
+                QDD = _qdd_over_step(model, s, X, XD, Q_prev, Q, XI, A)
+                if s.qdd_bound is not None:
+                    QDD = I.intersect(*QDD, -s.qdd_bound, s.qdd_bound)
+            qp = q_meas[:, k - 1, :]
+            fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
+            QD = I.add(*fd, *quant)
+            if s.velocity_model is VelocityModel.SOUND:
+                trunc = I.mul(0.5 * ts, 0.5 * ts, *QDD)
+                QD = I.add(*QD, *I.neg(*trunc))  # qd(t_k+1) = FD + (t_s/2) qdd(zeta)
+                QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
+            # prediction (Taylor with Lagrange remainder)
+            Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), *half_ts2_A)
+            XD = I.intersect(*I.add(*XD, *ts_A), *vmax)
+            X = Xn
+        # contraction to a fixpoint
+        for _ in range(s.max_iter):
+            wx0 = I.width(*X).sum(-1)
+            wv0 = I.width(*XD).sum(-1)
+            X, Q, XIc = hc4_pose(model, X, Q, XI)
+            if s.keep_xi:
+                XI = XIc
+            X = newton(model, X, Q, XI, "x")
+            if np.any(np.isfinite(QD[0])):
+                XD = velocity(model, X, Q, XI, XD, QD)
+            empty = np.any(X[0] > X[1], -1) | np.any(XD[0] > XD[1], -1) | np.any(XI[0] > XI[1], -1) | np.any(Q[0] > Q[1], -1)
+            if np.any(empty & alive):
+                bad_at = np.where(empty & alive, k, bad_at)
+                alive = bad_at < 0
+            if np.any(empty):
+                # neutralise dead scenarios so they cannot disturb the batch
+                X, XD, XI, Q = (_revive(B_, ~empty) for B_ in (X, XD, XI, Q))
+            wx1 = I.width(*X).sum(-1)
+            wv1 = I.width(*XD).sum(-1)
+            gain = np.maximum((wx0 - wx1) / np.maximum(wx0, 1e-300), np.where(np.isfinite(wv0), (wv0 - wv1) / np.maximum(wv0, 1e-300), 1.0))
+            if not np.any(alive & (gain > s.rel_tol)):
+                break
+        mode = mode_of(model, X, Q, XI)
+        mode = np.where(alive, mode, 0).astype(np.int8)
+        if k == 0:
+            init_mode = mode.copy()
+        changed = mode != cur_mode
+        streak = np.where(changed, k, streak)
+        cur_mode = mode
+        wx = _widths(X)
+        wv = _widths(XD)
+        mwx = np.where(alive, np.maximum(mwx, wx), mwx)
+        mwv = np.where(alive, np.maximum(mwv, wv), mwv)
+        if record:
+            rec["x_lo"][:, k], rec["x_hi"][:, k] = X
+            rec["xd_lo"][:, k], rec["xd_hi"][:, k] = XD
+            rec["mode"][:, k] = mode
+            rec["qdd_hi"][:, k] = np.maximum(np.abs(QDD[0]), np.abs(QDD[1]))
+        Q_prev = Q
+        if progress is not None:
+            progress(k)
+    final = np.where(bad_at < 0, cur_mode, 0).astype(np.int8)
+    cert = np.where(final != 0, streak, -1)
+    verdict = np.empty(B, dtype=object)
+    for b in range(B):
+        if bad_at[b] >= 0:
+            verdict[b] = Verdict.INCONSISTENT
+        elif init_mode[b] == 0 or final[b] == 0:
+            verdict[b] = Verdict.UNKNOWN
+        elif init_mode[b] == final[b]:
+            verdict[b] = Verdict.MODE_UNCHANGED
+        else:
+            verdict[b] = Verdict.MODE_CHANGED
+    res = BatchResult(
+        verdict=verdict,
+        initial_mode=init_mode,
+        final_mode=final,
+        certified_at_step=cert,
+        inconsistent_at_step=bad_at,
+        max_width_pose=mwx,
+        max_width_velocity=mwv,
+        steps=K,
+        elapsed_s=time.perf_counter() - t0,
+    )
+    return (res, rec) if record else res
+
+
+def _revive(box, keep):
+    """Replace the boxes of dead scenarios by ``[0, 0]`` (their results are void)."""
+    lo, hi = box
+    k = keep.reshape(keep.shape + (1,) * (lo.ndim - 1))
+    return np.where(k, lo, 0.0), np.where(k, hi, 0.0)
+
+
+def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None, progress=None) -> TrackResult:
+    """Track one recorded joint trajectory and give a verdict.
+
+    Parameters
+    ----------
+    model : verifier.model.IntervalModel
+    q_meas : array (K, n)
+        Encoder readings, rad, every ``settings.t_s`` seconds.
+    settings : TrackerSettings
+    x0 : (lo, hi), optional
+        Initial pose box ``(n,)``, m.
+    initial_mode : {+1, -1}, optional
+        Known assembly mode at the first sample (then the initial box is the
+        interval forward-kinematics enclosure of that mode).  Give exactly one
+        of ``x0`` and ``initial_mode``.
+    xi_box : (lo, hi), optional
+        Calibration box, the robot's by default.
+
+    Returns
+    -------
+    TrackResult
+    """
+    t0 = time.perf_counter()
+    q_meas = np.asarray(q_meas, dtype=np.float64)
+    if q_meas.ndim != 2 or q_meas.shape[1] != model.n:
+        raise InputError(f"q_meas must have shape (K, {model.n}), got {q_meas.shape}")
+    if len(q_meas) < 2:
+        raise InputError("at least two joint samples are needed")
+    if not np.all(np.isfinite(q_meas)):
+        raise InputError("joint samples must be finite (found NaN or inf)")
+    if (x0 is None) == (initial_mode is None):
+        raise InputError("give exactly one of an initial pose box (x0) and an initial assembly mode")
+    if initial_mode is not None:
+        if initial_mode not in (1, -1):
+            raise InputError(f"initial mode must be +1 or -1, got {initial_mode}")
+        x0 = initial_box_from_mode(model, q_meas[0], initial_mode, settings, xi_box)
+    else:
+        lo, hi = (np.asarray(v, dtype=np.float64) for v in x0)
+        if lo.shape != (model.n,) or hi.shape != (model.n,) or np.any(~(lo <= hi)):
+            raise InputError(f"initial pose box must be {model.n} intervals with lo <= hi, got {x0}")
+        x0 = (lo, hi)
+    res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress)
+    s = settings.validated(model.n)
+    verdict = res.verdict[0]
+    if initial_mode is not None and verdict is not Verdict.INCONSISTENT and res.initial_mode[0] != initial_mode:
+        # the given mode's box did not certify at step 0 after contraction
+        verdict = Verdict.UNKNOWN if res.initial_mode[0] == 0 else verdict
+    return TrackResult(
+        verdict=verdict,
+        initial_mode=int(res.initial_mode[0]),
+        final_mode=int(res.final_mode[0]),
+        certified_at_step=int(res.certified_at_step[0]),
+        inconsistent_at_step=int(res.inconsistent_at_step[0]),
+        max_width_pose=float(res.max_width_pose[0]),
+        max_width_velocity=float(res.max_width_velocity[0]),
+        x_lo=rec["x_lo"][0],
+        x_hi=rec["x_hi"][0],
+        xd_lo=rec["xd_lo"][0],
+        xd_hi=rec["xd_hi"][0],
+        mode=rec["mode"][0],
+        qdd_bound=rec["qdd_hi"][0],
+        steps=res.steps,
+        elapsed_s=time.perf_counter() - t0,
+        settings=s,
+    )
