@@ -40,7 +40,7 @@ from enum import Enum
 import numpy as np
 
 from . import interval as I
-from .contractors import hc4_pose, mode_of, newton, pose_solutions, velocity
+from .contractors import hc4_pose, mode_of, newton, pose_solutions, velocity, velocity_displacement
 from .errors import InputError
 from .linalg import linear_enclosure
 
@@ -69,11 +69,18 @@ class Verdict(str, Enum):
 
 
 class VelocityModel(str, Enum):
-    """Error model of the finite-difference joint velocity."""
+    """How joint samples inform the end-effector velocity."""
 
-    #: quantisation 2 eps_q / t_s plus truncation (t_s / 2) max|qdd| (default).
+    #: Default, sound: displacement over several baselines ``h = j t_s``;
+    #: quantisation ``2 eps_q / h`` in joint space, truncation ``(h/2) a_max``
+    #: in Cartesian space (see :func:`verifier.contractors.velocity_displacement`).
     SOUND = "sound"
-    #: the paper's quantisation-only bound 2 eps_q / t_s.  NOT sound: the
+    #: Sound: finite-difference joint velocity ``(q_k - q_{k-1}) / t_s`` with
+    #: quantisation ``2 eps_q / t_s`` plus truncation ``(t_s / 2) max|qdd|``, the
+    #: joint-acceleration bound given (``qdd_bound``) or derived every step
+    #: from the boxes and ``a_max``.
+    JOINT_FD = "joint-fd"
+    #: The paper's quantisation-only bound ``2 eps_q / t_s``.  NOT sound: the
     #: finite difference's truncation error is ignored (kept to reproduce the
     #: paper's Table II).
     PAPER = "paper"
@@ -99,13 +106,22 @@ class TrackerSettings:
     xd0 : array (n,)
         Initial velocity bound, m/s: ``|xd(0)| <= xd0`` (the paper's 0.1 m/s).
     velocity_model : VelocityModel
-        ``SOUND`` (default) or ``PAPER`` (quantisation only, unsound).
+        ``SOUND`` (default), ``JOINT_FD`` or ``PAPER`` (quantisation only, unsound).
+    baselines : tuple of int
+        Sample spans ``j`` used by the ``SOUND`` model (each gives a sound
+        enclosure; they are intersected).
     qdd_bound : float or array (n,) or None
-        Assumed bound on ``|qdd|``, rad/s^2.  ``None`` (default) derives a bound
-        at every step from the boxes and ``a_max``; a number is an assumption
-        the user vouches for (intersected with the derived one).
+        ``JOINT_FD`` only: assumed bound on ``|qdd|``, rad/s^2.  ``None``
+        (default) derives a bound at every step from the boxes and ``a_max``;
+        a number is an assumption the user vouches for (intersected with the
+        derived one).
     keep_xi : bool
         Keep the calibration box contracted across steps.
+    split_boxes : int
+        Budget of sub-boxes for branch and prune of an undecided pose box
+        (0 disables it).
+    split_tol : float
+        Pieces narrower than this (m) are not split further.
     max_iter : int
         Maximal fixpoint iterations per step.
     rel_tol : float
@@ -118,8 +134,11 @@ class TrackerSettings:
     v_max: np.ndarray | None = None
     xd0: np.ndarray | None = None
     velocity_model: VelocityModel = VelocityModel.SOUND
+    baselines: tuple = (1, 2, 4, 8, 16)
     qdd_bound: float | np.ndarray | None = None
     keep_xi: bool = False
+    split_boxes: int = 64
+    split_tol: float = 2e-4
     max_iter: int = 6
     rel_tol: float = 0.02
 
@@ -139,6 +158,9 @@ class TrackerSettings:
         if int(self.max_iter) < 1:
             raise InputError("max_iter must be at least 1")
         qdd = None if self.qdd_bound is None else vec(self.qdd_bound, "qdd_bound", allow_inf=True)
+        base = tuple(sorted({int(j) for j in self.baselines}))
+        if not base or base[0] < 1:
+            raise InputError(f"baselines must be positive sample counts, got {self.baselines}")
         return replace(
             self,
             eps_q=vec(self.eps_q, "eps_q"),
@@ -147,6 +169,7 @@ class TrackerSettings:
             xd0=vec(self.xd0, "xd0", np.inf, allow_inf=True),
             velocity_model=VelocityModel(self.velocity_model),
             qdd_bound=qdd,
+            baselines=base,
         )
 
 
@@ -302,6 +325,42 @@ def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
     return np.where(ok, QDD[0], -np.inf), np.where(ok, QDD[1], np.inf)
 
 
+def _split_undecided(model, X, Q, XI, mode, alive, s):
+    """Branch and prune the pose box of scenarios whose mode is undecided.
+
+    Near a Type 2 singularity the box often spans the singular locus although
+    the solutions of ``f = 0`` lie on one side; Newton cannot contract a box
+    with a singular Jacobian, but its pieces can be discarded one by one.
+    Only pieces proved empty are dropped, so the hull of the rest still
+    encloses the true pose.
+    """
+    todo = np.nonzero(alive & (mode == 0) & np.all(np.isfinite(X[0]) & np.isfinite(X[1]), -1))[0]
+    if todo.size == 0:
+        return X, mode
+    lo, hi = X[0].copy(), X[1].copy()
+    mode = mode.copy()
+    for b in todo:
+        sols = pose_solutions(
+            model,
+            (Q[0][b], Q[1][b]),
+            (XI[0][b], XI[1][b]),
+            (lo[b], hi[b]),
+            tol=s.split_tol,
+            small=np.inf,
+            max_boxes=s.split_boxes,
+        )
+        if sols is None:
+            continue  # budget exhausted: keep the box as it is
+        if not sols:
+            lo[b], hi[b] = np.inf, -np.inf  # no pose at all: inconsistent
+            continue
+        lo[b] = np.min([x[0] for x, _ in sols], axis=0)
+        hi[b] = np.max([x[1] for x, _ in sols], axis=0)
+        modes = {m for _, m in sols}
+        mode[b] = modes.pop() if len(modes) == 1 else 0
+    return (lo, hi), mode
+
+
 def _widths(B):
     return I.width(*B).max(axis=-1)
 
@@ -360,25 +419,28 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         rec = {k: np.full((B, K, n), np.nan) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "qdd_hi")}
         rec["mode"] = np.zeros((B, K), np.int8)
     Q_prev = None
+    sound = s.velocity_model is VelocityModel.SOUND
+    depth = max(s.baselines) if sound else 1
+    past = []  # (X, Q) boxes of the last `depth` samples, newest last
     for k in range(K):
         qk = q_meas[:, k, :]
         Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
         alive = bad_at < 0
         QDD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
-        if k == 0:
-            QD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
-        else:
-            if s.velocity_model is VelocityModel.SOUND:
+        QD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
+        if k > 0 and not sound:
+            if s.velocity_model is VelocityModel.JOINT_FD:
                 QDD = _qdd_over_step(model, s, X, XD, Q_prev, Q, XI, A)
                 if s.qdd_bound is not None:
                     QDD = I.intersect(*QDD, -s.qdd_bound, s.qdd_bound)
             qp = q_meas[:, k - 1, :]
             fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
             QD = I.add(*fd, *quant)
-            if s.velocity_model is VelocityModel.SOUND:
+            if s.velocity_model is VelocityModel.JOINT_FD:
                 trunc = I.mul(0.5 * ts, 0.5 * ts, *QDD)
                 QD = I.add(*QD, *I.neg(*trunc))  # qd(t_k+1) = FD + (t_s/2) qdd(zeta)
                 QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
+        if k > 0:
             # prediction (Taylor with Lagrange remainder)
             Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), *half_ts2_A)
             XD = I.intersect(*I.add(*XD, *ts_A), *vmax)
@@ -391,7 +453,15 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
             if s.keep_xi:
                 XI = XIc
             X = newton(model, X, Q, XI, "x")
-            if np.any(np.isfinite(QD[0])):
+            if sound:
+                for j in s.baselines:
+                    if j > len(past):
+                        break
+                    Xp, Qp, qp = past[-j]
+                    DQ = I.sub(qk, qk, qp, qp)
+                    DQ = I.add(*DQ, *I.scale(2.0, -eps, eps))
+                    XD = velocity_displacement(model, X, Q, Xp, Qp, XI, XD, DQ, j * ts, s.a_max)
+            elif np.any(np.isfinite(QD[0])):
                 XD = velocity(model, X, Q, XI, XD, QD)
             empty = np.any(X[0] > X[1], -1) | np.any(XD[0] > XD[1], -1) | np.any(XI[0] > XI[1], -1) | np.any(Q[0] > Q[1], -1)
             if np.any(empty & alive):
@@ -406,6 +476,8 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
             if not np.any(alive & (gain > s.rel_tol)):
                 break
         mode = mode_of(model, X, Q, XI)
+        if s.split_boxes:
+            X, mode = _split_undecided(model, X, Q, XI, mode, alive, s)
         mode = np.where(alive, mode, 0).astype(np.int8)
         if k == 0:
             init_mode = mode.copy()
@@ -422,6 +494,10 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
             rec["mode"][:, k] = mode
             rec["qdd_hi"][:, k] = np.maximum(np.abs(QDD[0]), np.abs(QDD[1]))
         Q_prev = Q
+        if sound:
+            past.append((X, Q, qk))
+            if len(past) > depth:
+                past.pop(0)
         if progress is not None:
             progress(k)
     final = np.where(bad_at < 0, cur_mode, 0).astype(np.int8)
