@@ -1,0 +1,238 @@
+"""Description of a parallel robot: geometry, bounds and its loop-closure equations.
+
+A :class:`Robot` is pure data plus the *one* symbolic definition of its
+loop-closure equations ``f(x, q, xi) = 0`` (eq. (1) of the paper).  Every
+derived quantity (Jacobians, determinant, numeric IK/FK) is built from that
+single CasADi definition by :class:`robots.kinematics.KinematicModel`, so the
+simulator, the interval tracker and the tests can never disagree on the model.
+
+Units are SI throughout: lengths in m, angles in rad, times in s.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from verifier.errors import ModelError
+
+__all__ = ["Robot", "LoopClosure"]
+
+#: Signature of a loop-closure definition: ``(x, q, xi) -> f`` on CasADi SX
+#: column vectors of shapes ``(n,)``, ``(n,)``, ``(m,)``, returning ``(n,)``.
+LoopClosure = Callable[..., object]
+
+
+def _floats(name: str, value, length: int | None = None) -> tuple[float, ...]:
+    """Coerce a sequence to a tuple of finite floats, checking its length."""
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{name} must be a sequence of numbers, got {value!r}") from exc
+    if length is not None and len(out) != length:
+        raise ModelError(f"{name} must have {length} entries, got {len(out)}")
+    if not all(math.isfinite(v) for v in out):
+        raise ModelError(f"{name} must be finite, got {out}")
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class Robot:
+    """A parallel robot with ``n`` actuated joints and ``n`` pose coordinates.
+
+    Parameters
+    ----------
+    name : str
+        Registry key, e.g. ``"dextar"``.
+    n : int
+        Degrees of freedom = number of actuated joints = pose dimension.
+    param_names : tuple of str, length m
+        Names of the geometric parameters ``xi``, in the order ``loop_closure``
+        reads them.
+    xi_nominal : tuple of float, length m
+        Nominal (design) values of the parameters, SI (m, rad).  A design value
+        may lie slightly outside its calibrated interval (Table I of the paper
+        has ``l11 = 90 mm`` against ``[89.832, 89.995] mm``); it must however lie
+        within ``[xi_lo - w, xi_hi + w]``, ``w = xi_hi - xi_lo``, which catches
+        unit slips.  Only the interval ``[xi_lo, xi_hi]`` is certified.
+    xi_lo, xi_hi : tuple of float, length m
+        Calibration interval ``[xi]`` enclosing the true parameters, SI.
+    q_lo, q_hi : tuple of float, length n
+        Modelled joint range, rad.
+    x_bounds : tuple (lo, hi) of tuples of float, each length n
+        A box, SI, containing every pose reachable for any ``xi`` in
+        ``[xi_lo, xi_hi]`` (used as FK search domain and as the tracker's
+        outermost pose box).
+    loop_closure : callable
+        ``loop_closure(x, q, xi) -> casadi.SX`` with ``x`` shape ``(n,)`` (pose),
+        ``q`` shape ``(n,)`` (joints, rad), ``xi`` shape ``(m,)``; returns the
+        ``(n,)`` residual of eq. (1).  Only operations the interval evaluator
+        supports may be used (``+ - * /``, integer powers, ``sqrt``, ``sin``,
+        ``cos``).
+    a_max : tuple of float, length n
+        Default componentwise bound on ``|x''|``, m/s^2 (rad/s^2 for angular
+        pose coordinates).
+    eps_q : float
+        Default encoder error bound, rad: ``|q_meas - q_true| <= eps_q``.
+    t_s : float
+        Default sampling period, s.
+    xd0 : tuple of float, length n
+        Default bound on the initial velocity, componentwise ``|x'(0)| <= xd0``
+        (the paper's ``[xd]_0``), m/s.
+    mode_sign : float, optional
+        ``+1.0`` or ``-1.0``.  The assembly mode is defined as
+        ``mode_sign * sign(det J_x)``, so that a robot module can align it with
+        its geometric convention.
+    description : str, optional
+        One-paragraph human description (source of the data, conventions).
+    """
+
+    name: str
+    n: int
+    param_names: tuple[str, ...]
+    xi_nominal: tuple[float, ...]
+    xi_lo: tuple[float, ...]
+    xi_hi: tuple[float, ...]
+    q_lo: tuple[float, ...]
+    q_hi: tuple[float, ...]
+    x_bounds: tuple[tuple[float, ...], tuple[float, ...]]
+    loop_closure: LoopClosure = field(repr=False)
+    a_max: tuple[float, ...]
+    eps_q: float
+    t_s: float
+    xd0: tuple[float, ...]
+    mode_sign: float = 1.0
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__  # frozen: normalise fields in place once
+        if not isinstance(self.name, str) or not self.name:
+            raise ModelError("Robot.name must be a non-empty string")
+        if isinstance(self.n, bool) or not isinstance(self.n, (int, np.integer)) or self.n < 1:
+            raise ModelError(f"Robot {self.name}: n must be a positive integer, got {self.n!r}")
+        n = int(self.n)
+        set_(self, "n", n)
+        names = tuple(self.param_names)
+        if not names or not all(isinstance(s, str) and s for s in names):
+            raise ModelError(f"Robot {self.name}: param_names must be non-empty strings")
+        if len(set(names)) != len(names):
+            raise ModelError(f"Robot {self.name}: duplicate parameter names {names}")
+        m = len(names)
+        set_(self, "param_names", names)
+        nom = _floats("xi_nominal", self.xi_nominal, m)
+        lo = _floats("xi_lo", self.xi_lo, m)
+        hi = _floats("xi_hi", self.xi_hi, m)
+        for i, nm in enumerate(names):
+            if lo[i] > hi[i]:
+                raise ModelError(f"Robot {self.name}: interval of {nm} is empty: [{lo[i]}, {hi[i]}]")
+            w = hi[i] - lo[i]
+            if not lo[i] - w <= nom[i] <= hi[i] + w:
+                raise ModelError(
+                    f"Robot {self.name}: nominal {nm} = {nom[i]} is far outside its "
+                    f"interval [{lo[i]}, {hi[i]}] (wrong units?)"
+                )
+        set_(self, "xi_nominal", nom)
+        set_(self, "xi_lo", lo)
+        set_(self, "xi_hi", hi)
+        qlo = _floats("q_lo", self.q_lo, n)
+        qhi = _floats("q_hi", self.q_hi, n)
+        if any(a >= b for a, b in zip(qlo, qhi)):
+            raise ModelError(f"Robot {self.name}: need q_lo < q_hi, got {qlo}, {qhi}")
+        set_(self, "q_lo", qlo)
+        set_(self, "q_hi", qhi)
+        try:
+            xb_lo, xb_hi = self.x_bounds
+        except (TypeError, ValueError) as exc:
+            raise ModelError(f"Robot {self.name}: x_bounds must be a pair (lo, hi)") from exc
+        xb_lo = _floats("x_bounds[0]", xb_lo, n)
+        xb_hi = _floats("x_bounds[1]", xb_hi, n)
+        if any(a >= b for a, b in zip(xb_lo, xb_hi)):
+            raise ModelError(f"Robot {self.name}: x_bounds lo must be < hi, got {xb_lo}, {xb_hi}")
+        set_(self, "x_bounds", (xb_lo, xb_hi))
+        if not callable(self.loop_closure):
+            raise ModelError(f"Robot {self.name}: loop_closure must be callable")
+        amax = _floats("a_max", self.a_max, n)
+        if any(a <= 0 for a in amax):
+            raise ModelError(f"Robot {self.name}: a_max must be positive, got {amax}")
+        set_(self, "a_max", amax)
+        xd0 = _floats("xd0", self.xd0, n)
+        if any(v <= 0 for v in xd0):
+            raise ModelError(f"Robot {self.name}: xd0 must be positive, got {xd0}")
+        set_(self, "xd0", xd0)
+        for attr in ("eps_q", "t_s"):
+            v = getattr(self, attr)
+            try:
+                v = float(v)
+            except (TypeError, ValueError) as exc:
+                raise ModelError(f"Robot {self.name}: {attr} must be a number") from exc
+            if not (math.isfinite(v) and v > 0):
+                raise ModelError(f"Robot {self.name}: {attr} must be positive and finite, got {v}")
+            set_(self, attr, v)
+        if self.mode_sign not in (1, -1):
+            raise ModelError(f"Robot {self.name}: mode_sign must be +1 or -1, got {self.mode_sign!r}")
+        set_(self, "mode_sign", float(self.mode_sign))
+        if not isinstance(self.description, str):
+            raise ModelError(f"Robot {self.name}: description must be a string")
+
+    # ----------------------------------------------------------------- arrays
+    @property
+    def m(self) -> int:
+        """Number of geometric parameters ``len(xi)``."""
+        return len(self.param_names)
+
+    @property
+    def xi_nominal_array(self) -> np.ndarray:
+        """Nominal parameters, shape ``(m,)``, SI."""
+        return np.array(self.xi_nominal, dtype=float)
+
+    @property
+    def xi_lo_array(self) -> np.ndarray:
+        """Lower ends of the calibration intervals, shape ``(m,)``, SI."""
+        return np.array(self.xi_lo, dtype=float)
+
+    @property
+    def xi_hi_array(self) -> np.ndarray:
+        """Upper ends of the calibration intervals, shape ``(m,)``, SI."""
+        return np.array(self.xi_hi, dtype=float)
+
+    @property
+    def xi_center(self) -> np.ndarray:
+        """Midpoint of the calibration box, shape ``(m,)``, SI (always inside it)."""
+        return 0.5 * (self.xi_lo_array + self.xi_hi_array)
+
+    @property
+    def q_lo_array(self) -> np.ndarray:
+        """Lower joint limits, shape ``(n,)``, rad."""
+        return np.array(self.q_lo, dtype=float)
+
+    @property
+    def q_hi_array(self) -> np.ndarray:
+        """Upper joint limits, shape ``(n,)``, rad."""
+        return np.array(self.q_hi, dtype=float)
+
+    @property
+    def x_lo_array(self) -> np.ndarray:
+        """Lower corner of the workspace box ``x_bounds``, shape ``(n,)``, SI."""
+        return np.array(self.x_bounds[0], dtype=float)
+
+    @property
+    def x_hi_array(self) -> np.ndarray:
+        """Upper corner of the workspace box ``x_bounds``, shape ``(n,)``, SI."""
+        return np.array(self.x_bounds[1], dtype=float)
+
+    @property
+    def a_max_array(self) -> np.ndarray:
+        """Default acceleration bound, shape ``(n,)``, m/s^2."""
+        return np.array(self.a_max, dtype=float)
+
+    def xi_in_box(self, xi, *, tol: float = 0.0) -> bool:
+        """Whether ``xi`` (shape ``(m,)``) lies in ``[xi_lo - tol, xi_hi + tol]``."""
+        xi = np.asarray(xi, dtype=float)
+        return bool(
+            xi.shape == (self.m,)
+            and np.all(xi >= self.xi_lo_array - tol)
+            and np.all(xi <= self.xi_hi_array + tol)
+        )
