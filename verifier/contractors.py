@@ -119,7 +119,7 @@ def mode_of(model, X, Q, XI):
     return np.where(D[0] > 0.0, 1, np.where(D[1] < 0.0, -1, 0)).astype(np.int8)
 
 
-def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-3, max_boxes: int = 20000):
+def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-3, max_boxes: int = 20000, sweeps: int = 30):
     """Enclose all solutions ``x`` of ``f(x, q, xi) = 0`` in ``X_search``.
 
     Branch and prune for ONE scenario: ``Q`` is ``(n,)`` boxes, ``XI`` ``(m,)``.
@@ -145,7 +145,7 @@ def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-
             return None
         lo, hi = stack.pop()
         X = (lo[None], hi[None])
-        for _ in range(30):
+        for _ in range(sweeps):
             w0 = X[1] - X[0]
             X, _, _ = hc4_pose(model, X, Qb, XIb)
             if np.any(X[0] > X[1]):

@@ -272,7 +272,7 @@ def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_bo
     if x_search is None:
         lo, hi = model.robot.x_bounds
         x_search = (np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
-    sols = pose_solutions(model, Q, XI, x_search)
+    sols = pose_solutions(model, Q, XI, x_search, tol=1e-5)
     if sols is None:
         raise InputError("could not isolate the forward-kinematics solutions of the first sample; give --x0 instead")
     if not sols:
@@ -348,6 +348,7 @@ def _split_undecided(model, X, Q, XI, mode, alive, s):
             tol=s.split_tol,
             small=np.inf,
             max_boxes=s.split_boxes,
+            sweeps=4,
         )
         if sols is None:
             continue  # budget exhausted: keep the box as it is
