@@ -55,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--robot", default=DEFAULT_ROBOT)
     g = c.add_mutually_exclusive_group(required=True)
     g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
-    g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m)")
+    g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
     c.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (all components)")
     c.add_argument("--eps-q", type=float, help="encoder error bound, rad")
     c.add_argument("--xd0", type=float, help="initial velocity bound, m/s (all components)")

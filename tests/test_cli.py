@@ -1,0 +1,133 @@
+"""The command line, through main(argv): verdicts, exit codes, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+
+from problems import CATALOGUE, run_of
+from verifier.cli import build_parser, main
+from verifier.trajfile import write_trajectory
+
+
+@pytest.fixture(scope="module")
+def crossing_csv(tmp_path_factory):
+    run = run_of(CATALOGUE["crossing_1458"])
+    path = tmp_path_factory.mktemp("traj") / "crossing.csv"
+    write_trajectory(path, run.t, run.q_meas)
+    return path
+
+
+def _write(tmp_path, text, name="t.csv"):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _one_line_error(capsys):
+    err = capsys.readouterr().err.strip()
+    assert err and "\n" not in err and "Traceback" not in err
+    return err
+
+
+def test_parser_is_separate_from_main():
+    p = build_parser()
+    a = p.parse_args(["check", "f.csv", "--initial-mode", "1"])
+    assert a.command == "check" and a.initial_mode == 1 and a.robot == "dextar"
+
+
+def test_check_crossing_json(crossing_csv, capsys):
+    code = main(["check", str(crossing_csv), "--initial-mode", "1", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert out["verdict"] == "mode-changed"
+    assert out["initial_mode"] == 1 and out["final_mode"] == -1
+    for key in ("certified_at_step", "inconsistent_at_step", "steps", "max_width_pose_m", "max_width_velocity_mps", "elapsed_s"):
+        assert key in out
+    assert out["inconsistent_at_step"] is None
+
+
+def test_check_with_plot_and_x0(crossing_csv, tmp_path, capsys):
+    run = run_of(CATALOGUE["crossing_1458"])
+    x, y = run.x_true[0]
+    png = tmp_path / "boxes.png"
+    code = main(["check", str(crossing_csv), f"--x0={x - 0.003},{x + 0.003},{y - 0.003},{y + 0.003}",
+                 "--plot", str(png), "--no-progress"])
+    assert code == 0
+    assert "verdict:" in capsys.readouterr().out
+    assert png.stat().st_size > 10_000
+
+
+def test_check_inconsistent_exit_3(crossing_csv, capsys):
+    code = main(["check", str(crossing_csv), "--initial-mode", "1", "--a-max", "2", "--json"])
+    assert code == 3
+    assert json.loads(capsys.readouterr().out)["verdict"] == "inconsistent"
+
+
+def test_simulate_then_check_bounce(tmp_path, capsys):
+    out = tmp_path / "bounce.csv"
+    assert main(["simulate", "--v-sing", "1.0", "--bounce", "--seed", "5", "--t-rest", "0.05", "-o", str(out)]) == 0
+    capsys.readouterr()
+    assert main(["check", str(out), "--initial-mode", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["verdict"] in ("mode-unchanged", "unknown")
+
+
+GOOD_HEAD = "t,q1,q2\n0.000,2.0,1.1\n0.001,2.0,1.1\n0.002,2.0,1.1\n"
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("", "empty"),
+        ("t,q1\n0,1\n0.001,1\n", "missing column"),
+        ("t,q1,q2,q3\n0,1,1,1\n0.001,1,1,1\n", "unexpected column"),
+        ("t,q1,q2\n0,1,abc\n0.001,1,1\n", "not a number"),
+        ("t,q1,q2\n0,1,nan\n0.001,1,1\n", "NaN"),
+        ("t,q1,q2\n0,1,inf\n0.001,1,1\n", "NaN and infinities"),
+        ("t,q1,q2\n0,1,1\n0.001,1\n", "values for"),
+        ("t,q1,q2\n0,1,1\n0,1,1\n", "does not increase"),
+        ("t,q1,q2\n0,1,1\n0.001,1,1\n0.003,1,1\n", "uneven sampling"),
+        ("t,q1,q2\n0,1,1\n", "at least two"),
+        ("t,q1,q2,qd1\n0,1,1,0\n0.001,1,1,0\n", "or none"),
+    ],
+)
+def test_malformed_files_exit_2(tmp_path, capsys, text, message):
+    p = _write(tmp_path, text)
+    assert main(["check", str(p), "--initial-mode", "1"]) == 2
+    assert message in _one_line_error(capsys)
+
+
+def test_missing_file_unknown_robot_and_usage(tmp_path, capsys):
+    assert main(["check", str(tmp_path / "nope.csv"), "--initial-mode", "1"]) == 2
+    assert "no such file" in _one_line_error(capsys)
+    p = _write(tmp_path, GOOD_HEAD)
+    assert main(["check", str(p), "--robot", "hexapod", "--initial-mode", "1"]) == 2
+    assert "unknown robot" in _one_line_error(capsys)
+    assert main(["check", str(p)]) == 2  # neither --initial-mode nor --x0
+    _one_line_error(capsys)
+    assert main(["check", str(p), "--x0", "1,2,3"]) == 2
+    assert "--x0" in _one_line_error(capsys)
+    assert main(["frobnicate"]) == 2
+    _one_line_error(capsys)
+
+
+def test_initial_mode_that_does_not_match_the_data(tmp_path, capsys):
+    # joints of a pose far from the singular locus; pose box given far away
+    run = run_of(CATALOGUE["crossing_1458"])
+    p = tmp_path / "c.csv"
+    write_trajectory(p, run.t[:20], run.q_meas[:20])
+    assert main(["check", str(p), "--x0", "0.5,0.6,0.5,0.6"]) in (2, 3)
+    capsys.readouterr()
+    # joint readings no geometry in the box can produce
+    q = np.tile([[np.pi, 0.0]], (20, 1))  # proximal links opposite: distal links cannot meet
+    write_trajectory(p, run.t[:20], q)
+    assert main(["check", str(p), "--initial-mode", "1"]) == 2
+    assert "no forward-kinematics solution" in _one_line_error(capsys)
+
+
+def test_simulate_errors(tmp_path, capsys):
+    assert main(["simulate", "--v-sing", "9", "-o", str(tmp_path / "x.csv")]) == 2
+    assert "v_sing" in _one_line_error(capsys)
+    assert not (tmp_path / "x.csv").exists()
+    assert main(["simulate", "--v-sing", "-1", "-o", str(tmp_path / "x.csv")]) == 2
+    _one_line_error(capsys)
