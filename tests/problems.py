@@ -62,7 +62,9 @@ def interval_model():
 
 
 def default_settings(**kw):
-    return TrackerSettings(t_s=DEXTAR.t_s, eps_q=DEXTAR.eps_q, a_max=DEXTAR.a_max, xd0=0.1, **kw)
+    args = dict(t_s=DEXTAR.t_s, eps_q=DEXTAR.eps_q, a_max=DEXTAR.a_max, xd0=DEXTAR.xd0)
+    args.update(kw)
+    return TrackerSettings(**args)
 
 
 @lru_cache(maxsize=None)

@@ -21,7 +21,15 @@ import numpy as np
 from . import interval as I
 from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 
-__all__ = ["hc4_pose", "newton", "velocity", "velocity_displacement", "mode_of", "pose_solutions"]
+__all__ = [
+    "hc4_pose",
+    "newton",
+    "velocity",
+    "velocity_displacement",
+    "mode_of",
+    "pose_solutions",
+    "split_prune",
+]
 
 
 def hc4_pose(model, X, Q, XI):
@@ -64,13 +72,12 @@ def velocity(model, X, Q, XI, XD, QD):
     ``J_q qd`` is enclosed as one expression; an unbounded ``[xd]`` is first
     replaced by the Neumann-series bound of :func:`verifier.linalg.linear_enclosure`.
     """
-    R = model.tape_jq_qd.evaluate([X, Q, XI, QD])[0]
-    J = model.tape_jx.evaluate([X, Q, XI])[0]
+    J, R = model.tape_vel.evaluate([X, Q, XI, QD])
     return linear_enclosure(J[0], J[1], -R[1], -R[0], XD[0], XD[1], sweeps=1)
 
 
-def velocity_displacement(model, X, Q, X_past, Q_past, XI, XD, DQ, h, a_max):
-    """Contract ``[xd]_k`` with the displacement over a baseline ``h = j t_s``.
+def velocity_displacement(model, X, Q, pasts, XI, XD, a_max):
+    """Contract ``[xd]_k`` with the displacements over several baselines ``h = j t_s``.
 
     Subtracting ``f = 0`` at ``t_k - h`` from ``f = 0`` at ``t_k`` (same
     geometry ``xi``) and applying the mean-value theorem row by row on the
@@ -84,29 +91,48 @@ def velocity_displacement(model, X, Q, X_past, Q_past, XI, XD, DQ, h, a_max):
     with ``q_k - q_{k-j}`` in ``DQ`` (measured difference plus ``2 eps_q``).
     Then ``xd_k in u + (h/2) [-a_max, a_max]``.  The finite difference's
     truncation error stays in Cartesian space, where ``a_max`` bounds it,
-    instead of being amplified by ``J_x^{-1}`` near the singularity.
+    instead of being amplified by ``J_x^{-1}`` near the singularity.  Each
+    baseline gives a sound enclosure; all are computed in one batched pass
+    and intersected.
 
     Parameters
     ----------
-    X, Q, X_past, Q_past : boxes (B, n) at ``t_k`` and ``t_k - h``.
+    X, Q : boxes (B, n) at ``t_k``.
+    pasts : list of (X_past, Q_past, DQ, h)
+        Boxes (B, n) at ``t_k - h``, the enclosure of ``q_k - q_{k-j}`` (rad)
+        and the baseline ``h`` (s).
+    XI : box (B, m).
     XD : box (B, n), current velocity enclosure at ``t_k``, m/s.
-    DQ : box (B, n), enclosure of ``q_k - q_{k-j}``, rad.
-    h : float, baseline, s.
     a_max : array (n,), m/s^2.
 
     Returns
     -------
     The contracted ``[xd]_k``.
     """
-    H = I.hull(*X, *X_past)
-    HQ = I.hull(*Q, *Q_past)
+    J = len(pasts)
+    if J == 0:
+        return XD
+    B, n = X[0].shape
+    h = np.repeat(np.array([p[3] for p in pasts], dtype=np.float64), B)[:, None]  # (J B, 1)
+    st = lambda boxes: (np.concatenate([b[0] for b in boxes]), np.concatenate([b[1] for b in boxes]))  # noqa: E731
+    Xp = st([p[0] for p in pasts])
+    Qp = st([p[1] for p in pasts])
+    DQ = st([p[2] for p in pasts])
+    Xk = (np.tile(X[0], (J, 1)), np.tile(X[1], (J, 1)))
+    Qk = (np.tile(Q[0], (J, 1)), np.tile(Q[1], (J, 1)))
+    XIk = (np.tile(XI[0], (J, 1)), np.tile(XI[1], (J, 1)))
+    H = I.hull(*Xk, *Xp)
+    HQ = I.hull(*Qk, *Qp)
     rate = I.div(*DQ, h, h)
-    R = model.tape_jq_qd.evaluate([H, HQ, XI, rate])[0]
-    J = model.tape_jx.evaluate([H, HQ, XI])[0]
-    slack = I.scale(0.5 * h, -a_max, a_max)
-    U0 = I.add(*XD, *slack)
-    U = linear_enclosure(J[0], J[1], -R[1], -R[0], U0[0], U0[1], sweeps=1)
-    return I.intersect(*XD, *I.add(*U, *slack))
+    Jx, R = model.tape_vel.evaluate([H, HQ, XIk, rate])
+    half_h = I.mul(0.5, 0.5, h, h)[1]  # upper bound of h / 2
+    slack = I.mul(-half_h, half_h, -a_max, a_max)
+    U0 = I.add(np.tile(XD[0], (J, 1)), np.tile(XD[1], (J, 1)), *slack)
+    U = linear_enclosure(Jx[0], Jx[1], -R[1], -R[0], U0[0], U0[1], sweeps=1)
+    Vl, Vh = I.add(*U, *slack)
+    lo = np.maximum(XD[0], Vl.reshape(J, B, n).max(axis=0))
+    hi = np.minimum(XD[1], Vh.reshape(J, B, n).min(axis=0))
+    return lo, hi
 
 
 def mode_of(model, X, Q, XI):
@@ -171,3 +197,69 @@ def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-
         stack.append((X[0][0].copy(), a_hi))
         stack.append((b_lo, X[1][0].copy()))
     return out
+
+
+def split_prune(model, X, Q, XI, max_pieces: int = 64, tol: float = 2e-4, sweeps: int = 4):
+    """Batched branch and prune of pose boxes whose mode is undecided.
+
+    Every piece whose mode is not certified and which is wider than ``tol``
+    is bisected along its widest side; both halves are contracted (HC4 then
+    Newton, ``sweeps`` times) and dropped only when proved empty.  A scenario
+    stops splitting once it holds ``max_pieces`` pieces.
+
+    Parameters
+    ----------
+    X, Q : boxes (B, n); XI : box (B, m).
+
+    Returns
+    -------
+    (lo, hi) : the hull of each scenario's surviving pieces (empty, ``lo > hi``,
+        when none survives), and ``mode`` (B,): the common certified mode of the
+        pieces, or 0.
+    """
+    B, n = X[0].shape
+    owner = np.arange(B)
+    lo, hi = X[0].copy(), X[1].copy()
+    while True:
+        mode = mode_of(model, (lo, hi), (Q[0][owner], Q[1][owner]), (XI[0][owner], XI[1][owner]))
+        counts = np.bincount(owner, minlength=B)
+        split = (mode == 0) & ((hi - lo).max(-1) >= tol) & (counts[owner] < max_pieces)
+        if not split.any():
+            break
+        keep = ~split
+        sl, sh, so = lo[split], hi[split], owner[split]
+        d = np.argmax(sh - sl, axis=-1)
+        rows = np.arange(len(so))
+        mid = 0.5 * sl[rows, d] + 0.5 * sh[rows, d]
+        left_hi = sh.copy()
+        left_hi[rows, d] = mid
+        right_lo = sl.copy()
+        right_lo[rows, d] = mid
+        nl = np.concatenate([sl, right_lo])
+        nh = np.concatenate([left_hi, sh])
+        no = np.concatenate([so, so])
+        Qn = (Q[0][no], Q[1][no])
+        XIn = (XI[0][no], XI[1][no])
+        P = (nl, nh)
+        alive = np.ones(len(no), bool)
+        for _ in range(sweeps):
+            P, _, _ = hc4_pose(model, P, Qn, XIn)
+            alive &= ~np.any(P[0] > P[1], -1)
+            P = (np.where(alive[:, None], P[0], nl), np.where(alive[:, None], P[1], nh))
+            P = newton(model, P, Qn, XIn, "x")
+            alive &= ~np.any(P[0] > P[1], -1)
+            P = (np.where(alive[:, None], P[0], nl), np.where(alive[:, None], P[1], nh))
+        lo = np.concatenate([lo[keep], P[0][alive]])
+        hi = np.concatenate([hi[keep], P[1][alive]])
+        owner = np.concatenate([owner[keep], no[alive]])
+    out_lo = np.full((B, n), np.inf)
+    out_hi = np.full((B, n), -np.inf)
+    np.minimum.at(out_lo, owner, lo)
+    np.maximum.at(out_hi, owner, hi)
+    mode = mode_of(model, (lo, hi), (Q[0][owner], Q[1][owner]), (XI[0][owner], XI[1][owner]))
+    mn = np.full(B, 2, np.int64)
+    mx = np.full(B, -2, np.int64)
+    np.minimum.at(mn, owner, mode)
+    np.maximum.at(mx, owner, mode)
+    common = np.where((mn == mx) & (mn != 2), mn, 0).astype(np.int8)
+    return (out_lo, out_hi), common

@@ -60,9 +60,9 @@ class IntervalModel:
         self.tape_f = Tape(fun("f", [x, q, xi], [f]))
         self.tape_jx = Tape(fun("jx", [x, q, xi], [jx]))
         self.tape_jq = Tape(fun("jq", [x, q, xi], [jq]))
-        self.tape_jx_jq = Tape(fun("jx_jq", [x, q, xi], [jx, jq]))
-        # J_q qd as one expression: tighter than the product of enclosures
-        self.tape_jq_qd = Tape(fun("jq_qd", [x, q, xi, qd], [ca.mtimes(jq, qd)]))
+        # J_x and J_q qd in one pass (shared subexpressions); J_q qd as one
+        # expression is tighter than the product of two enclosures
+        self.tape_vel = Tape(fun("vel", [x, q, xi, qd], [jx, ca.mtimes(jq, qd)]))
         self.tape_jx_xd = Tape(fun("jx_xd", [x, q, xi, xd], [ca.mtimes(jx, xd)]))
         self.tape_g = Tape(fun("g", [x, q, xi, xd, qd], [g]))
         self.tape_accel_rhs = Tape(fun("accel_rhs", [x, q, xi, xd, qd, xdd], [ca.mtimes(jx, xdd) + h]))

@@ -40,7 +40,7 @@ from enum import Enum
 import numpy as np
 
 from . import interval as I
-from .contractors import hc4_pose, mode_of, newton, pose_solutions, velocity, velocity_displacement
+from .contractors import hc4_pose, mode_of, newton, pose_solutions, split_prune, velocity, velocity_displacement
 from .errors import InputError
 from .linalg import linear_enclosure
 
@@ -326,39 +326,23 @@ def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
 
 
 def _split_undecided(model, X, Q, XI, mode, alive, s):
-    """Branch and prune the pose box of scenarios whose mode is undecided.
+    """Branch and prune the pose boxes of scenarios whose mode is undecided.
 
     Near a Type 2 singularity the box often spans the singular locus although
     the solutions of ``f = 0`` lie on one side; Newton cannot contract a box
-    with a singular Jacobian, but its pieces can be discarded one by one.
-    Only pieces proved empty are dropped, so the hull of the rest still
-    encloses the true pose.
+    with a singular Jacobian, but its pieces can be discarded one by one
+    (:func:`verifier.contractors.split_prune`).  Only pieces proved empty are
+    dropped, so the hull of the rest still encloses the true pose.
     """
     todo = np.nonzero(alive & (mode == 0) & np.all(np.isfinite(X[0]) & np.isfinite(X[1]), -1))[0]
     if todo.size == 0:
         return X, mode
+    sub = lambda box: (box[0][todo], box[1][todo])  # noqa: E731
+    (lo_t, hi_t), mode_t = split_prune(model, sub(X), sub(Q), sub(XI), max_pieces=s.split_boxes, tol=s.split_tol)
     lo, hi = X[0].copy(), X[1].copy()
+    lo[todo], hi[todo] = lo_t, hi_t
     mode = mode.copy()
-    for b in todo:
-        sols = pose_solutions(
-            model,
-            (Q[0][b], Q[1][b]),
-            (XI[0][b], XI[1][b]),
-            (lo[b], hi[b]),
-            tol=s.split_tol,
-            small=np.inf,
-            max_boxes=s.split_boxes,
-            sweeps=4,
-        )
-        if sols is None:
-            continue  # budget exhausted: keep the box as it is
-        if not sols:
-            lo[b], hi[b] = np.inf, -np.inf  # no pose at all: inconsistent
-            continue
-        lo[b] = np.min([x[0] for x, _ in sols], axis=0)
-        hi[b] = np.max([x[1] for x, _ in sols], axis=0)
-        modes = {m for _, m in sols}
-        mode[b] = modes.pop() if len(modes) == 1 else 0
+    mode[todo] = mode_t
     return (lo, hi), mode
 
 
@@ -407,7 +391,8 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     XI = (np.array(np.broadcast_to(XI[0], (B, model.m)), dtype=float), np.array(np.broadcast_to(XI[1], (B, model.m)), dtype=float))
     X = (np.array(np.broadcast_to(x0[0], (B, n)), dtype=float), np.array(np.broadcast_to(x0[1], (B, n)), dtype=float))
     XD = (np.broadcast_to(-s.xd0, (B, n)).copy(), np.broadcast_to(s.xd0, (B, n)).copy())
-    quant = I.div(*I.scale(2.0, -eps, eps), ts, ts)  # 2 eps / t_s
+    two_eps = I.scale(2.0, -eps, eps)
+    quant = I.div(*two_eps, ts, ts)  # 2 eps / t_s
 
     init_mode = np.zeros(B, np.int8)
     cur_mode = np.zeros(B, np.int8)
@@ -455,13 +440,14 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
                 XI = XIc
             X = newton(model, X, Q, XI, "x")
             if sound:
+                pasts = []
                 for j in s.baselines:
                     if j > len(past):
                         break
                     Xp, Qp, qp = past[-j]
-                    DQ = I.sub(qk, qk, qp, qp)
-                    DQ = I.add(*DQ, *I.scale(2.0, -eps, eps))
-                    XD = velocity_displacement(model, X, Q, Xp, Qp, XI, XD, DQ, j * ts, s.a_max)
+                    DQ = I.add(*I.sub(qk, qk, qp, qp), *two_eps)
+                    pasts.append((Xp, Qp, DQ, j * ts))
+                XD = velocity_displacement(model, X, Q, pasts, XI, XD, s.a_max)
             elif np.any(np.isfinite(QD[0])):
                 XD = velocity(model, X, Q, XI, XD, QD)
             empty = np.any(X[0] > X[1], -1) | np.any(XD[0] > XD[1], -1) | np.any(XI[0] > XI[1], -1) | np.any(Q[0] > Q[1], -1)
