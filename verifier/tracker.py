@@ -53,6 +53,7 @@ __all__ = [
     "initial_box_from_mode",
     "track",
     "track_batch",
+    "SampleStream",
 ]
 
 
@@ -356,8 +357,10 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     Parameters
     ----------
     model : verifier.model.IntervalModel
-    q_meas : array (B, K, n)
-        Encoder readings, rad, sampled every ``settings.t_s``.
+    q_meas : array (B, K, n) or SampleStream
+        Encoder readings, rad, sampled every ``settings.t_s``; a
+        :class:`SampleStream` supplies them one sample at a time, so memory
+        stays ``O(B)`` however long the run.
     settings : TrackerSettings
     x0 : (lo, hi)
         Initial pose boxes, arrays ``(B, n)`` or ``(n,)``, m.
@@ -375,12 +378,12 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     """
     t0 = time.perf_counter()
     s = settings.validated(model.n)
-    q_meas = np.asarray(q_meas, dtype=np.float64)
-    if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
-        raise InputError(f"q_meas must have shape (B, K, {model.n}), got {q_meas.shape}")
-    if not np.all(np.isfinite(q_meas)):
-        raise InputError("joint samples must be finite (found NaN or inf)")
-    B, K, n = q_meas.shape
+    if not isinstance(q_meas, SampleStream):
+        q_meas = np.asarray(q_meas, dtype=np.float64)
+        if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
+            raise InputError(f"q_meas must have shape (B, K, {model.n}), got {q_meas.shape}")
+        q_meas = SampleStream.from_array(q_meas)
+    B, K, n = q_meas.batch, q_meas.steps, model.n
     ts = s.t_s
     eps = s.eps_q
     A = (np.broadcast_to(-s.a_max, (B, n)), np.broadcast_to(s.a_max, (B, n)))
@@ -409,7 +412,9 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     depth = max(s.baselines) if sound else 1
     past = []  # (X, Q) boxes of the last `depth` samples, newest last
     for k in range(K):
-        qk = q_meas[:, k, :]
+        qk = q_meas.sample(k)
+        if qk.shape != (B, n) or not np.all(np.isfinite(qk)):
+            raise InputError(f"sample {k}: expected {B}x{n} finite joint values, got shape {qk.shape}")
         Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
         alive = bad_at < 0
         QDD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
@@ -419,7 +424,7 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
                 QDD = _qdd_over_step(model, s, X, XD, Q_prev, Q, XI, A)
                 if s.qdd_bound is not None:
                     QDD = I.intersect(*QDD, -s.qdd_bound, s.qdd_bound)
-            qp = q_meas[:, k - 1, :]
+            qp = q_prev
             fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
             QD = I.add(*fd, *quant)
             if s.velocity_model is VelocityModel.JOINT_FD:
@@ -481,6 +486,7 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
             rec["mode"][:, k] = mode
             rec["qdd_hi"][:, k] = np.maximum(np.abs(QDD[0]), np.abs(QDD[1]))
         Q_prev = Q
+        q_prev = qk
         if sound:
             past.append((X, Q, qk))
             if len(past) > depth:
@@ -511,6 +517,31 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         elapsed_s=time.perf_counter() - t0,
     )
     return (res, rec) if record else res
+
+
+@dataclass(frozen=True)
+class SampleStream:
+    """Joint samples supplied one at a time: ``sample(k)`` returns ``(B, n)``.
+
+    Parameters
+    ----------
+    batch : int
+        Number of scenarios ``B``.
+    steps : int
+        Number of samples ``K``.
+    sample : callable
+        ``sample(k) -> array (B, n)`` of encoder readings at ``t = k t_s``, rad.
+    """
+
+    batch: int
+    steps: int
+    sample: object
+
+    @staticmethod
+    def from_array(q):
+        """Stream over an array of shape ``(B, K, n)``."""
+        q = np.asarray(q, dtype=np.float64)
+        return SampleStream(q.shape[0], q.shape[1], lambda k: q[:, k, :])
 
 
 def _revive(box, keep):
