@@ -15,9 +15,9 @@ import numpy as np
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track_batch
 
-from .simulate import simulate_crossing
+from .simulate import ramp_length, simulate_crossing
 
-__all__ = ["SweepRow", "sweep"]
+__all__ = ["SweepRow", "sweep", "cruise_for"]
 
 
 @dataclass(frozen=True)
@@ -34,8 +34,15 @@ class SweepRow:
     contained: bool  # true pose and velocity inside every box (simulation only)
 
 
+def cruise_for(v_sing, a_peak=60.0, start_distance=0.035, minimum=0.005):
+    """Half-length (m) of the constant-speed zone so that every run starts at
+    least ``start_distance`` (m) before the locus, whatever its speed."""
+    return max(minimum, start_distance - ramp_length(v_sing, a_peak)[1])
+
+
 def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityModel.SOUND), *, xi_true=None,
-          seed=0, t_rest=0.3, a_peak=60.0, initial_mode=1, settings_kw=None, progress=None, record_speed=None):
+          seed=0, t_rest=0.1, a_peak=60.0, start_distance=0.035, initial_mode=1, settings_kw=None, progress=None,
+          record_speed=None):
     """Track simulated crossings at several speeds under several error models.
 
     Parameters
@@ -49,6 +56,9 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
     models : sequence of VelocityModel
     xi_true : array (m,), optional
         True geometry (nominal by default).
+    start_distance : float
+        Every run starts at least this far (m) before the locus (the constant
+        speed zone grows for slow crossings), so slow runs do not start next to it.
     initial_mode : int
         Assembly mode at the start (the first sample's mode).
     record_speed : float, optional
@@ -63,7 +73,8 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
     imodel = IntervalModel(robot)
     runs = [
         simulate_crossing(kin, crossing.point, crossing.direction, v, xi_true=xi_true, t_rest=t_rest,
-                          a_peak=a_peak, working_guess=crossing.q_point, seed=seed)
+                          a_peak=a_peak, cruise=cruise_for(v, a_peak, start_distance), working_guess=crossing.q_point,
+                          seed=seed)
         for v in speeds
     ]
     K = max(r.n_samples for r in runs)
@@ -73,7 +84,8 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
     for vm in models:
         s = TrackerSettings(t_s=robot.t_s, eps_q=robot.eps_q, a_max=robot.a_max, xd0=robot.xd0,
                             velocity_model=vm, **(settings_kw or {}))
-        x0 = initial_box_from_mode(imodel, q[0, 0], initial_mode, s)
+        boxes = [initial_box_from_mode(imodel, q[b, 0], initial_mode, s) for b in range(len(runs))]
+        x0 = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
         res, rec = track_batch(imodel, q, s, x0, record=True, progress=progress)
         for b, r in enumerate(runs):
             N = r.n_samples

@@ -13,19 +13,13 @@ from functools import lru_cache
 import numpy as np
 
 from planner.simulate import random_geometry, simulate_bounce, simulate_crossing
+from planner.sweep import cruise_for
 from robots import DEXTAR, KinematicModel, benchmark_crossing
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, Verdict
 
 T_REST = 0.05  # s: enough for the boxes to settle (they settle in a few samples)
-START_DISTANCE = 0.035  # m: every run starts this far (at least) before the locus
-
-
-def cruise_for(v_sing, a_peak=60.0):
-    """Half-length (m) of the constant-speed zone so the start is START_DISTANCE away."""
-    from planner.simulate import ramp_length
-
-    return max(0.005, START_DISTANCE - ramp_length(v_sing, a_peak)[1])
+# every run starts at least 35 mm before the locus (planner.sweep.cruise_for)
 
 
 @dataclass(frozen=True)
