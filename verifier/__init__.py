@@ -1,0 +1,50 @@
+"""Sound interval tracking of a parallel robot's pose and velocity.
+
+Explicit re-exports of the public API (no star imports).
+"""
+
+from .errors import (
+    CrosscertError,
+    InputError,
+    ModelError,
+    SimulationError,
+    TrajectoryFileError,
+    UnknownRobotError,
+)
+from .model import IntervalModel
+from .tape import Tape
+from .tracker import (
+    BatchResult,
+    SampleStream,
+    TrackerSettings,
+    TrackResult,
+    VelocityModel,
+    Verdict,
+    initial_box_from_mode,
+    track,
+    track_batch,
+)
+from .trajfile import Trajectory, read_trajectory, write_trajectory
+
+__all__ = [
+    "CrosscertError",
+    "InputError",
+    "ModelError",
+    "SimulationError",
+    "TrajectoryFileError",
+    "UnknownRobotError",
+    "IntervalModel",
+    "Tape",
+    "BatchResult",
+    "SampleStream",
+    "TrackerSettings",
+    "TrackResult",
+    "VelocityModel",
+    "Verdict",
+    "initial_box_from_mode",
+    "track",
+    "track_batch",
+    "Trajectory",
+    "read_trajectory",
+    "write_trajectory",
+]
