@@ -82,8 +82,7 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
     rows = []
     figures = {}
     for vm in models:
-        s = TrackerSettings(t_s=robot.t_s, eps_q=robot.eps_q, a_max=robot.a_max, xd0=robot.xd0,
-                            velocity_model=vm, **(settings_kw or {}))
+        s = TrackerSettings.for_robot(robot, velocity_model=vm, **(settings_kw or {}))
         boxes = [initial_box_from_mode(imodel, q[b, 0], initial_mode, s) for b in range(len(runs))]
         x0 = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
         res, rec = track_batch(imodel, q, s, x0, record=True, progress=progress)

@@ -82,6 +82,10 @@ class Robot:
     xd0 : tuple of float, length n
         Default bound on the initial velocity, componentwise ``|x'(0)| <= xd0``
         (the paper's ``[xd]_0``), m/s.
+    xi_splits : tuple of int, length m, optional
+        Recommended partition of ``[xi]`` for the tracker (``xi_splits[i]``
+        equal parts along parameter ``i``; each part is tracked as its own
+        geometry hypothesis).  ``None``: no partition.
     mode_sign : float, optional
         ``+1.0`` or ``-1.0``.  The assembly mode is defined as
         ``mode_sign * sign(det J_x)``, so that a robot module can align it with
@@ -105,6 +109,7 @@ class Robot:
     t_s: float
     xd0: tuple[float, ...]
     mode_sign: float = 1.0
+    xi_splits: tuple[int, ...] | None = None
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -162,6 +167,11 @@ class Robot:
         if any(v <= 0 for v in xd0):
             raise ModelError(f"Robot {self.name}: xd0 must be positive, got {xd0}")
         set_(self, "xd0", xd0)
+        if self.xi_splits is not None:
+            splits = tuple(int(v) for v in self.xi_splits)
+            if len(splits) != len(self.xi_nominal) or any(v < 1 for v in splits):
+                raise ModelError(f"Robot {self.name}: xi_splits needs one positive count per parameter, got {self.xi_splits}")
+            set_(self, "xi_splits", splits)
         for attr in ("eps_q", "t_s"):
             v = getattr(self, attr)
             try:

@@ -36,6 +36,9 @@ CATALOGUE = {
     for p in (
         # the paper's fastest Table II speed: a sound tracker must certify it
         Problem("crossing_1458", 1.458, False, 0, frozenset({Verdict.MODE_CHANGED})),
+        # the paper's slowest detection (with its unsound model): certified soundly
+        # with the robot's default partition of the angular offsets
+        Problem("crossing_1264", 1.264, False, 0, frozenset({Verdict.MODE_CHANGED})),
         # far below the refutation floor (~0.8 m/s): certifying would be wrong
         Problem("crossing_0500", 0.5, False, 0, frozenset({Verdict.UNKNOWN})),
         # failed crossings: never "mode-changed"
@@ -56,9 +59,7 @@ def interval_model():
 
 
 def default_settings(**kw):
-    args = dict(t_s=DEXTAR.t_s, eps_q=DEXTAR.eps_q, a_max=DEXTAR.a_max, xd0=DEXTAR.xd0)
-    args.update(kw)
-    return TrackerSettings(**args)
+    return TrackerSettings.for_robot(DEXTAR, **kw)
 
 
 @lru_cache(maxsize=None)

@@ -116,13 +116,8 @@ def _check(a):
 
     robot = get_robot(a.robot)
     traj = read_trajectory(a.trajectory, robot.n)
-    settings = TrackerSettings(
-        t_s=traj.t_s,
-        eps_q=robot.eps_q if a.eps_q is None else a.eps_q,
-        a_max=robot.a_max if a.a_max is None else a.a_max,
-        xd0=robot.xd0 if a.xd0 is None else a.xd0,
-        velocity_model=a.velocity_model,
-    )
+    settings = TrackerSettings.for_robot(robot, t_s=traj.t_s, eps_q=a.eps_q, a_max=a.a_max, xd0=a.xd0,
+                                         velocity_model=a.velocity_model)
     model = IntervalModel(robot)
     x0 = None
     if a.x0 is not None:

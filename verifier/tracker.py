@@ -33,6 +33,7 @@ reported ``inconsistent`` at that step and never given a verdict.
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
@@ -123,6 +124,14 @@ class TrackerSettings:
         (0 disables it).
     split_tol : float
         Pieces narrower than this (m) are not split further.
+    xi_splits : tuple of int (m,), optional
+        Partition the calibration box into ``prod(xi_splits)`` sub-boxes
+        (``xi_splits[i]`` equal parts along parameter ``i``) and track each
+        geometry hypothesis separately; the true geometry is one constant
+        vector, so it lies in one sub-box for the whole run.  A sub-box that
+        becomes inconsistent is refuted; the boxes reported are the hull of
+        the sub-boxes still consistent, and a mode is certified only when all
+        of them certify it.
     max_iter : int
         Maximal fixpoint iterations per step.
     rel_tol : float
@@ -140,8 +149,18 @@ class TrackerSettings:
     keep_xi: bool = False
     split_boxes: int = 64
     split_tol: float = 2e-4
+    xi_splits: tuple | None = None
     max_iter: int = 6
     rel_tol: float = 0.02
+
+    @classmethod
+    def for_robot(cls, robot, **overrides) -> "TrackerSettings":
+        """The robot's default bounds (``t_s``, ``eps_q``, ``a_max``, ``xd0``,
+        ``xi_splits``), with keyword overrides (``None`` values are ignored)."""
+        args = dict(t_s=robot.t_s, eps_q=robot.eps_q, a_max=robot.a_max, xd0=robot.xd0,
+                    xi_splits=getattr(robot, "xi_splits", None))
+        args.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(**args)
 
     def validated(self, n: int) -> "TrackerSettings":
         """Check values and broadcast vectors to shape ``(n,)``."""
@@ -159,6 +178,11 @@ class TrackerSettings:
         if int(self.max_iter) < 1:
             raise InputError("max_iter must be at least 1")
         qdd = None if self.qdd_bound is None else vec(self.qdd_bound, "qdd_bound", allow_inf=True)
+        splits = None
+        if self.xi_splits is not None:
+            splits = tuple(int(v) for v in self.xi_splits)
+            if any(v < 1 for v in splits):
+                raise InputError(f"xi_splits must be positive integers, got {self.xi_splits}")
         base = tuple(sorted({int(j) for j in self.baselines}))
         if not base or base[0] < 1:
             raise InputError(f"baselines must be positive sample counts, got {self.baselines}")
@@ -171,6 +195,7 @@ class TrackerSettings:
             velocity_model=VelocityModel(self.velocity_model),
             qdd_bound=qdd,
             baselines=base,
+            xi_splits=splits,
         )
 
 
@@ -347,6 +372,38 @@ def _split_undecided(model, X, Q, XI, mode, alive, s):
     return (lo, hi), mode
 
 
+def _partition(XI, splits):
+    """Split calibration boxes ``(B, m)`` into ``P = prod(splits)`` sub-boxes ``(B, P, m)``.
+
+    Adjacent sub-boxes share the same float split point, so their union is
+    exactly the original box.
+    """
+    lo, hi = (np.asarray(v, dtype=np.float64) for v in XI)
+    B, m = lo.shape
+    if splits is None or all(v == 1 for v in splits):
+        return lo[:, None, :].copy(), hi[:, None, :].copy()
+    if len(splits) != m:
+        raise InputError(f"xi_splits needs {m} counts (one per geometric parameter), got {len(splits)}")
+    points = []
+    for i, cnt in enumerate(splits):
+        inner = [lo[:, i] + (hi[:, i] - lo[:, i]) * (j / cnt) for j in range(1, cnt)]
+        points.append(np.stack([lo[:, i]] + inner + [hi[:, i]], axis=1))  # (B, cnt + 1)
+    combos = np.array(list(itertools.product(*(range(c) for c in splits))))  # (P, m)
+    cols = np.arange(m)
+    sub_lo = np.stack([np.stack([points[i][:, c[i]] for i in cols], axis=1) for c in combos], axis=1)
+    sub_hi = np.stack([np.stack([points[i][:, c[i] + 1] for i in cols], axis=1) for c in combos], axis=1)
+    return sub_lo, sub_hi
+
+
+def _hull_rows(box, live):
+    """Hull over the live rows of each scenario: ``(B P, n)`` -> ``(B, n)``."""
+    B, P = live.shape
+    lo = box[0].reshape(B, P, -1)
+    hi = box[1].reshape(B, P, -1)
+    lv = live[..., None]
+    return np.where(lv, lo, np.inf).min(1), np.where(lv, hi, -np.inf).max(1)
+
+
 def _widths(B):
     return I.width(*B).max(axis=-1)
 
@@ -386,14 +443,19 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     B, K, n = q_meas.batch, q_meas.steps, model.n
     ts = s.t_s
     eps = s.eps_q
-    A = (np.broadcast_to(-s.a_max, (B, n)), np.broadcast_to(s.a_max, (B, n)))
-    ts_A = I.scale(ts, *A)
-    half_ts2_A = I.scale(0.5 * ts * ts, *A)
     vmax = (-s.v_max, s.v_max)
     XI = model.xi_box() if xi_box is None else xi_box
-    XI = (np.array(np.broadcast_to(XI[0], (B, model.m)), dtype=float), np.array(np.broadcast_to(XI[1], (B, model.m)), dtype=float))
-    X = (np.array(np.broadcast_to(x0[0], (B, n)), dtype=float), np.array(np.broadcast_to(x0[1], (B, n)), dtype=float))
-    XD = (np.broadcast_to(-s.xd0, (B, n)).copy(), np.broadcast_to(s.xd0, (B, n)).copy())
+    XI = _partition((np.broadcast_to(XI[0], (B, model.m)), np.broadcast_to(XI[1], (B, model.m))), s.xi_splits)
+    P = XI[0].shape[1]  # geometry hypotheses per scenario; rows r = b P + p
+    R = B * P
+    XI = (XI[0].reshape(R, model.m), XI[1].reshape(R, model.m))
+    A = (np.broadcast_to(-s.a_max, (R, n)), np.broadcast_to(s.a_max, (R, n)))
+    half_ts2_A = I.scale(0.5 * ts * ts, *A)
+    ts_A = I.scale(ts, *A)
+    rep = lambda a: np.repeat(np.asarray(a, dtype=float), P, axis=0)  # noqa: E731
+    X = (rep(np.broadcast_to(x0[0], (B, n))), rep(np.broadcast_to(x0[1], (B, n))))
+    XD = (np.broadcast_to(-s.xd0, (R, n)).copy(), np.broadcast_to(s.xd0, (R, n)).copy())
+    row_bad = np.full(R, -1, np.int64)
     two_eps = I.scale(2.0, -eps, eps)
     quant = I.div(*two_eps, ts, ts)  # 2 eps / t_s
 
@@ -412,13 +474,14 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     depth = max(s.baselines) if sound else 1
     past = []  # (X, Q) boxes of the last `depth` samples, newest last
     for k in range(K):
-        qk = q_meas.sample(k)
+        qk = np.asarray(q_meas.sample(k), dtype=np.float64)
         if qk.shape != (B, n) or not np.all(np.isfinite(qk)):
             raise InputError(f"sample {k}: expected {B}x{n} finite joint values, got shape {qk.shape}")
+        qk = rep(qk)
         Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
-        alive = bad_at < 0
-        QDD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
-        QD = (np.full((B, n), -np.inf), np.full((B, n), np.inf))
+        alive = row_bad < 0
+        QDD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
+        QD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
         if k > 0 and not sound:
             if s.velocity_model is VelocityModel.JOINT_FD:
                 QDD = _qdd_over_step(model, s, X, XD, Q_prev, Q, XI, A)
@@ -457,8 +520,8 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
                 XD = velocity(model, X, Q, XI, XD, QD)
             empty = np.any(X[0] > X[1], -1) | np.any(XD[0] > XD[1], -1) | np.any(XI[0] > XI[1], -1) | np.any(Q[0] > Q[1], -1)
             if np.any(empty & alive):
-                bad_at = np.where(empty & alive, k, bad_at)
-                alive = bad_at < 0
+                row_bad = np.where(empty & alive, k, row_bad)
+                alive = row_bad < 0
             if np.any(empty):
                 # neutralise dead scenarios so they cannot disturb the batch
                 X, XD, XI, Q = (_revive(B_, ~empty) for B_ in (X, XD, XI, Q))
@@ -470,21 +533,35 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         mode = mode_of(model, X, Q, XI)
         if s.split_boxes:
             X, mode = _split_undecided(model, X, Q, XI, mode, alive, s)
-        mode = np.where(alive, mode, 0).astype(np.int8)
+            dead = alive & np.any(X[0] > X[1], -1)
+            if dead.any():
+                row_bad = np.where(dead, k, row_bad)
+                alive = row_bad < 0
+                X, XD, XI, Q = (_revive(B_, alive) for B_ in (X, XD, XI, Q))
+        # combine the geometry hypotheses of each scenario
+        live = alive.reshape(B, P)
+        scen_alive = live.any(1)
+        bad_at = np.where(~scen_alive & (bad_at < 0), k, bad_at)
+        rm = mode.reshape(B, P).astype(np.int64)
+        mn = np.where(live, rm, 2).min(1)
+        mx = np.where(live, rm, -2).max(1)
+        mode = np.where(scen_alive & (mn == mx), mn, 0).astype(np.int8)
+        Xh = _hull_rows(X, live)
+        XDh = _hull_rows(XD, live)
         if k == 0:
             init_mode = mode.copy()
         changed = mode != cur_mode
         streak = np.where(changed, k, streak)
         cur_mode = mode
-        wx = _widths(X)
-        wv = _widths(XD)
-        mwx = np.where(alive, np.maximum(mwx, wx), mwx)
-        mwv = np.where(alive, np.maximum(mwv, wv), mwv)
+        ok = bad_at < 0
+        mwx = np.where(ok, np.maximum(mwx, _widths(Xh)), mwx)
+        mwv = np.where(ok, np.maximum(mwv, _widths(XDh)), mwv)
         if record:
-            rec["x_lo"][:, k], rec["x_hi"][:, k] = X
-            rec["xd_lo"][:, k], rec["xd_hi"][:, k] = XD
+            rec["x_lo"][:, k], rec["x_hi"][:, k] = Xh
+            rec["xd_lo"][:, k], rec["xd_hi"][:, k] = XDh
             rec["mode"][:, k] = mode
-            rec["qdd_hi"][:, k] = np.maximum(np.abs(QDD[0]), np.abs(QDD[1]))
+            qdd = np.maximum(np.abs(QDD[0]), np.abs(QDD[1])).reshape(B, P, n)
+            rec["qdd_hi"][:, k] = np.where(live[..., None], qdd, 0.0).max(1)
         Q_prev = Q
         q_prev = qk
         if sound:
