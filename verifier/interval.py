@@ -15,11 +15,17 @@ one float up therefore always yields a rigorous enclosure.  Two refinements:
 * a result that is *exactly* zero is not widened: a sum or difference that
   rounds to 0 is exactly 0 (gradual underflow), and a product or quotient is
   exactly 0 only when a factor (the numerator) is 0; a product that underflows
-  to 0 from non-zero factors *is* widened to the smallest subnormal;
+  to 0 from non-zero factors *is* widened to the smallest subnormal.  A finite
+  numerator over an infinite divisor bound gives the bound 0 (its limit);
 * ``sin`` and ``cos`` are not correctly rounded by numpy (its SIMD kernels
   promise a few ulp).  Their results are widened by :data:`TRIG_ULPS` ulp of
-  the result plus the smallest normal number, a margin checked against
-  mpmath over many random arguments in the test-suite.
+  the result plus the smallest normal number (then rounded outward), a margin
+  checked against mpmath over many random arguments in the test-suite;
+  ``sin(0) = 0`` is kept exact.
+
+Operands are converted to float64 first (integer arrays would wrap around).
+Overflow to infinity and underflow are intended outcomes of the rounding and
+raise no numpy floating-point warnings.
 
 An *empty* interval is any pair with ``lo > hi``.  Arithmetic functions assume
 non-empty operands (the tracker tests emptiness after every intersection);
@@ -58,24 +64,33 @@ _INF = np.inf
 #: Margin (in ulp of the result) added on both sides of numpy's sin/cos.
 TRIG_ULPS = 4
 _TINY_NORMAL = np.finfo(np.float64).tiny
+_MAX = np.finfo(np.float64).max
 _TWO_PI = 2.0 * np.pi
 
 
+# Stepping from +-max to +-inf (or from a subnormal to 0) raises numpy's
+# overflow/underflow flags; both are intended here, so they are silenced: the
+# core must not warn (or raise under np.seterr(all="raise")) on valid input.
+_QUIET = dict(over="ignore", under="ignore")
+
+
 def _dn(r):
-    return np.nextafter(r, -_INF)
+    with np.errstate(**_QUIET):
+        return np.nextafter(r, -_INF)
 
 
 def _up(r):
-    return np.nextafter(r, _INF)
+    with np.errstate(**_QUIET):
+        return np.nextafter(r, _INF)
 
 
 def _dn_keep0(r):
     # Sums/differences that round to 0 are exactly 0 (gradual underflow).
-    return np.where(r == 0.0, 0.0, np.nextafter(r, -_INF))
+    return np.where(r == 0.0, 0.0, _dn(r))
 
 
 def _up_keep0(r):
-    return np.where(r == 0.0, 0.0, np.nextafter(r, _INF))
+    return np.where(r == 0.0, 0.0, _up(r))
 
 
 def point(x):
@@ -90,18 +105,30 @@ def empty_like(lo):
     return np.full(shape, _INF), np.full(shape, -_INF)
 
 
+def _f64(*vs):
+    # float64 before any arithmetic: integer arrays would wrap around silently
+    return tuple(np.asarray(v, dtype=np.float64) for v in vs)
+
+
 def add(al, ah, bl, bh):
     """``[a] + [b]``."""
-    return _dn_keep0(al + bl), _up_keep0(ah + bh)
+    al, ah, bl, bh = _f64(al, ah, bl, bh)
+    with np.errstate(over="ignore"):
+        lo, hi = al + bl, ah + bh
+    return _dn_keep0(lo), _up_keep0(hi)
 
 
 def sub(al, ah, bl, bh):
     """``[a] - [b]``."""
-    return _dn_keep0(al - bh), _up_keep0(ah - bl)
+    al, ah, bl, bh = _f64(al, ah, bl, bh)
+    with np.errstate(over="ignore"):
+        lo, hi = al - bh, ah - bl
+    return _dn_keep0(lo), _up_keep0(hi)
 
 
 def neg(al, ah):
     """``-[a]`` (exact)."""
+    al, ah = _f64(al, ah)
     return -ah, -al
 
 
@@ -113,15 +140,23 @@ def scale(c, al, ah):
 
 def mul(al, ah, bl, bh):
     """``[a] * [b]`` with ``0 * inf = 0`` (interval convention)."""
-    al, ah, bl, bh = np.broadcast_arrays(al, ah, bl, bh)
+    al, ah, bl, bh = np.broadcast_arrays(*_f64(al, ah, bl, bh))
     a = np.stack((al, al, ah, ah))
     b = np.stack((bl, bh, bl, bh))
     with np.errstate(invalid="ignore", over="ignore", under="ignore"):
         p = a * b
     zero = (a == 0.0) | (b == 0.0)  # exactly zero products, including 0*inf
-    lo = np.where(zero, 0.0, np.nextafter(p, -_INF)).min(axis=0)
-    hi = np.where(zero, 0.0, np.nextafter(p, _INF)).max(axis=0)
+    lo = np.where(zero, 0.0, _dn(p)).min(axis=0)
+    hi = np.where(zero, 0.0, _up(p)).max(axis=0)
     return lo, hi
+
+
+def _quot(x, y, step):
+    """``step(x / y)`` for a bound of a quotient; exactly 0 when ``x = 0`` or when
+    ``y`` is infinite (``x`` finite), where 0 is the limit the bound is taken as."""
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
+        q = x / y
+    return np.where((x == 0.0) | (np.isinf(y) & np.isfinite(x)), 0.0, step(q))
 
 
 def div(al, ah, bl, bh):
@@ -130,51 +165,43 @@ def div(al, ah, bl, bh):
     A divisor containing 0 gives a half-line or the entire line; ``[b] = [0, 0]``
     gives the empty interval.
     """
-    al, ah, bl, bh = np.broadcast_arrays(
-        *(np.asarray(v, dtype=np.float64) for v in (al, ah, bl, bh))
-    )
+    al, ah, bl, bh = np.broadcast_arrays(*_f64(al, ah, bl, bh))
     a = np.stack((al, al, ah, ah))
     b = np.stack((bl, bh, bl, bh))
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
-        qt = a / b
-    zero = a == 0.0
-    # inf/inf quotients only arise with unbounded operands; they bound nothing.
-    bad = np.isnan(qt)
-    lo = np.where(zero, 0.0, np.where(bad, -_INF, np.nextafter(qt, -_INF))).min(axis=0)
-    hi = np.where(zero, 0.0, np.where(bad, _INF, np.nextafter(qt, _INF))).max(axis=0)
+    # 0 not in [b]: x / y is monotone in x and in y, so the corners bound it.
+    # An inf/inf corner (NaN) is no extremum: near it the quotient is bounded by
+    # the corners (inf, finite bound of [b]) and (finite bound of [a], inf), or
+    # [a] is the whole line and the other corners already give -inf and inf.
+    lo_c = _quot(a, b, _dn)
+    hi_c = _quot(a, b, _up)
+    lo = np.where(np.isnan(lo_c), _INF, lo_c).min(axis=0)
+    hi = np.where(np.isnan(hi_c), -_INF, hi_c).max(axis=0)
 
     bz = (bl <= 0.0) & (bh >= 0.0)
     if np.any(bz):
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
-            a_zero = (al == 0.0) & (ah == 0.0)
-            a_has0 = (al <= 0.0) & (ah >= 0.0)
-            b_zero = (bl == 0.0) & (bh == 0.0)
-            pos_side = bz & (bl == 0.0) & (bh > 0.0)  # [0, bh]
-            neg_side = bz & (bh == 0.0) & (bl < 0.0)  # [bl, 0]
-            zlo = np.full_like(lo, -_INF)
-            zhi = np.full_like(hi, _INF)
-            # [0, bh]: a > 0 -> [al/bh, inf]; a < 0 -> [-inf, ah/bh]
-            m = pos_side & (al > 0.0)
-            zlo = np.where(m, _dn(al / bh), zlo)
-            m = pos_side & (ah < 0.0)
-            zhi = np.where(m, _up(ah / bh), zhi)
-            # [bl, 0]: a > 0 -> [-inf, al/bl]; a < 0 -> [ah/bl, inf]
-            m = neg_side & (al > 0.0)
-            zhi = np.where(m, _up(al / bl), zhi)
-            m = neg_side & (ah < 0.0)
-            zlo = np.where(m, _dn(ah / bl), zlo)
-            # a containing 0 (not only 0) or b straddling 0: entire line.
-            straddle = bz & ((bl < 0.0) & (bh > 0.0) | (a_has0 & ~a_zero))
-            zlo = np.where(straddle, -_INF, zlo)
-            zhi = np.where(straddle, _INF, zhi)
-            # [0, 0] / b (b not [0, 0]) = [0, 0]
-            zlo = np.where(a_zero, 0.0, zlo)
-            zhi = np.where(a_zero, 0.0, zhi)
-            # a / [0, 0] = empty
-            zlo = np.where(b_zero, _INF, zlo)
-            zhi = np.where(b_zero, -_INF, zhi)
-            lo = np.where(bz, zlo, lo)
-            hi = np.where(bz, zhi, hi)
+        pos_side = (bl == 0.0) & (bh > 0.0)  # [0, bh]: y in (0, bh]
+        neg_side = (bh == 0.0) & (bl < 0.0)  # [bl, 0]: y in [bl, 0)
+        a_nonneg = al >= 0.0
+        a_nonpos = ah <= 0.0
+        zlo = np.full_like(lo, -_INF)
+        zhi = np.full_like(hi, _INF)
+        # [0, bh]: a >= 0 -> [al/bh, inf]; a <= 0 -> [-inf, ah/bh]
+        zlo = np.where(pos_side & a_nonneg, _quot(al, bh, _dn), zlo)
+        zhi = np.where(pos_side & a_nonpos, _quot(ah, bh, _up), zhi)
+        # [bl, 0]: a >= 0 -> [-inf, al/bl]; a <= 0 -> [ah/bl, inf]
+        zhi = np.where(neg_side & a_nonneg, _quot(al, bl, _up), zhi)
+        zlo = np.where(neg_side & a_nonpos, _quot(ah, bl, _dn), zlo)
+        # a straddling 0 or b straddling 0 keeps the entire line, except
+        # [0, 0] / b (b not [0, 0]) = [0, 0]
+        a_zero = a_nonneg & a_nonpos
+        zlo = np.where(a_zero, 0.0, zlo)
+        zhi = np.where(a_zero, 0.0, zhi)
+        # a / [0, 0] = empty
+        b_zero = (bl == 0.0) & (bh == 0.0)
+        zlo = np.where(b_zero, _INF, zlo)
+        zhi = np.where(b_zero, -_INF, zhi)
+        lo = np.where(bz, zlo, lo)
+        hi = np.where(bz, zhi, hi)
     return lo, hi
 
 
@@ -188,24 +215,26 @@ def sqr(al, ah):
     has0 = (al <= 0.0) & (ah >= 0.0)
     mn = np.minimum(l2, h2)
     mx = np.maximum(l2, h2)
-    lo = np.where(has0, 0.0, np.maximum(np.nextafter(mn, -_INF), 0.0))
+    lo = np.where(has0, 0.0, np.maximum(_dn(mn), 0.0))
     # an exact 0 bound squared is exactly 0: leave it, otherwise widen
     hi_exact0 = (mx == 0.0) & (al == 0.0) & (ah == 0.0)
-    hi = np.where(hi_exact0, 0.0, np.nextafter(mx, _INF))
+    hi = np.where(hi_exact0, 0.0, _up(mx))
     return lo, hi
 
 
 def _point_pow(v, n: int):
-    """Enclosure of ``v**n`` for a float array ``v`` by repeated squaring."""
-    rl, rh = np.ones(np.shape(v)), np.ones(np.shape(v))
-    bl, bh = np.asarray(v, dtype=np.float64), np.asarray(v, dtype=np.float64)
-    while n:
+    """Enclosure of ``v**n`` (``n >= 1``) for a float array ``v`` by repeated squaring."""
+    bl = bh = np.asarray(v, dtype=np.float64)
+    rl = rh = None
+    while True:
         if n & 1:
-            rl, rh = mul(rl, rh, bl, bh)
+            # the first factor is taken as is (a copy: no aliasing of the input):
+            # v**1 is exact, no 1 * v rounding
+            rl, rh = (np.array(bl), np.array(bh)) if rl is None else mul(rl, rh, bl, bh)
         n >>= 1
-        if n:
-            bl, bh = sqr(bl, bh)
-    return rl, rh
+        if not n:
+            return rl, rh
+        bl, bh = sqr(bl, bh)
 
 
 def pown(al, ah, n: int):
@@ -238,8 +267,8 @@ def sqrt(al, ah):
     with np.errstate(invalid="ignore"):
         sl = np.sqrt(np.maximum(al, 0.0))
         sh = np.sqrt(np.maximum(ah, 0.0))
-    lo = np.where(sl == 0.0, 0.0, np.maximum(np.nextafter(sl, -_INF), 0.0))
-    hi = np.where(sh == 0.0, 0.0, np.nextafter(sh, _INF))
+    lo = np.where(sl == 0.0, 0.0, np.maximum(_dn(sl), 0.0))
+    hi = np.where(sh == 0.0, 0.0, _up(sh))
     neg_only = ah < 0.0
     lo = np.where(neg_only, _INF, lo)
     hi = np.where(neg_only, -_INF, hi)
@@ -256,7 +285,8 @@ def absolute(al, ah):
 
 
 def _trig_margin(r):
-    return TRIG_ULPS * np.spacing(np.abs(r)) + _TINY_NORMAL
+    with np.errstate(under="ignore"):  # the spacing of a small r is subnormal
+        return TRIG_ULPS * np.spacing(np.abs(r)) + _TINY_NORMAL
 
 
 def _contains_phase(al, ah, phase):
@@ -265,24 +295,37 @@ def _contains_phase(al, ah, phase):
     Conservative: a near miss counts as a hit (it only widens the result).
     """
     slack = 1e-9 * (1.0 + np.maximum(np.abs(al), np.abs(ah)))
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", under="ignore"):
         k_lo = np.ceil((al - phase) / _TWO_PI - slack)
         k_hi = np.floor((ah - phase) / _TWO_PI + slack)
     return k_lo <= k_hi
 
 
-def _periodic(fun, al, ah, max_phase, min_phase):
+def _enclose_value(fun, x, zero_at_0):
+    """Bounds of ``fun(x)`` at the float ``x``: numpy's value +- the margin."""
+    with np.errstate(invalid="ignore", under="ignore"):  # sin(subnormal) underflows
+        f = fun(x)
+    m = _trig_margin(f)
+    # rounded outward so that rounding f -+ m cannot eat into the margin
+    lo, hi = _dn(f - m), _up(f + m)
+    if zero_at_0:  # sin(0) = 0 exactly: an exact zero is not widened
+        lo = np.where(x == 0.0, 0.0, lo)
+        hi = np.where(x == 0.0, 0.0, hi)
+    return lo, hi
+
+
+def _periodic(fun, al, ah, max_phase, min_phase, zero_at_0=False):
     al = np.asarray(al, dtype=np.float64)
     ah = np.asarray(ah, dtype=np.float64)
     finite = np.isfinite(al) & np.isfinite(ah)
-    with np.errstate(invalid="ignore"):
-        fa = fun(np.where(finite, al, 0.0))
-        fb = fun(np.where(finite, ah, 0.0))
-    lo = np.minimum(fa - _trig_margin(fa), fb - _trig_margin(fb))
-    hi = np.maximum(fa + _trig_margin(fa), fb + _trig_margin(fb))
+    la, ha = _enclose_value(fun, np.where(finite, al, 0.0), zero_at_0)
+    lb, hb = _enclose_value(fun, np.where(finite, ah, 0.0), zero_at_0)
+    lo = np.minimum(la, lb)
+    hi = np.maximum(ha, hb)
     lo = np.where(_contains_phase(al, ah, min_phase), -1.0, lo)
     hi = np.where(_contains_phase(al, ah, max_phase), 1.0, hi)
-    full = ~finite | ((ah - al) >= _TWO_PI)
+    with np.errstate(invalid="ignore", over="ignore"):
+        full = ~finite | ((ah - al) >= _TWO_PI)
     lo = np.where(full, -1.0, np.maximum(lo, -1.0))
     hi = np.where(full, 1.0, np.minimum(hi, 1.0))
     return lo, hi
@@ -290,7 +333,7 @@ def _periodic(fun, al, ah, max_phase, min_phase):
 
 def sin(al, ah):
     """``sin([a])`` with the margin :data:`TRIG_ULPS`; range-reduced soundly."""
-    return _periodic(np.sin, al, ah, 0.5 * np.pi, -0.5 * np.pi)
+    return _periodic(np.sin, al, ah, 0.5 * np.pi, -0.5 * np.pi, zero_at_0=True)
 
 
 def cos(al, ah):
@@ -319,8 +362,8 @@ def is_empty(al, ah):
 
 def width(al, ah):
     """Upper bound of ``hi - lo`` (0 for an empty interval)."""
-    with np.errstate(invalid="ignore"):
-        w = np.nextafter(np.asarray(ah) - np.asarray(al), _INF)
+    with np.errstate(invalid="ignore", over="ignore"):
+        w = _up(np.asarray(ah) - np.asarray(al))
     return np.where(is_empty(al, ah), 0.0, np.where(np.asarray(ah) == np.asarray(al), 0.0, w))
 
 
@@ -328,13 +371,16 @@ def midpoint(al, ah):
     """A float inside each non-empty interval (finite whenever possible)."""
     al = np.asarray(al, dtype=np.float64)
     ah = np.asarray(ah, dtype=np.float64)
-    with np.errstate(invalid="ignore", over="ignore"):
-        m = 0.5 * al + 0.5 * ah  # no overflow, unlike (al + ah) / 2
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+        m = 0.5 * al + 0.5 * ah  # no overflow, unlike (al + ah) / 2 (clipped below)
     m = np.where(np.isneginf(al) & np.isposinf(ah), 0.0, m)
     # half-lines: a finite point inside, away from the finite bound
     with np.errstate(over="ignore"):
-        m = np.where(np.isneginf(al) & np.isfinite(ah), np.where(ah >= 0.0, 0.0, 2.0 * ah), m)
-        m = np.where(np.isposinf(ah) & np.isfinite(al), np.where(al <= 0.0, 0.0, 2.0 * al), m)
+        # (2 * bound saturated at +-max: 2 * (-1e308) overflows to -inf, not inside)
+        m = np.where(np.isneginf(al) & np.isfinite(ah),
+                     np.where(ah >= 0.0, 0.0, np.maximum(2.0 * ah, -_MAX)), m)
+        m = np.where(np.isposinf(ah) & np.isfinite(al),
+                     np.where(al <= 0.0, 0.0, np.minimum(2.0 * al, _MAX)), m)
     return np.clip(m, al, ah)
 
 
