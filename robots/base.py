@@ -64,8 +64,8 @@ class Robot:
         Modelled joint range, rad.
     x_bounds : tuple (lo, hi) of tuples of float, each length n
         A box, SI, containing every pose reachable for any ``xi`` in
-        ``[xi_lo, xi_hi]`` (used as FK search domain and as the tracker's
-        outermost pose box).
+        ``[xi_lo, xi_hi]`` (the search domain of the interval forward
+        kinematics of the first sample, and of the simulator).
     loop_closure : callable
         ``loop_closure(x, q, xi) -> casadi.SX`` with ``x`` shape ``(n,)`` (pose),
         ``q`` shape ``(n,)`` (joints, rad), ``xi`` shape ``(m,)``; returns the

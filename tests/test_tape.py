@@ -120,3 +120,14 @@ def test_hc4_on_a_square_keeps_both_signs():
     assert lo[0, 0] <= 2 <= hi[0, 0] and lo[0, 0] > 1.9 and hi[0, 0] < 2.1
     lo, hi = tape.contract([(np.array([[0.0]]), np.array([[1.0]]))])[0]
     assert I.is_empty(lo, hi).all()
+
+
+def test_gauss_seidel_leaves_an_unconstrained_component_alone():
+    from verifier.linalg import gauss_seidel
+
+    # 0 * y = 0: any y solves it; the box must not shrink to [0, 0]
+    A = np.array([[[0.0, 0.0], [0.0, 1.0]]])
+    b = np.zeros((1, 2))
+    yl, yh = gauss_seidel(A, A, b, b, np.array([[-1.0, -1.0]]), np.array([[1.0, 1.0]]))
+    assert yl[0, 0] == -1.0 and yh[0, 0] == 1.0
+    assert yl[0, 1] <= 0.0 <= yh[0, 1]

@@ -103,3 +103,17 @@ def test_bad_arguments_raise_input_errors():
         track(m, np.zeros((10, 3)), s, initial_mode=1)
     with pytest.raises(InputError, match="t_s"):
         track(m, q, default_settings().__class__(t_s=-1.0, eps_q=1e-4, a_max=[80, 80]), initial_mode=1)
+
+
+@pytest.mark.parametrize("qdd_bound", [None, 1000.0])
+def test_joint_fd_model_contains_the_truth(qdd_bound):
+    """The finite-difference model, with a derived or a given joint-acceleration bound."""
+    run = run_of(CATALOGUE["crossing_1458"])
+    s = default_settings(velocity_model="joint-fd", qdd_bound=qdd_bound)
+    res = track(interval_model(), run.q_meas, s, initial_mode=1)
+    assert res.verdict is not Verdict.INCONSISTENT
+    assert _inside(res.x_lo, res.x_hi, run.x_true)
+    assert _inside(res.xd_lo[1:], res.xd_hi[1:], run.xd_true[1:])
+    finite = np.isfinite(res.qdd_bound).all(1)
+    assert finite[1:50].all()  # a bound is proved away from the singularity
+    assert np.all(res.qdd_bound[finite] >= np.abs(run.qdd_true[finite]) - 1e-9)

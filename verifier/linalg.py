@@ -80,7 +80,8 @@ def gauss_seidel(Al, Ah, bl, bh, yl, yh, sweeps: int = 1):
     ``y_i <- y_i ∩ (b_i - sum_{j != i} A_ij y_j) / A_ii`` for each ``i`` in
     turn.  Every ``y`` in ``[y]`` solving ``A y = b`` for some ``A in [A]``,
     ``b in [b]`` stays in the result.  A diagonal entry containing 0 gives an
-    unbounded quotient, i.e. no contraction of that component.
+    unbounded quotient (or, when the numerator contains 0 too, no constraint
+    at all), i.e. no contraction of that component.
 
     Returns the contracted ``(yl, yh)`` (empty components have ``lo > hi``).
     """
@@ -95,7 +96,12 @@ def gauss_seidel(Al, Ah, bl, bh, yl, yh, sweeps: int = 1):
                     continue
                 pl, ph = I.mul(Al[..., i, j], Ah[..., i, j], yl[..., j], yh[..., j])
                 sl, sh = I.sub(sl, sh, pl, ph)
-            ql, qh = I.div(sl, sh, Al[..., i, i], Ah[..., i, i])
+            dl, dh = Al[..., i, i], Ah[..., i, i]
+            ql, qh = I.div(sl, sh, dl, dh)
+            # 0 in A_ii and 0 in the numerator: y_i = anything solves it (A_ii = 0)
+            free = (dl <= 0.0) & (dh >= 0.0) & (sl <= 0.0) & (sh >= 0.0)
+            ql = np.where(free, -np.inf, ql)
+            qh = np.where(free, np.inf, qh)
             yl[..., i], yh[..., i] = I.intersect(yl[..., i], yh[..., i], ql, qh)
     return yl, yh
 

@@ -13,12 +13,15 @@ scenarios at once:
    (Algorithm 1 line 7 as printed adds ``t_s [xd]_k`` with the velocity
    contracted *at* ``t_k`` only, which does not enclose the velocity over the
    interval; the Taylor form does.)
-2. **measurement**: ``[q]_{k+1} = q_meas + [-eps_q, eps_q]``; the joint
-   velocity from the finite difference ``(q_{k+1} - q_k) / t_s`` plus its
-   error: quantisation ``2 eps_q / t_s`` and, in the sound model, truncation
-   ``(t_s / 2) max |qdd|`` over the interval (Taylor again).  The joint
-   acceleration bound is either given or *derived* every step from the boxes
-   of the previous step and ``a_max`` (see :func:`_qdd_over_step`).
+2. **measurement**: ``[q]_{k+1} = q_meas + [-eps_q, eps_q]``; velocity
+   information from the joint samples by one of three models
+   (:class:`VelocityModel`): the default, sound *displacement* model relates
+   ``x_k - x_{k-j}`` to ``q_k - q_{k-j}`` over several baselines ``j`` (its
+   truncation error ``(h/2) a_max`` stays in Cartesian space); the
+   *joint-fd* model uses the finite difference ``(q_{k+1} - q_k) / t_s`` with
+   quantisation ``2 eps_q / t_s`` plus truncation ``(t_s / 2) qdd`` from a
+   given or derived joint-acceleration bound (:func:`_qdd_over_step`); the
+   *paper* model keeps only the quantisation term (unsound).
 3. **contraction** to a fixpoint: HC4Revise and interval Newton on
    ``f(x, q, xi) = 0`` for the pose, Gauss–Seidel on ``J_x xd = -J_q qd`` for
    the velocity; optionally the calibration box ``[xi]`` is kept contracted
@@ -26,9 +29,13 @@ scenarios at once:
 4. **mode**: +1 / -1 when ``mode_sign * det J_x`` has that sign over the whole
    box, else 0.
 
-If a box becomes empty, some assumption (``a_max``, ``[xi]``, ``eps_q``, the
-initial box, the joint-acceleration bound) was violated: the scenario is
-reported ``inconsistent`` at that step and never given a verdict.
+The calibration box may be partitioned into geometry hypotheses
+(``xi_splits``), tracked side by side; a hypothesis whose box becomes empty
+is refuted, the reported boxes are the hull of the surviving ones, and a mode
+is certified only when every survivor certifies it.  If every hypothesis
+becomes empty, some assumption (``a_max``, ``[xi]``, ``eps_q``, the initial
+box, the joint-acceleration bound) was violated: the scenario is reported
+``inconsistent`` at that step and never given a verdict.
 """
 
 from __future__ import annotations
@@ -491,8 +498,10 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
             fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
             QD = I.add(*fd, *quant)
             if s.velocity_model is VelocityModel.JOINT_FD:
+                # q_{k-1} = q_k - t_s qd_k + (t_s^2/2) qdd(zeta), per component, so
+                # qd_k = FD + (t_s/2) qdd(zeta)
                 trunc = I.mul(0.5 * ts, 0.5 * ts, *QDD)
-                QD = I.add(*QD, *I.neg(*trunc))  # qd(t_k+1) = FD + (t_s/2) qdd(zeta)
+                QD = I.add(*QD, *trunc)
                 QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
         if k > 0:
             # prediction (Taylor with Lagrange remainder)
