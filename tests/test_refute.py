@@ -1,0 +1,170 @@
+"""Tests of the refutation bound (planner.refute) on the DexTAR benchmark crossing.
+
+Measured (seed 0, floor quantisation, box-centre geometry): verified bounces
+exist for every crossing from 0.3 to 0.93 m/s, IPOPT reports infeasibility
+from 0.94 m/s up; the tests assert only the robust ends of that (0.6 found,
+1.458 not found) and that verification rejects tampered candidates.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from planner.refute import (
+    BounceSearch,
+    Counterexample,
+    RecordingBounds,
+    RefutationBound,
+    fk_branch_guess,
+    refutation_bound,
+    search_bounce,
+    verify_bounce,
+)
+from problems import kinematics, simulate
+from robots import DEXTAR
+from verifier.errors import InputError
+
+SLOW, FAST = 0.6, 1.458  # m/s: refuted (notes: up to ~0.8) / certified by the tracker
+
+
+def _corner():
+    """The notes' corner: shortest proximal, longest distal links, smallest d, delta1 = -0.004, delta2 = +0.004."""
+    lo, hi = DEXTAR.xi_lo_array, DEXTAR.xi_hi_array
+    return np.array([lo[0], lo[1], hi[2], hi[3], lo[4], lo[5], hi[6]])
+
+
+def _recording(v):
+    run = simulate(v, False, 0)
+    return run.q_meas, run.t_s
+
+
+@pytest.fixture(scope="module")
+def bound() -> RefutationBound:
+    return refutation_bound(kinematics(), _recording, [SLOW, FAST], m0=1, xi_starts=[None, _corner()],
+                            max_cpu_time=30.0)
+
+
+@pytest.fixture(scope="module")
+def slow_case():
+    kin = kinematics()
+    rb = RecordingBounds.for_model(kin, simulate(SLOW, False, 0).q_meas, m0=1)
+    res = search_bounce(kin, rb, max_cpu_time=30.0)
+    assert res.verified, (res.status, res.verification)
+    return kin, rb, res
+
+
+def test_slow_crossing_is_refuted_and_verified(bound):
+    row = next(r for r in bound.rows if r.speed == SLOW)
+    assert row.found and row.verified
+    assert bound.bound == SLOW
+    v = next(a for a in row.attempts if a.verified).verification
+    assert v.ok and not v.failures
+    assert v.joint_ratio <= 1.0 and v.accel_ratio <= 1.0 and v.xi_excess == 0.0 and v.mode_margin > 0
+    assert v.dense_ik_failures == 0 and v.dense_mode_violations == 0
+    assert v.state_mismatch <= 1e-9
+    assert DEXTAR.xi_in_box(row.geometry)
+
+
+def test_fast_crossing_is_not_refuted(bound):
+    row = next(r for r in bound.rows if r.speed == FAST)
+    assert not row.verified and not row.found
+    assert len(row.attempts) == 2  # every start tried
+    assert all(not a.found and a.counterexample is None for a in row.attempts)
+    assert row.status != "Solve_Succeeded" and np.isnan(row.joint_ratio)
+
+
+def test_nlp_size(slow_case):
+    kin, rb, res = slow_case
+    K = rb.n_samples
+    assert res.n_variables == kin.m + kin.n * (4 * K - 1)
+    assert res.n_constraints == 2 * kin.n * (K - 1) + kin.n * K + K
+
+
+def test_counterexample_trajectory_matches_samples(slow_case):
+    _kin, rb, res = slow_case
+    ce = res.counterexample
+    t = rb.t_s * np.arange(rb.n_samples)
+    np.testing.assert_allclose(ce.trajectory(t), ce.x, atol=1e-9)
+    # the bounce ends in the initial mode far from where the crossing ended
+    run = simulate(SLOW, False, 0)
+    assert np.max(np.abs(ce.x[-1] - run.x_true[-1])) > 1e-2
+
+
+def test_branch_guess_is_the_recording_before_and_its_mirror_after():
+    kin = kinematics()
+    run = simulate(SLOW, False, 0)
+    X, solved = fk_branch_guess(kin, run.q_meas, run.xi_true, 1)
+    before = slice(0, run.k_sing - 20)
+    assert solved[before].all()
+    np.testing.assert_allclose(X[before], run.x_true[before], atol=1e-4)
+    assert np.all(kin.mode_batch(X[solved], run.q_meas[solved], run.xi_true) == 1)
+    assert np.max(np.abs(X[-1] - run.x_true[-1])) > 1e-2
+
+
+def _tamper(ce, **arrays):
+    return dataclasses.replace(ce, **arrays)
+
+
+def test_verification_rejects_joint_outside_interval(slow_case):
+    kin, rb, res = slow_case
+    ce = res.counterexample
+    q = ce.q.copy()
+    q[len(q) // 2, 0] = rb.q_meas[len(q) // 2, 0] + 1.5 * rb.eps_q[0]
+    v = verify_bounce(kin, _tamper(ce, q=q), rb)
+    assert not v.ok and any("candidate joints leave" in f for f in v.failures)
+    # moving the whole motion: the re-solved joints leave their intervals too
+    shift = np.array([2e-4, 0.0])
+    v = verify_bounce(kin, _tamper(ce, x=ce.x + shift), rb)
+    assert not v.ok and v.joint_ratio > 1.0 and any("re-solved joints" in f for f in v.failures)
+    # the same recording with tighter encoders no longer admits it
+    tight = dataclasses.replace(rb, eps_q=rb.eps_q * 0.99)
+    assert not verify_bounce(kin, ce, tight).ok
+
+
+def test_verification_rejects_acceleration_above_bound(slow_case):
+    kin, rb, res = slow_case
+    ce = res.counterexample
+    u = ce.u.copy()
+    u[10] = 1.01 * rb.a_max
+    v = verify_bounce(kin, _tamper(ce, u=u), rb)
+    assert not v.ok and v.accel_ratio > 1.0 and any("a_max" in f for f in v.failures)
+    # a smaller a_max rejects the untampered one (it uses ~90 % of 80 m/s^2)
+    assert not verify_bounce(kin, ce, dataclasses.replace(rb, a_max=rb.a_max * 0.5)).ok
+
+
+def test_verification_rejects_geometry_and_mode(slow_case):
+    kin, rb, res = slow_case
+    ce = res.counterexample
+    xi = ce.xi.copy()
+    xi[4] = rb.xi_lo[4] - 1e-6
+    v = verify_bounce(kin, _tamper(ce, xi=xi), rb)
+    assert not v.ok and v.xi_excess > 0
+    other = dataclasses.replace(rb, m0=-1)
+    v = verify_bounce(kin, _tamper(ce, m0=-1), other)
+    assert not v.ok and v.mode_margin < 0
+
+
+def test_untampered_counterexample_passes_again(slow_case):
+    kin, rb, res = slow_case
+    assert verify_bounce(kin, res.counterexample, rb, dense=16).ok
+    assert isinstance(res, BounceSearch) and isinstance(res.counterexample, Counterexample)
+    assert not res.counterexample.x.flags.writeable
+
+
+def test_input_errors():
+    kin = kinematics()
+    q = simulate(SLOW, False, 0).q_meas
+    with pytest.raises(InputError):
+        RecordingBounds.for_model(kin, q, m0=0)
+    with pytest.raises(InputError):
+        RecordingBounds.for_model(kin, q[:, :1])
+    with pytest.raises(InputError):
+        RecordingBounds.for_model(kin, q, eps_q=-1.0)
+    rb = RecordingBounds.for_model(kin, q)
+    with pytest.raises(InputError):
+        search_bounce(kin, rb, xi_start=DEXTAR.xi_hi_array + 1.0)
+    with pytest.raises(InputError):
+        refutation_bound(kin, "not callable", [0.5])
