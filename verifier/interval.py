@@ -34,9 +34,13 @@ non-empty operands (the tracker tests emptiness after every intersection);
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
+
 import numpy as np
 
 __all__ = [
+    "quiet_fp",
     "TRIG_ULPS",
     "add",
     "sub",
@@ -74,13 +78,39 @@ _TWO_PI = 2.0 * np.pi
 _QUIET = dict(over="ignore", under="ignore")
 
 
+_QUIET_MODE = contextvars.ContextVar("crosscert_quiet_fp", default=False)
+_NULL = contextlib.nullcontext()
+
+
+def _fp(**flags):
+    """``np.errstate(**flags)``, or nothing inside :func:`quiet_fp` (which already
+    ignores every flag): entering ``np.errstate`` costs more than a ``nextafter``."""
+    return _NULL if _QUIET_MODE.get() else np.errstate(**flags)
+
+
+@contextlib.contextmanager
+def quiet_fp():
+    """Run a block of interval operations with numpy's FP flags ignored once.
+
+    Results are unchanged (the operations only silence flags they expect);
+    this only saves the per-operation cost of ``np.errstate``.  Code in the
+    block must check for NaN/inf itself, as the tracker does.
+    """
+    token = _QUIET_MODE.set(True)
+    try:
+        with np.errstate(all="ignore"):
+            yield
+    finally:
+        _QUIET_MODE.reset(token)
+
+
 def _dn(r):
-    with np.errstate(**_QUIET):
+    with _fp(**_QUIET):
         return np.nextafter(r, -_INF)
 
 
 def _up(r):
-    with np.errstate(**_QUIET):
+    with _fp(**_QUIET):
         return np.nextafter(r, _INF)
 
 
@@ -113,7 +143,7 @@ def _f64(*vs):
 def add(al, ah, bl, bh):
     """``[a] + [b]``."""
     al, ah, bl, bh = _f64(al, ah, bl, bh)
-    with np.errstate(over="ignore"):
+    with _fp(over="ignore"):
         lo, hi = al + bl, ah + bh
     return _dn_keep0(lo), _up_keep0(hi)
 
@@ -121,7 +151,7 @@ def add(al, ah, bl, bh):
 def sub(al, ah, bl, bh):
     """``[a] - [b]``."""
     al, ah, bl, bh = _f64(al, ah, bl, bh)
-    with np.errstate(over="ignore"):
+    with _fp(over="ignore"):
         lo, hi = al - bh, ah - bl
     return _dn_keep0(lo), _up_keep0(hi)
 
@@ -143,7 +173,7 @@ def mul(al, ah, bl, bh):
     al, ah, bl, bh = np.broadcast_arrays(*_f64(al, ah, bl, bh))
     a = np.stack((al, al, ah, ah))
     b = np.stack((bl, bh, bl, bh))
-    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+    with _fp(invalid="ignore", over="ignore", under="ignore"):
         p = a * b
     zero = (a == 0.0) | (b == 0.0)  # exactly zero products, including 0*inf
     lo = np.where(zero, 0.0, _dn(p)).min(axis=0)
@@ -154,7 +184,7 @@ def mul(al, ah, bl, bh):
 def _quot(x, y, step):
     """``step(x / y)`` for a bound of a quotient; exactly 0 when ``x = 0`` or when
     ``y`` is infinite (``x`` finite), where 0 is the limit the bound is taken as."""
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
+    with _fp(invalid="ignore", divide="ignore", over="ignore", under="ignore"):
         q = x / y
     return np.where((x == 0.0) | (np.isinf(y) & np.isfinite(x)), 0.0, step(q))
 
@@ -209,7 +239,7 @@ def sqr(al, ah):
     """``[a]^2``: lower bound clamped at 0; exact zero when 0 is a bound."""
     al = np.asarray(al, dtype=np.float64)
     ah = np.asarray(ah, dtype=np.float64)
-    with np.errstate(over="ignore", under="ignore"):
+    with _fp(over="ignore", under="ignore"):
         l2 = al * al
         h2 = ah * ah
     has0 = (al <= 0.0) & (ah >= 0.0)
@@ -264,7 +294,7 @@ def sqrt(al, ah):
     """``sqrt([a] ∩ [0, inf))``; empty when ``[a] < 0``."""
     al = np.asarray(al, dtype=np.float64)
     ah = np.asarray(ah, dtype=np.float64)
-    with np.errstate(invalid="ignore"):
+    with _fp(invalid="ignore"):
         sl = np.sqrt(np.maximum(al, 0.0))
         sh = np.sqrt(np.maximum(ah, 0.0))
     lo = np.where(sl == 0.0, 0.0, np.maximum(_dn(sl), 0.0))
@@ -285,7 +315,7 @@ def absolute(al, ah):
 
 
 def _trig_margin(r):
-    with np.errstate(under="ignore"):  # the spacing of a small r is subnormal
+    with _fp(under="ignore"):  # the spacing of a small r is subnormal
         return TRIG_ULPS * np.spacing(np.abs(r)) + _TINY_NORMAL
 
 
@@ -295,7 +325,7 @@ def _contains_phase(al, ah, phase):
     Conservative: a near miss counts as a hit (it only widens the result).
     """
     slack = 1e-9 * (1.0 + np.maximum(np.abs(al), np.abs(ah)))
-    with np.errstate(invalid="ignore", under="ignore"):
+    with _fp(invalid="ignore", under="ignore"):
         k_lo = np.ceil((al - phase) / _TWO_PI - slack)
         k_hi = np.floor((ah - phase) / _TWO_PI + slack)
     return k_lo <= k_hi
@@ -303,7 +333,7 @@ def _contains_phase(al, ah, phase):
 
 def _enclose_value(fun, x, zero_at_0):
     """Bounds of ``fun(x)`` at the float ``x``: numpy's value +- the margin."""
-    with np.errstate(invalid="ignore", under="ignore"):  # sin(subnormal) underflows
+    with _fp(invalid="ignore", under="ignore"):  # sin(subnormal) underflows
         f = fun(x)
     m = _trig_margin(f)
     # rounded outward so that rounding f -+ m cannot eat into the margin
@@ -324,7 +354,7 @@ def _periodic(fun, al, ah, max_phase, min_phase, zero_at_0=False):
     hi = np.maximum(ha, hb)
     lo = np.where(_contains_phase(al, ah, min_phase), -1.0, lo)
     hi = np.where(_contains_phase(al, ah, max_phase), 1.0, hi)
-    with np.errstate(invalid="ignore", over="ignore"):
+    with _fp(invalid="ignore", over="ignore"):
         full = ~finite | ((ah - al) >= _TWO_PI)
     lo = np.where(full, -1.0, np.maximum(lo, -1.0))
     hi = np.where(full, 1.0, np.minimum(hi, 1.0))
@@ -362,7 +392,7 @@ def is_empty(al, ah):
 
 def width(al, ah):
     """Upper bound of ``hi - lo`` (0 for an empty interval)."""
-    with np.errstate(invalid="ignore", over="ignore"):
+    with _fp(invalid="ignore", over="ignore"):
         w = _up(np.asarray(ah) - np.asarray(al))
     return np.where(is_empty(al, ah), 0.0, np.where(np.asarray(ah) == np.asarray(al), 0.0, w))
 
@@ -371,11 +401,11 @@ def midpoint(al, ah):
     """A float inside each non-empty interval (finite whenever possible)."""
     al = np.asarray(al, dtype=np.float64)
     ah = np.asarray(ah, dtype=np.float64)
-    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+    with _fp(invalid="ignore", over="ignore", under="ignore"):
         m = 0.5 * al + 0.5 * ah  # no overflow, unlike (al + ah) / 2 (clipped below)
     m = np.where(np.isneginf(al) & np.isposinf(ah), 0.0, m)
     # half-lines: a finite point inside, away from the finite bound
-    with np.errstate(over="ignore"):
+    with _fp(over="ignore"):
         # (2 * bound saturated at +-max: 2 * (-1e308) overflows to -inf, not inside)
         m = np.where(np.isneginf(al) & np.isfinite(ah),
                      np.where(ah >= 0.0, 0.0, np.maximum(2.0 * ah, -_MAX)), m)

@@ -124,53 +124,54 @@ class Tape:
         self._instrs = tuple(fixed)
 
     # ------------------------------------------------------------------ forward
+    def _program(self):
+        """The instructions as ``(kind, fn, out, a, b, value)`` tuples, dispatch resolved once."""
+        prog = getattr(self, "_prog", None)
+        if prog is not None:
+            return prog
+        binary = {"OP_ADD": I.add, "OP_SUB": I.sub, "OP_MUL": I.mul, "OP_DIV": I.div}
+        unary = {
+            "OP_SQ": I.sqr,
+            "OP_NEG": I.neg,
+            "OP_TWICE": lambda al, ah: I.add(al, ah, al, ah),
+            "OP_SQRT": I.sqrt,
+            "OP_SIN": I.sin,
+            "OP_COS": I.cos,
+            "OP_FABS": I.absolute,
+            "OP_INV": lambda al, ah: I.div(1.0, 1.0, al, ah),
+            "OP_ASSIGN": lambda al, ah: (al, ah),
+        }
+        prog = []
+        for ins in self._instrs:
+            if ins.op == "OP_INPUT":
+                continue
+            if ins.op == "OP_CONST":
+                prog.append((0, None, ins.out, -1, -1, ins.value))
+            elif ins.op == "OP_CONSTPOW":
+                prog.append((3, I.pown, ins.out, ins.a, -1, int(ins.value)))
+            elif ins.op in binary:
+                prog.append((2, binary[ins.op], ins.out, ins.a, ins.b, 0.0))
+            else:
+                prog.append((1, unary[ins.op], ins.out, ins.a, -1, 0.0))
+        self._prog = tuple(prog)
+        return self._prog
+
     def _forward(self, inputs, batch_shape):
         lo = [None] * self.n_nodes
         hi = [None] * self.n_nodes
         for node, i, nz in self._inputs:
             lo[node] = np.broadcast_to(inputs[i][0][..., nz], batch_shape)
             hi[node] = np.broadcast_to(inputs[i][1][..., nz], batch_shape)
-        for ins in self._instrs:
-            op = ins.op
-            if op == "OP_INPUT":
-                continue
-            o = ins.out
-            if op == "OP_CONST":
-                lo[o] = np.full(batch_shape, ins.value)
+        for kind, fn, o, a, b, value in self._program():
+            if kind == 2:
+                lo[o], hi[o] = fn(lo[a], hi[a], lo[b], hi[b])
+            elif kind == 1:
+                lo[o], hi[o] = fn(lo[a], hi[a])
+            elif kind == 0:
+                lo[o] = np.full(batch_shape, value)
                 hi[o] = lo[o]
-                continue
-            al, ah = lo[ins.a], hi[ins.a]
-            if op in _BINARY and op != "OP_CONSTPOW":
-                bl, bh = lo[ins.b], hi[ins.b]
-                if op == "OP_ADD":
-                    r = I.add(al, ah, bl, bh)
-                elif op == "OP_SUB":
-                    r = I.sub(al, ah, bl, bh)
-                elif op == "OP_MUL":
-                    r = I.mul(al, ah, bl, bh)
-                else:
-                    r = I.div(al, ah, bl, bh)
-            elif op == "OP_SQ":
-                r = I.sqr(al, ah)
-            elif op == "OP_NEG":
-                r = I.neg(al, ah)
-            elif op == "OP_TWICE":
-                r = I.add(al, ah, al, ah)
-            elif op == "OP_SQRT":
-                r = I.sqrt(al, ah)
-            elif op == "OP_SIN":
-                r = I.sin(al, ah)
-            elif op == "OP_COS":
-                r = I.cos(al, ah)
-            elif op == "OP_FABS":
-                r = I.absolute(al, ah)
-            elif op == "OP_INV":
-                r = I.div(1.0, 1.0, al, ah)
-            elif op == "OP_ASSIGN":
-                r = (al, ah)
-            else:  # OP_CONSTPOW
-                r = I.pown(al, ah, int(ins.value))
-            lo[o], hi[o] = r
+            else:
+                lo[o], hi[o] = fn(lo[a], hi[a], value)
         return lo, hi
 
     def _batch_shape(self, inputs):

@@ -440,6 +440,11 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     BatchResult, and when ``record`` a dict of arrays ``x_lo, x_hi, xd_lo,
     xd_hi`` ``(B, K, n)``, ``mode`` ``(B, K)``, ``qdd_hi`` ``(B, K, n)``.
     """
+    with I.quiet_fp():  # one errstate for the whole run instead of one per operation
+        return _track_batch(model, q_meas, settings, x0, xi_box, record, progress)
+
+
+def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
     t0 = time.perf_counter()
     s = settings.validated(model.n)
     if not isinstance(q_meas, SampleStream):
