@@ -1,4 +1,4 @@
-"""``crosscert`` command line: check a recorded trajectory, simulate one, sweep speeds.
+"""``crosscert`` command line: certify a planned crossing, plan one, check a recording, simulate, sweep.
 
 Exit codes: 0 a verdict was given, 2 bad input or usage (one line on
 stderr, no traceback), 3 the data contradict the assumptions (inconsistent).
@@ -74,6 +74,28 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
     s.add_argument("-o", "--output", required=True, help="CSV file to write")
 
+    ce = sub.add_parser("certify", help="minimal certified crossing speed of a task, with its proof and refutation bound")
+    _task_options(ce)
+    ce.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (default: planned peak + 10%%)")
+    ce.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
+    ce.add_argument("--tracking-error", type=float, default=0.0, help="allowed |reading - plan|, rad")
+    ce.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
+    ce.add_argument("--v-low", type=float, default=0.6, help="slowest speed tried, m/s")
+    ce.add_argument("--v-high", type=float, help="fastest speed tried, m/s (default: the fastest the segment allows)")
+    ce.add_argument("--tol", type=float, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
+    ce.add_argument("--monte-carlo", type=int, default=50, help="simulated executions at v_min (0 skips)")
+    ce.add_argument("--no-refute", action="store_true", help="skip the counterexample search")
+    ce.add_argument("--seed", type=int, default=0)
+    ce.add_argument("--out", default="crosscert-certify", help="folder for the PNG plot and the JSON report")
+    ce.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
+    ce.add_argument("--no-progress", action="store_true")
+
+    pl = sub.add_parser("plan", help="plan a crossing at a given speed and write it as a trajectory file")
+    _task_options(pl)
+    pl.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
+    pl.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    pl.add_argument("-o", "--output", required=True, help="CSV file to write (t, q1..qn, x1..xn)")
+
     w = sub.add_parser("sweep", help="the paper's Table II on the simulated benchmark crossing")
     w.add_argument("--robot", default=DEFAULT_ROBOT)
     w.add_argument("--speeds", help="comma-separated speeds at the singularity, m/s")
@@ -81,6 +103,88 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
     w.add_argument("--no-progress", action="store_true")
     return p
+
+
+def _task_options(p):
+    p.add_argument("--robot", default=DEFAULT_ROBOT)
+    p.add_argument("--start", help="start pose at rest, comma-separated, SI (default: 60 mm before the benchmark crossing)")
+    p.add_argument("--goal", help="goal pose at rest in the other mode, SI (default: 60 mm after it)")
+
+
+def _task(a):
+    from planner.certify import CrossingTask
+
+    robot, kin, bench = _benchmark(a.robot)
+    start = bench.point - 0.06 * bench.direction if a.start is None else np.array(_floats(a.start, robot.n, "--start"))
+    goal = bench.point + 0.06 * bench.direction if a.goal is None else np.array(_floats(a.goal, robot.n, "--goal"))
+    return robot, kin, CrossingTask(start, goal, bench.q_point)
+
+
+def _plan(a):
+    from planner.certify import PlanningBounds, plan_crossing
+
+    robot, kin, task = _task(a)
+    p = plan_crossing(kin, task, a.v_sing, PlanningBounds(a_peak=a.a_peak))
+    write_trajectory(a.output, p.t, p.q, x=p.x)
+    print(f"wrote {a.output}: {len(p.t)} samples, crossing at sample {p.k_sing} at {p.v_sing} m/s, "
+          f"peak |xdd| {np.abs(p.xdd).max():.1f} m/s^2")
+    return 0
+
+
+def _certify(a):
+    from planner.certify import PlanningBounds, certify_crossing
+
+    from .plots import plot_run
+
+    robot, kin, task = _task(a)
+    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak)
+    out = Path(a.out)
+    bar = None
+    cb = None
+    if not a.no_progress:
+        from tqdm import tqdm
+
+        bar = tqdm(desc="certify", unit="step", file=sys.stderr, leave=False)
+        cb = lambda k: bar.update(1)  # noqa: E731
+    try:
+        cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
+                                monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
+                                progress=cb, kin=kin)
+    finally:
+        if bar is not None:
+            bar.close()
+    report = cert.summary()
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    if cert.enclosures is not None:
+        e, p = cert.enclosures, cert.trajectory
+        png = out / f"certificate_{robot.name}_{cert.v_min:.3f}.png"
+        plot_run(png, p.t[1] - p.t[0], {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
+                 p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s")
+        files.append(png)
+    js = out / "certificate.json"
+    tmp = js.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(report, indent=1))
+    tmp.replace(js)
+    files.append(js)
+    if a.json:
+        print(json.dumps(report))
+        return 0
+    print(f"{'v_sing (m/s)':>12} {'m_x (mm)':>10} {'m_xd (m/s)':>11} {'verdict':>15}")
+    for r in cert.trials:
+        print(f"{r.v_sing:12.4f} {1e3 * r.max_width_pose:10.2f} {r.max_width_velocity:11.3f} {r.verdict.value:>15}")
+    vmin = "none (no tried speed certifies)" if cert.v_min is None else f"{cert.v_min:.4f} m/s"
+    ref = "not computed" if a.no_refute else ("none found" if cert.refutation_bound is None else f"{cert.refutation_bound:.4f} m/s")
+    print(f"minimal certified v_sing: {vmin}")
+    print(f"refutation bound (no sound tracker certifies at or below): {ref}")
+    if cert.monte_carlo:
+        mc = cert.monte_carlo
+        print(f"Monte Carlo at v_min: {mc['detected']}/{mc['runs']} executions detected, "
+              f"{len(mc['containment_failures'])} containment failures")
+    print(f"a_max used: {report['a_max_mps2']} m/s^2; elapsed {cert.elapsed_s:.1f} s")
+    for f in files:
+        print(f"wrote {f}")
+    return 0
 
 
 def _benchmark(name):
@@ -206,7 +310,7 @@ def main(argv=None) -> int:
     """Entry point of the ``crosscert`` script; returns the exit code."""
     try:
         a = build_parser().parse_args(argv)
-        return {"check": _check, "simulate": _simulate, "sweep": _sweep}[a.command](a)
+        return {"check": _check, "simulate": _simulate, "sweep": _sweep, "plan": _plan, "certify": _certify}[a.command](a)
     except _Usage as exc:
         print(str(exc), file=sys.stderr)
         return 2

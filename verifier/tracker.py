@@ -131,6 +131,9 @@ class TrackerSettings:
         (0 disables it).
     split_tol : float
         Pieces narrower than this (m) are not split further.
+    split_max_width : float
+        Boxes wider than this (m) are not split (a box that wide has lost the
+        track; splitting it costs the whole budget every step).
     xi_splits : tuple of int (m,), optional
         Partition the calibration box into ``prod(xi_splits)`` sub-boxes
         (``xi_splits[i]`` equal parts along parameter ``i``) and track each
@@ -156,6 +159,7 @@ class TrackerSettings:
     keep_xi: bool = False
     split_boxes: int = 64
     split_tol: float = 2e-4
+    split_max_width: float = 0.06
     xi_splits: tuple | None = None
     max_iter: int = 6
     rel_tol: float = 0.02
@@ -367,7 +371,8 @@ def _split_undecided(model, X, Q, XI, mode, alive, s):
     (:func:`verifier.contractors.split_prune`).  Only pieces proved empty are
     dropped, so the hull of the rest still encloses the true pose.
     """
-    todo = np.nonzero(alive & (mode == 0) & np.all(np.isfinite(X[0]) & np.isfinite(X[1]), -1))[0]
+    narrow = np.all(X[1] - X[0] <= s.split_max_width, -1)  # also False for NaN/inf
+    todo = np.nonzero(alive & (mode == 0) & narrow)[0]
     if todo.size == 0:
         return X, mode
     sub = lambda box: (box[0][todo], box[1][todo])  # noqa: E731

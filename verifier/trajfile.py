@@ -7,7 +7,9 @@ Format (CSV, comma-separated, one header row):
 * ``q1 .. qn`` — encoder readings, rad;
 * optional ``qd1 .. qdn`` — joint velocities, rad/s (accepted, checked, not
   used: the tracker derives velocity information from the positions, whose
-  error bound it knows).
+  error bound it knows);
+* optional ``x1 .. xn`` — planned end-effector pose, SI (written by
+  ``crosscert plan``; accepted, checked, used only for plots).
 
 Any other column, a missing column, a non-numeric, NaN or infinite value is
 an error (:class:`~verifier.errors.TrajectoryFileError`).
@@ -43,6 +45,8 @@ class Trajectory:
         Encoder readings, rad.
     qd : array (K, n) or None
         Joint velocities, rad/s, when the file has them.
+    x : array (K, n) or None
+        Planned poses, SI, when the file has them.
     t_s : float
         Sampling period, s.
     """
@@ -51,6 +55,7 @@ class Trajectory:
     q: np.ndarray
     qd: np.ndarray | None
     t_s: float
+    x: np.ndarray | None = None
 
 
 def read_trajectory(path, n: int) -> Trajectory:
@@ -75,17 +80,23 @@ def read_trajectory(path, n: int) -> Trajectory:
     header = [c.strip() for c in rows[0]]
     qcols = [f"q{i + 1}" for i in range(n)]
     qdcols = [f"qd{i + 1}" for i in range(n)]
+    xcols = [f"x{i + 1}" for i in range(n)]
     missing = [c for c in ["t"] + qcols if c not in header]
     if missing:
         raise TrajectoryFileError(f"{path}: missing column(s) {', '.join(missing)}; expected t,{','.join(qcols)}[,{','.join(qdcols)}]")
-    extra = [c for c in header if c not in ["t"] + qcols + qdcols]
+    extra = [c for c in header if c not in ["t"] + qcols + qdcols + xcols]
     if extra:
-        raise TrajectoryFileError(f"{path}: unexpected column(s) {', '.join(extra)}; expected t,{','.join(qcols)}[,{','.join(qdcols)}]")
+        raise TrajectoryFileError(
+            f"{path}: unexpected column(s) {', '.join(extra)}; expected t,{','.join(qcols)}"
+            f"[,{','.join(qdcols)}][,{','.join(xcols)}]"
+        )
     if len(set(header)) != len(header):
         raise TrajectoryFileError(f"{path}: duplicated column names in the header")
     has_qd = any(c in header for c in qdcols)
-    if has_qd and not all(c in header for c in qdcols):
-        raise TrajectoryFileError(f"{path}: give all of {','.join(qdcols)} or none")
+    for group in (qdcols, xcols):
+        if any(c in header for c in group) and not all(c in header for c in group):
+            raise TrajectoryFileError(f"{path}: give all of {','.join(group)} or none")
+    has_x = xcols[0] in header
     data = np.empty((len(rows) - 1, len(header)))
     for i, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):
@@ -116,11 +127,16 @@ def read_trajectory(path, n: int) -> Trajectory:
         )
     q = data[:, [header.index(c) for c in qcols]]
     qd = data[:, [header.index(c) for c in qdcols]] if has_qd else None
-    return Trajectory(t=t, q=q, qd=qd, t_s=t_s)
+    x = data[:, [header.index(c) for c in xcols]] if has_x else None
+    return Trajectory(t=t, q=q, qd=qd, t_s=t_s, x=x)
 
 
-def write_trajectory(path, t, q, qd=None) -> None:
-    """Write a trajectory file atomically (a partial file is never left behind)."""
+def write_trajectory(path, t, q, qd=None, x=None) -> None:
+    """Write a trajectory file atomically (a partial file is never left behind).
+
+    ``t`` (K,) s, ``q`` (K, n) rad, optional ``qd`` (K, n) rad/s and planned
+    poses ``x`` (K, n) SI.
+    """
     path = Path(path)
     t = np.asarray(t, dtype=float)
     q = np.asarray(q, dtype=float)
@@ -130,6 +146,9 @@ def write_trajectory(path, t, q, qd=None) -> None:
     if qd is not None:
         cols += [f"qd{i + 1}" for i in range(n)]
         data.append(np.asarray(qd, dtype=float))
+    if x is not None:
+        cols += [f"x{i + 1}" for i in range(n)]
+        data.append(np.asarray(x, dtype=float))
     arr = np.hstack(data)
     directory = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=directory)

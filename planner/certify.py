@@ -1,0 +1,601 @@
+"""Planning-time certification of a Type 2 singularity crossing.
+
+Before a crossing is executed, answer: how fast must the robot cross for the
+assembly-mode change to be certified from its encoders, and prove it.
+
+* :func:`plan_crossing` — a rest-to-rest trajectory along the straight segment
+  from ``task.start`` to ``task.goal`` that crosses the nominal Type 2 locus at
+  speed ``v_sing`` with zero acceleration there (the crossing criterion for a
+  path along the uncontrolled direction), smoothstep speed ramps peaking at
+  ``a_peak``;
+* :func:`certify_plan` — the tracker run on inputs that cover every admissible
+  execution (see *What a certificate guarantees* below);
+* :func:`minimal_v_sing` — batched search of the smallest certified speed;
+* :func:`monte_carlo_confirmation` — simulated executions with random true
+  geometries and encoder quantisations, tracked as the robot would at run time;
+* :func:`certify_crossing` — all of it, returning a frozen certificate.
+
+What a certificate guarantees
+-----------------------------
+Let ``q_plan(t_k)`` be the planned joints (computed with the planning
+geometry, the centre of ``[xi]``).  An *admissible execution* is any motion
+with (i) a constant true geometry in ``[xi]``, (ii) ``|xdd_i(t)| <= a_max_i``
+at all times, (iii) true joints ``|q(t_k) - q_plan(t_k)| <= eps_q +
+tracking_error`` at every sample.  The certifying run feeds the tracker the
+readings ``q_plan(t_k)`` with the encoder bound ``eps_q + tracking_error``: by
+the tracker's soundness (docs/soundness.md) its boxes contain the pose and
+velocity of every admissible execution, so when it reports ``mode-changed``
+every admissible execution ends in the other assembly mode.  At run time,
+admissibility is checked on the readings: ``|q_read - q_plan| <= tracking_error``
+at every sample implies (iii).
+
+The midpoint-preconditioned Newton step and the fixpoint thresholds are not
+inclusion-monotone: re-running the tracker on one execution's (narrower)
+readings is not guaranteed to certify whenever the planning run did.  The
+certificate therefore never relies on such a re-run: it is a statement about
+every admissible execution, proved by the planning run itself.  The Monte
+Carlo confirmation goes further than the certificate (true geometries whose
+joints leave the tube of (iii)) and runs the run-time tracker on each
+execution's own readings.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as md
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from verifier.errors import InputError, SimulationError
+from verifier.model import IntervalModel
+from verifier.tracker import TrackerSettings, TrackResult, Verdict, initial_box_from_mode, track, track_batch
+
+from .simulate import TimeLaw, ramp_length
+
+__all__ = [
+    "CrossingTask",
+    "PlanningBounds",
+    "PlannedTrajectory",
+    "SpeedTrial",
+    "CrossingCertificate",
+    "plan_crossing",
+    "certify_plan",
+    "minimal_v_sing",
+    "monte_carlo_confirmation",
+    "certify_crossing",
+]
+
+
+@dataclass(frozen=True)
+class CrossingTask:
+    """Go from ``start`` (at rest, one assembly mode) to ``goal`` (at rest, the other).
+
+    Parameters
+    ----------
+    start, goal : array (n,)
+        Poses, SI.
+    working_guess : array (n,)
+        Joints (rad) on the working branch near ``start``.
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    working_guess: np.ndarray
+
+    def __post_init__(self):
+        for name in ("start", "goal", "working_guess"):
+            v = np.asarray(getattr(self, name), dtype=float)
+            if v.ndim != 1 or not np.all(np.isfinite(v)):
+                raise InputError(f"task {name} must be a finite vector, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, v)
+        if self.start.shape != self.goal.shape:
+            raise InputError("task start and goal must have the same dimension")
+        if np.linalg.norm(self.goal - self.start) == 0.0:
+            raise InputError("task start and goal coincide")
+
+
+@dataclass(frozen=True)
+class PlanningBounds:
+    """Bounds of the planning-time certification (SI).
+
+    Parameters
+    ----------
+    eps_q : float, optional
+        Encoder error bound, rad (robot default).
+    tracking_error : float
+        Allowed deviation of the readings from the planned joints, rad.
+    a_max : array (n,), optional
+        End-effector acceleration bound, m/s^2.  ``None``: derived from each
+        plan as ``max |xdd_plan| (1 + a_margin)`` componentwise.
+    a_margin : float
+        Relative margin of the derived ``a_max``.
+    a_peak : float
+        Peak acceleration of the planned speed ramps, m/s^2.
+    t_s : float, optional
+        Sampling period, s (robot default).
+    t_rest : float
+        Rest before the motion, s.
+    xi_splits : tuple, optional
+        Geometry hypotheses of the tracker (robot default).
+    """
+
+    eps_q: float | None = None
+    tracking_error: float = 0.0
+    a_max: tuple | None = None
+    a_margin: float = 0.1
+    a_peak: float = 60.0
+    t_s: float | None = None
+    t_rest: float = 0.05
+    xi_splits: tuple | None = None
+
+    def resolved(self, robot) -> "PlanningBounds":
+        eps = robot.eps_q if self.eps_q is None else float(self.eps_q)
+        ts = robot.t_s if self.t_s is None else float(self.t_s)
+        for name, v in (("eps_q", eps), ("t_s", ts), ("a_peak", self.a_peak)):
+            if not (np.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be positive, got {v}")
+        if not (self.tracking_error >= 0 and self.a_margin >= 0 and self.t_rest >= 0):
+            raise InputError("tracking_error, a_margin and t_rest must be non-negative")
+        amax = None if self.a_max is None else tuple(np.broadcast_to(np.asarray(self.a_max, float), (robot.n,)))
+        splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
+        return PlanningBounds(eps, float(self.tracking_error), amax, float(self.a_margin), float(self.a_peak), ts,
+                              float(self.t_rest), splits)
+
+
+@dataclass(frozen=True)
+class PlannedTrajectory:
+    """A planned crossing sampled at ``t_s``.
+
+    Attributes
+    ----------
+    t : (K,) s; q, qd, qdd : (K, n) rad, rad/s, rad/s^2; x, xd, xdd : (K, n) SI.
+    k_sing : int — sample of the nominal crossing; v_sing : float, m/s.
+    crossing_point : (n,) m; xi_plan : (m,) — planning geometry.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    x: np.ndarray
+    xd: np.ndarray
+    xdd: np.ndarray
+    k_sing: int
+    v_sing: float
+    crossing_point: np.ndarray
+    xi_plan: np.ndarray
+
+
+@dataclass(frozen=True)
+class SpeedTrial:
+    """One tried speed: the paper's Table II columns."""
+
+    v_sing: float
+    verdict: Verdict
+    max_width_pose: float  # m
+    max_width_velocity: float  # m/s
+    certified_at_step: int
+
+
+@dataclass(frozen=True)
+class CrossingCertificate:
+    """Result of :func:`certify_crossing` (frozen).
+
+    ``verdict`` is ``MODE_CHANGED`` when ``v_min`` exists (the change is
+    certified for every admissible execution at ``v_min``), ``UNKNOWN`` when
+    no tried speed certifies.  ``refutation_bound`` (m/s, or None when not
+    computed / no counterexample) is the largest speed at which a verified
+    counterexample exists: no sound tracker can certify at or below it.
+    """
+
+    verdict: Verdict
+    v_min: float | None
+    refutation_bound: float | None
+    trials: tuple
+    trajectory: PlannedTrajectory | None
+    enclosures: TrackResult | None
+    bounds: PlanningBounds
+    a_max_used: tuple | None
+    monte_carlo: dict | None
+    versions: dict
+    elapsed_s: float
+    refutation: tuple = field(default=(), repr=False)
+
+    def summary(self) -> dict:
+        """JSON-ready summary."""
+        return {
+            "verdict": self.verdict.value,
+            "v_min_mps": self.v_min,
+            "refutation_bound_mps": self.refutation_bound,
+            "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
+            "a_max_mps2": None if self.a_max_used is None else list(self.a_max_used),
+            "eps_q_rad": self.bounds.eps_q,
+            "tracking_error_rad": self.bounds.tracking_error,
+            "t_s": self.bounds.t_s,
+            "xi_splits": None if self.bounds.xi_splits is None else list(self.bounds.xi_splits),
+            "trials": [
+                {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "max_width_pose_m": r.max_width_pose,
+                 "max_width_velocity_mps": r.max_width_velocity,
+                 "certified_at_step": None if r.certified_at_step < 0 else r.certified_at_step}
+                for r in self.trials
+            ],
+            "refutation": [
+                {"v_sing_mps": r.speed, "counterexample": bool(r.verified), "status": r.status,
+                 "geometry": None if r.geometry is None else list(map(float, r.geometry))}
+                for r in self.refutation
+            ],
+            "monte_carlo": self.monte_carlo,
+            "versions": self.versions,
+            "elapsed_s": self.elapsed_s,
+        }
+
+
+# ------------------------------------------------------------------ planning
+def _crossing_on_segment(kin, task, xi):
+    """Arc length (m) where the segment meets the Type 2 locus, and the IK there.
+
+    IK continuation on a grid of 0.5 mm, then bisection of the sign change of
+    ``det J_x``.  Raises if the start or goal is unreachable, or if both lie in
+    the same assembly mode.
+    """
+    L = float(np.linalg.norm(task.goal - task.start))
+    u = (task.goal - task.start) / L
+    N = max(8, int(np.ceil(L / 5e-4)))
+    s = np.linspace(0.0, L, N + 1)
+    X = task.start[None] + s[:, None] * u[None]
+    try:
+        Q = kin.ik_path(X, xi, task.working_guess)
+    except SimulationError as exc:
+        raise InputError(f"the straight path from start to goal is not reachable in the working mode: {exc}") from None
+    modes = kin.mode_batch(X, Q, xi)
+    m0, m1 = modes[0], modes[-1]
+    if m0 == 0 or m1 == 0:
+        raise InputError("start or goal lies on the Type 2 locus; move it off the locus")
+    if m0 == m1:
+        raise InputError(f"goal is in the same assembly mode ({m0:+d}) as the start: there is nothing to cross")
+    change = np.nonzero(modes[:-1] != modes[1:])[0]
+    if np.count_nonzero(modes[:-1] * modes[1:] < 0) > 1:
+        raise InputError("the straight path crosses the Type 2 locus more than once; choose another start/goal")
+    k = int(change[0])
+    lo, hi = s[k], s[k + 1]
+    qg = Q[k]
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        qm = kin.ik(task.start + mid * u, xi, qg)
+        if kin.det_batch((task.start + mid * u)[None], qm[None], xi)[0] * kin.robot.mode_sign * m0 > 0:
+            lo = mid
+            qg = qm
+        else:
+            hi = mid
+    return 0.5 * (lo + hi), u, L, int(m0)
+
+
+def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds) -> PlannedTrajectory:
+    """Plan a rest-to-rest straight crossing at ``v_sing`` (m/s).
+
+    Time law: rest ``t_rest``; smoothstep speed ramp to ``v_sing`` (peak
+    ``a_peak``); constant speed through the crossing point (zero acceleration
+    there: the crossing criterion); ramp to rest at ``goal``; 0.05 s rest.
+
+    Raises
+    ------
+    InputError
+        Infeasible speed (the ramps do not fit between start, crossing point
+        and goal: the message gives the largest feasible speed), bad task.
+    """
+    robot = kin.robot
+    b = bounds.resolved(robot)
+    if not (np.isfinite(v_sing) and v_sing > 0):
+        raise InputError(f"v_sing must be positive, got {v_sing}")
+    xi = robot.xi_center
+    s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
+    T, D = ramp_length(v_sing, b.a_peak)
+    room = min(s_star, L - s_star)
+    if D > room:
+        v_max = float(np.sqrt(2.0 * b.a_peak * room / 1.875))
+        raise InputError(
+            f"no feasible crossing at v_sing = {v_sing} m/s: its speed ramps need {1e3 * D:.1f} mm but the crossing "
+            f"point is {1e3 * s_star:.1f} mm from the start and {1e3 * (L - s_star):.1f} mm from the goal; "
+            f"v_sing <= {v_max:.3f} m/s at a_peak = {b.a_peak} m/s^2"
+        )
+    law = TimeLaw.build(0.0, [
+        (b.t_rest, 0.0, 0.0),
+        (T, 0.0, v_sing),
+        ((s_star - D) / v_sing, v_sing, v_sing),
+        ((L - s_star - D) / v_sing, v_sing, v_sing),
+        (T, v_sing, 0.0),
+        (0.05, 0.0, 0.0),
+    ])
+    t_cross = b.t_rest + T + (s_star - D) / v_sing
+    # put the crossing instant on a sample (shift the initial rest by < t_s)
+    shift = (np.ceil(t_cross / b.t_s - 1e-9) * b.t_s) - t_cross
+    K = int(np.floor((law.duration + shift) / b.t_s + 1e-9)) + 1
+    t = np.arange(K) * b.t_s
+    s, v, a = law.evaluate(t - shift)
+    X = task.start[None] + s[:, None] * u[None]
+    XD = v[:, None] * u[None]
+    XDD = a[:, None] * u[None]
+    try:
+        Q = kin.ik_path(X, xi, task.working_guess)
+    except SimulationError as exc:
+        raise InputError(f"planned path left the working mode: {exc}") from None
+    QD = kin.joint_velocity(X, Q, xi, XD)
+    QDD = kin.joint_acceleration(X, Q, xi, XD, QD, XDD)
+    k_sing = int(round((t_cross + shift) / b.t_s))
+    for arr in (t, Q, QD, QDD, X, XD, XDD):
+        arr.setflags(write=False)
+    return PlannedTrajectory(t, Q, QD, QDD, X, XD, XDD, k_sing, float(v_sing), task.start + s_star * u, xi.copy())
+
+
+def _a_max_for(plan: PlannedTrajectory, b: PlanningBounds):
+    peak = np.max(np.abs(plan.xdd), axis=0)
+    if b.a_max is None:
+        # at least 1 m/s^2 so a nearly static axis still has room for tracking errors
+        return tuple(np.maximum(peak * (1.0 + b.a_margin), 1.0))
+    if np.any(np.asarray(b.a_max) < peak):
+        raise InputError(
+            f"bounds contradict the plan: a_max = {list(b.a_max)} m/s^2 is below the planned peak acceleration "
+            f"{peak.tolist()} m/s^2"
+        )
+    return tuple(b.a_max)
+
+
+def _settings(robot, b: PlanningBounds, a_max):
+    return TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q + b.tracking_error, a_max=a_max,
+                                     xi_splits=b.xi_splits)
+
+
+def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int) -> TrackResult:
+    """Run the tracker on inputs covering every admissible execution of ``plan``.
+
+    Readings ``q_plan`` with the encoder bound ``eps_q + tracking_error``; the
+    initial box encloses every start pose of mode ``initial_mode`` for every
+    geometry in ``[xi]``.  ``MODE_CHANGED`` certifies every admissible execution.
+    """
+    robot = imodel.robot
+    b = bounds.resolved(robot)
+    s = _settings(robot, b, _a_max_for(plan, b))
+    return track(imodel, plan.q, s, initial_mode=initial_mode)
+
+
+def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6, progress=None):
+    """Smallest certified ``v_sing`` in ``[v_low, v_high]`` to ``tol`` (m/s).
+
+    Each round plans ``grid`` speeds spread over the current bracket and
+    certifies them in one batch; the bracket shrinks to the interval between
+    the fastest uncertified speed below the slowest certified one and that
+    certified speed.  Certification need not be monotone in the speed: the
+    table of every trial is returned, and the result is the slowest speed
+    certified such that every tried speed above it was certified too.
+
+    Returns
+    -------
+    v_min : float or None
+    trials : list of SpeedTrial (sorted by speed)
+    """
+    robot = kin.robot
+    b = bounds.resolved(robot)
+    if not (0 < v_low < v_high):
+        raise InputError(f"need 0 < v_low < v_high, got [{v_low}, {v_high}]")
+    trials: dict[float, SpeedTrial] = {}
+    lo, hi = float(v_low), float(v_high)
+    speeds = list(np.linspace(lo, hi, grid))
+    while True:
+        speeds = [round(v, 6) for v in speeds if round(v, 6) not in trials]
+        if speeds:
+            for v, trial in zip(speeds, _certify_speeds(kin, imodel, task, b, speeds, progress)):
+                trials[v] = trial
+        ordered = sorted(trials)
+        ok = [trials[v].verdict is Verdict.MODE_CHANGED for v in ordered]
+        if not any(ok):
+            return None, [trials[v] for v in ordered]
+        # slowest speed from which every faster trial certifies
+        i = len(ordered) - 1
+        while i > 0 and ok[i - 1]:
+            i -= 1
+        if not ok[-1]:
+            i = max(j for j, good in enumerate(ok) if good)
+            while i > 0 and ok[i - 1]:
+                i -= 1
+        v_cert = ordered[i]
+        v_fail = ordered[i - 1] if i > 0 else None
+        if v_fail is None:
+            return v_cert, [trials[v] for v in ordered]
+        if v_cert - v_fail <= tol:
+            return v_cert, [trials[v] for v in ordered]
+        speeds = list(np.linspace(v_fail, v_cert, grid)[1:-1])
+
+
+def _certify_speeds(kin, imodel, task, b, speeds, progress):
+    robot = kin.robot
+    plans = [plan_crossing(kin, task, v, b) for v in speeds]
+    a_max = np.max([_a_max_for(p, b) for p in plans], axis=0)
+    s = _settings(robot, b, a_max)
+    K = max(len(p.t) for p in plans)
+    q = np.stack([np.vstack([p.q, np.repeat(p.q[-1:], K - len(p.t), axis=0)]) for p in plans])
+    m0 = int(kin.mode(plans[0].x[0], plans[0].q[0], plans[0].xi_plan))
+    boxes = [initial_box_from_mode(imodel, p.q[0], m0, s) for p in plans]
+    x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
+    res = track_batch(imodel, q, s, x0, progress=progress)
+    return [
+        SpeedTrial(float(v), res.verdict[i], float(res.max_width_pose[i]), float(res.max_width_velocity[i]),
+                   int(res.certified_at_step[i]))
+        for i, v in enumerate(speeds)
+    ]
+
+
+def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
+                             a_max=None, progress=None) -> dict:
+    """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
+
+    Each execution: geometry uniform in ``[xi]`` (every 5th at a random corner),
+    joints by the true IK, readings quantised (floor, round or a uniform
+    random error within ``eps_q``), tracked by the run-time tracker (robot
+    defaults, ``a_max`` of the certificate).  Returns counts and the runs
+    whose verdict was not ``mode-changed`` or whose boxes missed the truth.
+    """
+    from .simulate import random_geometry
+
+    robot = kin.robot
+    b = bounds.resolved(robot)
+    a_max = _a_max_for(plan, b) if a_max is None else a_max
+    s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
+    rng = np.random.default_rng(seed)
+    qs, truths = [], []
+    for r in range(runs):
+        xi = random_geometry(robot, rng, corners=(r % 5 == 4))
+        q_true = kin.ik_path(plan.x, xi, plan.q[0])
+        kind = ("floor", "round", "uniform")[r % 3]
+        if kind == "floor":
+            q_read = b.eps_q * np.floor(q_true / b.eps_q)
+        elif kind == "round":
+            q_read = (0.5 * b.eps_q) * np.round(q_true / (0.5 * b.eps_q))
+        else:
+            q_read = q_true + rng.uniform(-b.eps_q, b.eps_q, q_true.shape)
+        q_read = np.clip(q_read, q_true - b.eps_q, q_true + b.eps_q)
+        modes = kin.mode_batch(plan.x, q_true, xi)
+        qs.append(q_read)
+        truths.append((xi, modes))
+    q = np.stack(qs)
+    m0 = int(truths[0][1][0])
+    boxes = [initial_box_from_mode(imodel, q[r, 0], m0, s) for r in range(runs)]
+    x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
+    res, rec = track_batch(imodel, q, s, x0, record=True, progress=progress)
+    misses, failures = [], []
+    for r in range(runs):
+        inside = (np.all(rec["x_lo"][r] <= plan.x) and np.all(plan.x <= rec["x_hi"][r])
+                  and np.all(rec["xd_lo"][r, 1:] <= plan.xd[1:]) and np.all(plan.xd[1:] <= rec["xd_hi"][r, 1:]))
+        if not inside:
+            misses.append(r)
+        true_changed = truths[r][1][-1] != truths[r][1][0]
+        if res.verdict[r] is not Verdict.MODE_CHANGED or not true_changed:
+            failures.append({"run": r, "verdict": res.verdict[r].value, "xi": truths[r][0].tolist()})
+    return {
+        "runs": runs,
+        "seed": seed,
+        "detected": int(sum(v is Verdict.MODE_CHANGED for v in res.verdict)),
+        "containment_failures": misses,
+        "not_detected": failures,
+    }
+
+
+def _versions():
+    out = {}
+    for pkg in ("crosscert", "numpy", "casadi", "scipy"):
+        try:
+            out[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=0.6, v_high=None,
+                     tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, seed=0, progress=None,
+                     kin=None, imodel=None) -> CrossingCertificate:
+    """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
+
+    Parameters
+    ----------
+    robot : robots.Robot
+    task : CrossingTask
+    bounds : PlanningBounds, optional
+    v_low, v_high : float
+        Speed bracket, m/s; ``v_high`` defaults to the fastest crossing the
+        segment allows at ``a_peak``.
+    tol : float
+        Resolution of ``v_min``, m/s.
+    monte_carlo_runs : int
+        Executions simulated at ``v_min`` (0 to skip).
+    refute : bool
+        Search verified counterexamples (planner.refute) below ``v_min``.
+    refute_speeds : sequence of float, optional
+        Speeds of the coarse counterexample scan (default every 0.1 m/s from 0.3).
+    seed : int
+        Seed of the Monte Carlo executions and of the counterexample starts.
+    progress : callable, optional
+        ``progress(k)`` after each tracked sample of every batch.
+    """
+    from robots import KinematicModel
+
+    t0 = time.perf_counter()
+    kin = KinematicModel(robot) if kin is None else kin
+    imodel = IntervalModel(robot) if imodel is None else imodel
+    b = (bounds or PlanningBounds()).resolved(robot)
+    s_star, _, L, m0 = _crossing_on_segment(kin, task, robot.xi_center)
+    v_feasible = float(np.sqrt(2.0 * b.a_peak * min(s_star, L - s_star) / 1.875)) * (1 - 1e-6)
+    v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)
+    if v_high <= v_low:
+        raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the segment allows at most {v_feasible:.3f} m/s")
+    v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
+    plan = enc = mc = a_used = None
+    if v_min is not None:
+        plan = plan_crossing(kin, task, v_min, b)
+        a_used = _a_max_for(plan, b)
+        enc = certify_plan(imodel, plan, b, m0)
+        if monte_carlo_runs:
+            mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress)
+    ref_bound = ref = None
+    if refute:
+        top = v_min if v_min is not None else max(t.v_sing for t in trials)
+        a_ref = a_used if a_used is not None else _a_max_for(plan_crossing(kin, task, top, b), b)
+        ref_bound, ref = _refutation(kin, task, b, m0, a_ref, top, tol, refute_speeds, seed)
+    return CrossingCertificate(
+        verdict=Verdict.MODE_CHANGED if v_min is not None else Verdict.UNKNOWN,
+        v_min=v_min,
+        refutation_bound=ref_bound,
+        trials=tuple(trials),
+        trajectory=plan,
+        enclosures=enc,
+        bounds=b,
+        a_max_used=a_used,
+        monte_carlo=mc,
+        versions=_versions(),
+        elapsed_s=time.perf_counter() - t0,
+        refutation=tuple(ref or ()),
+    )
+
+
+def _refutation(kin, task, b, m0, a_max, v_top, tol, speeds=None, seed=0):
+    """Refutation bound below ``v_top``: the largest speed with a verified counterexample.
+
+    Coarse scan (0.1 m/s from 0.3 m/s, or the given ``speeds``) with
+    :func:`planner.refute.refutation_bound` on the planned readings, then
+    bisection between the fastest refuted and the slowest non-refuted speed
+    above it, to ``tol``.  Starting geometries: the box centre and two seeded
+    random corners (the NLP is non-convex; a failed search proves nothing).
+
+    Returns
+    -------
+    bound : float or None
+    rows : list of planner.refute.SpeedRefutation (sorted by speed)
+    """
+    from . import refute
+    from .simulate import random_geometry
+
+    robot = kin.robot
+    rng = np.random.default_rng(seed)
+    starts = [robot.xi_center] + [random_geometry(robot, rng, corners=True) for _ in range(2)]
+    overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
+
+    def recording(v):
+        return plan_crossing(kin, task, v, b).q, b.t_s
+
+    def run(vs):
+        return list(refute.refutation_bound(kin, recording, vs, m0=m0, xi_starts=starts, bounds=overrides).rows)
+
+    if speeds is None:
+        speeds = [round(v, 6) for v in np.arange(0.3, v_top, 0.1)]
+    rows = {r.speed: r for r in run([v for v in speeds if v < v_top])}
+    while True:
+        ordered = sorted(rows)
+        refuted = [v for v in ordered if rows[v].verified]
+        if not refuted:
+            return None, [rows[v] for v in ordered]
+        v_ok = max(refuted)
+        above = [v for v in ordered if v > v_ok]
+        v_no = min(above) if above else v_top
+        if v_no - v_ok <= tol:
+            return v_ok, [rows[v] for v in ordered]
+        mid = round(0.5 * (v_ok + v_no), 6)
+        rows.update({r.speed: r for r in run([mid])})
