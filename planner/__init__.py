@@ -1,12 +1,40 @@
-"""Planning side: simulated crossings and operating-range sweeps.
+"""Planning side: planning-time certification, refutation bound, simulated crossings, sweeps.
 
 Explicit re-exports (no star imports).
 """
 
+from .certify import (
+    CrossingCertificate,
+    CrossingTask,
+    PlannedTrajectory,
+    PlanningBounds,
+    SpeedTrial,
+    certify_crossing,
+    certify_plan,
+    minimal_v_sing,
+    monte_carlo_confirmation,
+    plan_crossing,
+)
+from .refute import RecordingBounds, RefutationBound, refutation_bound, search_bounce, verify_bounce
 from .simulate import SimulatedRun, max_v_sing, random_geometry, simulate_bounce, simulate_crossing
 from .sweep import SweepRow, cruise_for, sweep
 
 __all__ = [
+    "CrossingCertificate",
+    "CrossingTask",
+    "PlannedTrajectory",
+    "PlanningBounds",
+    "SpeedTrial",
+    "certify_crossing",
+    "certify_plan",
+    "minimal_v_sing",
+    "monte_carlo_confirmation",
+    "plan_crossing",
+    "RecordingBounds",
+    "RefutationBound",
+    "refutation_bound",
+    "search_bounce",
+    "verify_bounce",
     "SimulatedRun",
     "max_v_sing",
     "random_geometry",

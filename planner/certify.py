@@ -331,14 +331,15 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
 def _a_max_for(plan: PlannedTrajectory, b: PlanningBounds):
     peak = np.max(np.abs(plan.xdd), axis=0)
     if b.a_max is None:
-        # at least 1 m/s^2 so a nearly static axis still has room for tracking errors
-        return tuple(np.maximum(peak * (1.0 + b.a_margin), 1.0))
+        # an axis the plan does not accelerate still gets a_margin * the largest
+        # planned acceleration: room for tracking errors, an assumption stated in a_max
+        return tuple(float(v) for v in np.maximum(peak * (1.0 + b.a_margin), b.a_margin * peak.max()))
     if np.any(np.asarray(b.a_max) < peak):
         raise InputError(
             f"bounds contradict the plan: a_max = {list(b.a_max)} m/s^2 is below the planned peak acceleration "
             f"{peak.tolist()} m/s^2"
         )
-    return tuple(b.a_max)
+    return tuple(float(v) for v in b.a_max)
 
 
 def _settings(robot, b: PlanningBounds, a_max):
@@ -562,8 +563,8 @@ def _refutation(kin, task, b, m0, a_max, v_top, tol, speeds=None, seed=0):
     Coarse scan (0.1 m/s from 0.3 m/s, or the given ``speeds``) with
     :func:`planner.refute.refutation_bound` on the planned readings, then
     bisection between the fastest refuted and the slowest non-refuted speed
-    above it, to ``tol``.  Starting geometries: the box centre and two seeded
-    random corners (the NLP is non-convex; a failed search proves nothing).
+    above it, to ``tol``.  Starting geometries: the box centre and a seeded
+    random corner (the NLP is non-convex; a failed search proves nothing).
 
     Returns
     -------
@@ -575,7 +576,7 @@ def _refutation(kin, task, b, m0, a_max, v_top, tol, speeds=None, seed=0):
 
     robot = kin.robot
     rng = np.random.default_rng(seed)
-    starts = [robot.xi_center] + [random_geometry(robot, rng, corners=True) for _ in range(2)]
+    starts = [robot.xi_center, random_geometry(robot, rng, corners=True)]
     overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
 
     def recording(v):
