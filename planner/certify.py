@@ -118,6 +118,9 @@ class PlanningBounds:
         Rest before the motion, s.
     xi_splits : tuple, optional
         Geometry hypotheses of the tracker (robot default).
+    method : str
+        Time law of the plans: ``"smoothstep"`` or ``"time-optimal"``
+        (see :func:`plan_crossing`).
     """
 
     eps_q: float | None = None
@@ -128,6 +131,7 @@ class PlanningBounds:
     t_s: float | None = None
     t_rest: float = 0.05
     xi_splits: tuple | None = None
+    method: str = "smoothstep"
 
     def resolved(self, robot) -> "PlanningBounds":
         eps = robot.eps_q if self.eps_q is None else float(self.eps_q)
@@ -139,8 +143,10 @@ class PlanningBounds:
             raise InputError("tracking_error, a_margin and t_rest must be non-negative")
         amax = None if self.a_max is None else tuple(np.broadcast_to(np.asarray(self.a_max, float), (robot.n,)))
         splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
+        if self.method not in ("smoothstep", "time-optimal"):
+            raise InputError(f"unknown planning method {self.method!r}; use 'smoothstep' or 'time-optimal'")
         return PlanningBounds(eps, float(self.tracking_error), amax, float(self.a_margin), float(self.a_peak), ts,
-                              float(self.t_rest), splits)
+                              float(self.t_rest), splits, self.method)
 
 
 @dataclass(frozen=True)
@@ -271,12 +277,22 @@ def _crossing_on_segment(kin, task, xi):
     return 0.5 * (lo + hi), u, L, int(m0)
 
 
-def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds) -> PlannedTrajectory:
+def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds,
+                  method: str | None = None, limits=None) -> PlannedTrajectory:
     """Plan a rest-to-rest straight crossing at ``v_sing`` (m/s).
 
-    Time law: rest ``t_rest``; smoothstep speed ramp to ``v_sing`` (peak
-    ``a_peak``); constant speed through the crossing point (zero acceleration
-    there: the crossing criterion); ramp to rest at ``goal``; 0.05 s rest.
+    ``method`` defaults to ``bounds.method``.  ``"smoothstep"``: rest ``t_rest``; smoothstep speed ramp
+    to ``v_sing`` (peak ``a_peak``); constant speed through the crossing point
+    (zero acceleration there: the crossing criterion); ramp to rest at
+    ``goal``; 0.05 s rest.
+
+    ``method="time-optimal"``: the minimal-time scaling of the same segment
+    (:func:`planner.timescale.time_optimal_scaling`, cvxpy) with
+    ``|xdd| <= a_peak``, the joint limits of ``limits``
+    (:class:`planner.timescale.ScalingLimits`, optional), speed ``v_sing``
+    and the criterion at the crossing point; the segment is gridded at about
+    0.1 mm with the crossing point on a node, so the goal may move by less
+    than one grid step along the segment.
 
     Raises
     ------
@@ -290,6 +306,11 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
         raise InputError(f"v_sing must be positive, got {v_sing}")
     xi = robot.xi_center
     s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
+    method = b.method if method is None else method
+    if method == "time-optimal":
+        return _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits)
+    if method != "smoothstep":
+        raise InputError(f"unknown planning method {method!r}; use 'smoothstep' or 'time-optimal'")
     T, D = ramp_length(v_sing, b.a_peak)
     room = min(s_star, L - s_star)
     if D > room:
@@ -326,6 +347,24 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     for arr in (t, Q, QD, QDD, X, XD, XDD):
         arr.setflags(write=False)
     return PlannedTrajectory(t, Q, QD, QDD, X, XD, XDD, k_sing, float(v_sing), task.start + s_star * u, xi.copy())
+
+
+def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
+    from . import timescale as ts_
+
+    h_target = 1e-4  # m, grid step
+    n1 = max(2, int(round(s_star / h_target)))
+    h = s_star / n1
+    N = max(n1 + 2, int(round(L / h)))
+    samples = ts_.sample_path(kin, task.start, u, N * h, N, task.working_guess, xi)
+    lim = limits or ts_.ScalingLimits()
+    lim = ts_.ScalingLimits(qd_max=lim.qd_max, qdd_max=lim.qdd_max, a_max=b.a_peak, extra=lim.extra)
+    scaling = ts_.time_optimal_scaling(samples, lim, v_sing=v_sing, s_star=s_star)
+    tt = ts_.resample(scaling, samples, b.t_s, t_rest=b.t_rest, t_rest_end=0.05)
+    arrays = [np.array(a) for a in (tt.t, tt.q, tt.qd, tt.qdd, tt.x, tt.xd, tt.xdd)]
+    for arr in arrays:
+        arr.setflags(write=False)
+    return PlannedTrajectory(*arrays, int(tt.k_star), float(v_sing), task.start + s_star * u, xi.copy())
 
 
 def _a_max_for(plan: PlannedTrajectory, b: PlanningBounds):

@@ -43,6 +43,18 @@ def test_plan_meets_the_criterion_and_the_limits(task):
     assert modes[0] == 1 and modes[-1] == -1
 
 
+def test_time_optimal_plan_is_certified_and_meets_the_criterion(task):
+    kin = kinematics()
+    b = PlanningBounds(method="time-optimal")
+    p = plan_crossing(kin, task, 1.3, b)
+    assert abs(np.linalg.norm(p.xd[p.k_sing]) - 1.3) <= 1e-6
+    u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
+    assert abs(p.xdd[p.k_sing] @ u) <= 1e-8
+    assert np.abs(p.xdd).max() <= 60.0 * (1 + 1e-6)
+    res = certify_plan(interval_model(), p, b, 1)
+    assert res.verdict is Verdict.MODE_CHANGED
+
+
 def test_infeasible_and_contradictory_requests(task):
     kin = kinematics()
     with pytest.raises(InputError, match="no feasible crossing"):

@@ -80,6 +80,8 @@ def build_parser() -> argparse.ArgumentParser:
     ce.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
     ce.add_argument("--tracking-error", type=float, default=0.0, help="allowed |reading - plan|, rad")
     ce.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
+    ce.add_argument("--method", choices=("smoothstep", "time-optimal"), default="smoothstep",
+                    help="time law: constant speed through the crossing, or minimal time (cvxpy)")
     ce.add_argument("--v-low", type=float, default=0.6, help="slowest speed tried, m/s")
     ce.add_argument("--v-high", type=float, help="fastest speed tried, m/s (default: the fastest the segment allows)")
     ce.add_argument("--tol", type=float, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
@@ -94,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
     _task_options(pl)
     pl.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
     pl.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    pl.add_argument("--method", choices=("smoothstep", "time-optimal"), default="smoothstep",
+                    help="time law: constant speed through the crossing, or minimal time (cvxpy)")
     pl.add_argument("-o", "--output", required=True, help="CSV file to write (t, q1..qn, x1..xn)")
 
     w = sub.add_parser("sweep", help="the paper's Table II on the simulated benchmark crossing")
@@ -124,7 +128,7 @@ def _plan(a):
     from planner.certify import PlanningBounds, plan_crossing
 
     robot, kin, task = _task(a)
-    p = plan_crossing(kin, task, a.v_sing, PlanningBounds(a_peak=a.a_peak))
+    p = plan_crossing(kin, task, a.v_sing, PlanningBounds(a_peak=a.a_peak, method=a.method))
     write_trajectory(a.output, p.t, p.q, x=p.x)
     print(f"wrote {a.output}: {len(p.t)} samples, crossing at sample {p.k_sing} at {p.v_sing} m/s, "
           f"peak |xdd| {np.abs(p.xdd).max():.1f} m/s^2")
@@ -137,7 +141,8 @@ def _certify(a):
     from .plots import plot_run
 
     robot, kin, task = _task(a)
-    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak)
+    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak,
+                            method=a.method)
     out = Path(a.out)
     bar = None
     cb = None
