@@ -14,7 +14,7 @@ from planner.certify import (
     plan_crossing,
 )
 from problems import interval_model, kinematics
-from robots import DEXTAR, benchmark_crossing
+from robots import benchmark_crossing
 from verifier.cli import main
 from verifier.errors import InputError
 from verifier.tracker import Verdict

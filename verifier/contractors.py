@@ -159,7 +159,6 @@ def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-
         Disjoint-ish solution boxes ``(n,)`` and their certified mode (0 when
         undecided).  ``None`` if the budget ``max_boxes`` was exhausted.
     """
-    n = model.n
     stack = [(np.array(X_search[0], dtype=float), np.array(X_search[1], dtype=float))]
     Qb = (np.asarray(Q[0], dtype=float)[None], np.asarray(Q[1], dtype=float)[None])
     XIb = (np.asarray(XI[0], dtype=float)[None], np.asarray(XI[1], dtype=float)[None])

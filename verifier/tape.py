@@ -290,7 +290,7 @@ class Tape:
                 lo[a], hi[a] = I.intersect(al, ah, zl, zh)
             # sin, cos, fabs, other powers: no projection (sound, just weaker)
         result = []
-        for i, (il, ih) in enumerate(inputs):
+        for il, ih in inputs:
             nl = np.array(np.broadcast_to(il, bs + il.shape[-1:]), dtype=np.float64)
             nh = np.array(np.broadcast_to(ih, bs + ih.shape[-1:]), dtype=np.float64)
             result.append([nl, nh])

@@ -486,7 +486,7 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
     if record:
         rec = {k: np.full((B, K, n), np.nan) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "qdd_hi")}
         rec["mode"] = np.zeros((B, K), np.int8)
-    Q_prev = None
+    Q_prev = q_prev = None
     sound = s.velocity_model is VelocityModel.SOUND
     depth = max(s.baselines) if sound else 1
     past = []  # (X, Q) boxes of the last `depth` samples, newest last
