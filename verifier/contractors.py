@@ -198,7 +198,7 @@ def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-
     return out
 
 
-def split_prune(model, X, Q, XI, max_pieces: int = 64, tol: float = 2e-4, sweeps: int = 4):
+def split_prune(model, X, Q, XI, max_pieces: int = 64, tol: float = 2e-4, sweeps: int = 2):
     """Batched branch and prune of pose boxes whose mode is undecided.
 
     Every piece whose mode is not certified and which is wider than ``tol``
