@@ -1,0 +1,562 @@
+"""Lumped-mass inverse dynamics of a parallel robot, and the Type 2 crossing criterion.
+
+A :class:`LumpedMassModel` is *data*: point masses at named points whose
+positions are a CasADi-compatible function of ``(x, q, xi)``, the reflected
+inertias of the motors, a gravity vector and the actuator torque limits.  A
+user replaces the DexTAR's assumed values (:data:`DEXTAR_DYNAMICS`) by
+building another instance; nothing else changes.
+
+:class:`LumpedDynamics` derives, once and symbolically, the inverse dynamics
+of such a model on a robot's kinematics (:class:`~robots.kinematics.KinematicModel`).
+With generalised coordinates ``z = (x, q)`` (pose and actuated joints, both
+``(n,)``) and the ``n`` loop-closure constraints ``f(x, q, xi) = 0`` (eq. (1)
+of the paper) with multipliers ``lambda``, Lagrange's equations read
+
+    ``w_x(z, zd, zdd) = J_x^T lambda``
+    ``w_q(z, zd, zdd) = tau + J_q^T lambda``
+
+where ``w = (w_x, w_q) = sum_j m_j P_j^T (pdd_j - g) + (0, I_m qdd)`` is the
+generalised inertial-plus-gravity force, ``p_j`` the position of mass ``j``,
+``P_j = dp_j/dz`` and ``pdd_j = P_j zdd + Pd_j zd`` its acceleration.  Hence
+
+    ``tau = w_q - J_q^T J_x^{-T} w_x``                              (1)
+
+away from Type 2 singularities.  On the Type 2 locus ``J_x`` has a right
+null vector ``t_s`` (unit; the direction of the motion the locked actuators
+do not control, ``J_x t_s = 0``), ``J_x^T lambda = w_x`` is solvable iff
+
+    ``t_s^T w_x = 0``                                              (2)
+
+which is the crossing criterion of Briot and Arakelian (ref. [11] of the
+paper, Section III-B): the wrench the platform dynamics require must have no
+component along the uncontrolled direction.  When every mass that moves with
+``x`` is attached to the end-effector point itself (the DexTAR with its distal
+links lumped at their ends), ``w_x = m_E (xdd - g)`` and (2) reduces to the
+paper's statement: the end-effector acceleration (minus gravity) is normal to
+the uncontrolled direction.
+
+When (2) holds at the singular instant and the motion crosses the locus
+transversally with a continuous jerk, the multipliers have a finite limit;
+differentiating ``J_x^T lambda = w_x`` once in time and projecting on
+``t_s`` gives one more equation, and ``lambda`` solves the square system
+
+    ``(J_x^T + t_s (Jd_x t_s)^T) lambda = (I - t_s t_s^T) w_x + t_s (t_s^T wd_x)``   (3)
+
+(:meth:`LumpedDynamics.singular_torques`), regular iff
+``nu^T Jd_x t_s != 0`` for the left null vector ``nu`` of ``J_x`` (the
+determinant changes sign at the crossing).  Equation (3) needs the jerk.
+
+Units: SI (kg, m, rad, s, N, N m).  Shapes: ``x, q`` ``(n,)``; ``xi``
+``(m,)``; positions of the ``P`` masses in ``d``-dimensional space, ``(d, P)``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from verifier.errors import InputError, ModelError
+
+from .kinematics import KinematicModel
+
+__all__ = [
+    "LumpedMassModel",
+    "LumpedDynamics",
+    "DEXTAR_DYNAMICS",
+    "dextar_mass_points",
+    "uncontrolled_direction",
+    "criterion_residual",
+]
+
+#: ``|det J_x|`` below this fraction of Hadamard's bound (product of the row
+#: norms of ``J_x``): eq. (1) is not evaluated (torques reported as NaN).
+SINGULAR_RTOL = 1e-12
+
+
+def _floats(owner: str, name: str, value, length: int | None = None, *, positive=False,
+            nonneg=False) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in value)
+    except (TypeError, ValueError) as exc:
+        raise ModelError(f"{owner}: {name} must be a sequence of numbers, got {value!r}") from exc
+    if length is not None and len(out) != length:
+        raise ModelError(f"{owner}: {name} must have {length} entries, got {len(out)}")
+    if not all(math.isfinite(v) for v in out):
+        raise ModelError(f"{owner}: {name} must be finite, got {out}")
+    if positive and not all(v > 0 for v in out):
+        raise ModelError(f"{owner}: {name} must be positive, got {out}")
+    if nonneg and not all(v >= 0 for v in out):
+        raise ModelError(f"{owner}: {name} must be non-negative, got {out}")
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class LumpedMassModel:
+    """Point masses, motor inertias, gravity and torque limits of a parallel robot (data).
+
+    Parameters
+    ----------
+    robot_name : str
+        Name of the :class:`~robots.base.Robot` whose ``(x, q, xi)`` the
+        positions read (checked by :class:`LumpedDynamics`).
+    point_names : tuple of str, length P
+        Names of the mass points (e.g. ``"B1"``, ``"E"``).
+    masses : tuple of float, length P
+        Point masses, kg (positive).
+    positions : callable
+        ``positions(x, q, xi) -> casadi.SX`` of shape ``(d, P)``: column ``j``
+        is the position (m) of point ``j`` in ``d``-dimensional space, for
+        ``x`` ``(n,)``, ``q`` ``(n,)``, ``xi`` ``(m,)`` CasADi SX symbols.  A
+        ``casadi.Function`` of ``(x, q, xi)`` qualifies.  Points fixed to the
+        base (a motor axis) contribute nothing and may be left out.
+    motor_inertia : tuple of float, length n
+        Inertia of each actuated joint's rotating parts reflected to the
+        joint (rotor times gear ratio squared, plus any inertia rigidly
+        attached to the joint that no point mass represents), kg m^2.
+    gravity : tuple of float, length d
+        Gravity acceleration in the frame of the positions, m/s^2.  A planar
+        robot working in a horizontal plane has no in-plane gravity:
+        ``(0, 0)``.
+    tau_max : tuple of float, length n
+        Actuator torque limits ``|tau_i| <= tau_max_i`` at the joints, N m.
+    description : str
+        Source of every value (and which are assumptions).
+    """
+
+    robot_name: str
+    point_names: tuple[str, ...]
+    masses: tuple[float, ...]
+    positions: Callable = field(repr=False)
+    motor_inertia: tuple[float, ...]
+    gravity: tuple[float, ...]
+    tau_max: tuple[float, ...]
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        owner = f"LumpedMassModel({self.robot_name!r})"
+        if not isinstance(self.robot_name, str) or not self.robot_name:
+            raise ModelError("LumpedMassModel.robot_name must be a non-empty string")
+        names = tuple(self.point_names)
+        if not names or not all(isinstance(s, str) and s for s in names) or len(set(names)) != len(names):
+            raise ModelError(f"{owner}: point_names must be distinct non-empty strings, got {names}")
+        set_(self, "point_names", names)
+        set_(self, "masses", _floats(owner, "masses", self.masses, len(names), positive=True))
+        if not callable(self.positions):
+            raise ModelError(f"{owner}: positions must be callable (x, q, xi) -> casadi.SX (d, P)")
+        inertia = _floats(owner, "motor_inertia", self.motor_inertia, nonneg=True)
+        if not inertia:
+            raise ModelError(f"{owner}: motor_inertia needs one entry per actuated joint")
+        set_(self, "motor_inertia", inertia)
+        set_(self, "tau_max", _floats(owner, "tau_max", self.tau_max, len(inertia), positive=True))
+        grav = _floats(owner, "gravity", self.gravity)
+        if not grav:
+            raise ModelError(f"{owner}: gravity needs one entry per spatial dimension")
+        set_(self, "gravity", grav)
+        if not isinstance(self.description, str):
+            raise ModelError(f"{owner}: description must be a string")
+
+    @property
+    def n(self) -> int:
+        """Number of actuated joints."""
+        return len(self.motor_inertia)
+
+    @property
+    def dim(self) -> int:
+        """Dimension ``d`` of the space the positions live in."""
+        return len(self.gravity)
+
+    @property
+    def total_mass(self) -> float:
+        """Sum of the point masses, kg."""
+        return float(sum(self.masses))
+
+    @property
+    def tau_max_array(self) -> np.ndarray:
+        """Torque limits, shape ``(n,)``, N m."""
+        return np.array(self.tau_max, dtype=float)
+
+
+# ---------------------------------------------------------------------- DexTAR
+def dextar_mass_points(x, q, xi):
+    """Mass points of the DexTAR on CasADi symbols (same geometry as :func:`robots.dextar.dextar_loop_closure`).
+
+    Parameters
+    ----------
+    x : casadi.SX, shape (2,)
+        End-effector position ``E``, m.
+    q : casadi.SX, shape (2,)
+        Motor angles, rad.
+    xi : casadi.SX, shape (7,)
+        ``(l11, l21, l12, l22, d, delta1, delta2)``, m and rad.
+
+    Returns
+    -------
+    casadi.SX, shape (2, 5)
+        Columns ``P1, B1, P2, B2, E``: mid-points of the proximal links, the
+        elbows ``B_i = A_i + l_i1 (cos q_i1, sin q_i1)`` and the end-effector, m.
+    """
+    l11, l21, _l12, _l22, d, delta1, delta2 = (xi[i] for i in range(7))
+    u1 = ca.vertcat(ca.cos(q[0] + delta1), ca.sin(q[0] + delta1))
+    u2 = ca.vertcat(ca.cos(q[1] + delta2), ca.sin(q[1] + delta2))
+    a1 = ca.vertcat(-d / 2, 0)
+    a2 = ca.vertcat(d / 2, 0)
+    e = ca.vertcat(x[0], x[1])
+    return ca.horzcat(a1 + 0.5 * l11 * u1, a1 + l11 * u1, a2 + 0.5 * l21 * u2, a2 + l21 * u2, e)
+
+
+# Assumed DexTAR data: the paper and Mecademic publish no inertial data.
+_M_PROX = 0.10  # kg, each proximal link (90 mm aluminium arm with its clamp), a uniform rod
+_M_DIST = 0.08  # kg, each distal link (90 mm tube with its two bearings)
+_M_TOOL = 0.05  # kg, end-effector shaft and tool
+_J_ROTOR = 5e-5  # kg m^2, rotor of a ~100 W servo motor
+_GEAR = 10.0  # reduction ratio; 3000 rpm at the motor gives ~31 rad/s at the joint
+#: The DexTAR's lumped-mass model.  **Every value is an assumption**: the
+#: paper (and Mecademic's public data) give no masses, inertias, gear ratios
+#: or torque limits.  Replace this instance when the real data are known.
+DEXTAR_DYNAMICS = LumpedMassModel(
+    robot_name="dextar",
+    point_names=("P1", "B1", "P2", "B2", "E"),
+    # A uniform rod of mass m rotating about A_i is *exactly* equivalent (mass,
+    # centre of mass, inertia) to m/6 at A_i, 2m/3 at its midpoint P_i and m/6
+    # at B_i; the m/6 at the fixed motor axis A_i does nothing and is left out.
+    # The distal links are lumped half at each end (B_i and E): the usual
+    # assumption of the crossing literature (Briot & Arakelian; Pagis) under
+    # which the criterion is "end-effector acceleration normal to the
+    # uncontrolled direction"; it keeps mass and centre of mass and
+    # overestimates each distal link's central inertia by m l^2 / 6.
+    masses=(
+        2 * _M_PROX / 3,
+        _M_PROX / 6 + _M_DIST / 2,
+        2 * _M_PROX / 3,
+        _M_PROX / 6 + _M_DIST / 2,
+        _M_TOOL + _M_DIST,  # tool + half of each distal link
+    ),
+    positions=dextar_mass_points,
+    # rotor 5e-5 kg m^2 behind a 10:1 reduction: 5e-3 kg m^2 at the joint
+    motor_inertia=(_J_ROTOR * _GEAR**2, _J_ROTOR * _GEAR**2),
+    # The paper does not say whether the DexTAR's plane is horizontal; the
+    # five-bar is assumed to work in a horizontal plane (table-top pick and
+    # place), where gravity has no in-plane component.  Use (0, -9.81) for a
+    # vertical plane with Y up.
+    gravity=(0.0, 0.0),
+    # peak torque of such a motor (~0.3 N m) times the 10:1 reduction
+    tau_max=(3.0, 3.0),
+    description=(
+        "DexTAR lumped-mass model with ASSUMED parameters (none are published): proximal links "
+        "90 mm, 0.10 kg uniform rods (2/3 at mid-link, 1/6 at the elbow); distal links 0.08 kg lumped "
+        "half at each end; tool 0.05 kg at E; rotor 5e-5 kg m^2 behind a 10:1 gear (5e-3 kg m^2 at "
+        "the joint); tau_max 3 N m per joint; horizontal plane (no in-plane gravity)."
+    ),
+)
+
+
+# ---------------------------------------------------------------------- derivation
+def _svd_null(jx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit right and left singular vectors of the smallest singular value, sign-normalised."""
+    u, _s, vt = np.linalg.svd(jx)
+    t, nu = vt[-1].copy(), u[:, -1].copy()
+    for v in (t, nu):
+        if v[np.argmax(np.abs(v))] < 0:
+            v *= -1.0
+    return t, nu
+
+
+def uncontrolled_direction(kin: KinematicModel, x, q, xi) -> np.ndarray:
+    """Unit direction ``t_s`` of the uncontrolled motion at a configuration.
+
+    The right singular vector of the smallest singular value of ``J_x``: on
+    the Type 2 locus, ``J_x t_s = 0`` (the end-effector can move along
+    ``t_s`` with the actuators locked).  Its sign is fixed so that its
+    largest-magnitude component is positive.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+    x, q : array_like, shape (n,)
+        Pose (SI) and joints (rad).
+    xi : array_like, shape (m,)
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    jx = kin.jac_x_batch(np.asarray(x, float).reshape(1, -1), np.asarray(q, float).reshape(1, -1), xi)[0]
+    return _svd_null(jx)[0]
+
+
+class LumpedDynamics:
+    """Inverse dynamics of a :class:`LumpedMassModel` on a robot's kinematics.
+
+    Built once, symbolically (see the module docstring for the equations);
+    immutable afterwards.  The numeric methods take one configuration
+    (``(n,)`` arrays) or a batch (``(N, n)``) and one shared ``xi``.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+    model : LumpedMassModel
+
+    Attributes
+    ----------
+    kin : KinematicModel
+    model : LumpedMassModel
+    wrench_fun : casadi.Function
+        ``(x, q, xd, qd, xdd, qdd, xi) -> (w_x, w_q)``, each ``(n, 1)``: the
+        generalised inertial-plus-gravity forces, N (per unit of ``x``) and
+        N m (per rad of ``q``).
+    rates_fun : casadi.Function
+        ``(x, q, xd, xdd, xi) -> (qd, qdd)``: joint rates from eq. (2) and its
+        derivative, ``J_q`` inverted (regular away from Type 1 singularities).
+    reduced_wrench_fun : casadi.Function
+        ``(x, q, xd, xdd, xi) -> (w_x, w_q)`` with the joint rates eliminated.
+    torque_fun : casadi.Function
+        ``(x, q, xd, xdd, xi) -> tau`` ``(n, 1)``, N m, eq. (1); undefined on
+        the Type 2 locus.
+    singular_torque_fun : casadi.Function
+        ``(x, q, xd, xdd, xddd, xi, t) -> (tau, lambda)``: eq. (3) with the
+        uncontrolled direction ``t`` (unit, ``(n, 1)``) as an input.
+
+    Raises
+    ------
+    ModelError
+        If the model is for another robot, has the wrong number of joints,
+        or its positions have the wrong shape or use other symbols.
+    """
+
+    def __init__(self, kin: KinematicModel, model: LumpedMassModel) -> None:
+        if not isinstance(kin, KinematicModel):
+            raise ModelError(f"LumpedDynamics needs a KinematicModel, got {type(kin).__name__}")
+        if not isinstance(model, LumpedMassModel):
+            raise ModelError(f"LumpedDynamics needs a LumpedMassModel, got {type(model).__name__}")
+        robot = kin.robot
+        if model.robot_name != robot.name:
+            raise ModelError(f"the dynamic model is for robot {model.robot_name!r}, the kinematics for {robot.name!r}")
+        n = kin.n
+        if model.n != n:
+            raise ModelError(f"the dynamic model has {model.n} motor inertias, the robot {n} joints")
+        x, q, xi = kin.sx_x, kin.sx_q, kin.sx_xi
+        try:
+            pos = model.positions(x, q, xi)
+        except Exception as exc:  # any failure of user code is a model defect
+            raise ModelError(f"{model.robot_name}: positions failed on CasADi symbols: {exc}") from exc
+        if isinstance(pos, ca.MX) or not isinstance(pos, (ca.SX, ca.DM)):
+            raise ModelError(f"{model.robot_name}: positions must return casadi.SX, got {type(pos).__name__}")
+        pos = ca.SX(pos)
+        P, d = len(model.masses), model.dim
+        if pos.shape != (d, P):
+            raise ModelError(f"{model.robot_name}: positions returned shape {pos.shape}, expected ({d}, {P}) "
+                             "(one column per mass point, one row per gravity component)")
+        try:
+            ca.Function("pos", [x, q, xi], [pos])
+        except RuntimeError as exc:
+            raise ModelError(f"{model.robot_name}: positions use symbols other than (x, q, xi)") from exc
+
+        xd, qd = kin.sx_xd, kin.sx_qd
+        xdd, qdd = ca.SX.sym("xdd", n), ca.SX.sym("qdd", n)
+        xddd, qddd = ca.SX.sym("xddd", n), ca.SX.sym("qddd", n)
+        z, zd, zdd = ca.vertcat(x, q), ca.vertcat(xd, qd), ca.vertcat(xdd, qdd)
+        g = ca.DM(model.gravity)
+        w = ca.SX.zeros(2 * n, 1)
+        for j, mj in enumerate(model.masses):
+            pj = pos[:, j]
+            Pj = ca.jacobian(pj, z)
+            acc = ca.mtimes(Pj, zdd) + ca.jtimes(ca.mtimes(Pj, zd), z, zd)
+            w += mj * ca.mtimes(Pj.T, acc - g)
+        w += ca.vertcat(ca.SX.zeros(n, 1), ca.DM(model.motor_inertia) * qdd)
+        w_x, w_q = w[:n], w[n:]
+
+        jx, jq = kin.sx_jx, kin.sx_jq
+        # joint rates: J_x xd + J_q qd = 0 and its time derivative
+        qd_e = -ca.solve(jq, ca.mtimes(jx, xd))
+        h = ca.substitute(kin.sx_jdot, qd, qd_e)
+        qdd_e = -ca.solve(jq, ca.mtimes(jx, xdd) + h)
+        # third order: d/dt (J_x xdd + J_q qdd + jdot) = 0, linear in qddd with J_q
+        G = ca.mtimes(jx, xdd) + ca.mtimes(jq, qdd) + kin.sx_jdot
+        allv = ca.vertcat(x, q, xd, qd, xdd, qdd)
+        Gd = ca.jtimes(G, allv, ca.vertcat(xd, qd, xdd, qdd, xddd, ca.SX.zeros(n, 1)))
+        qddd_e = -ca.solve(jq, Gd)
+
+        def reduce(expr):
+            """Eliminate qd, qdd (and qddd) in favour of pose rates."""
+            expr = ca.substitute(expr, qddd, qddd_e)
+            expr = ca.substitute(expr, qdd, qdd_e)
+            return ca.substitute(expr, qd, qd_e)
+
+        w_x_r, w_q_r = reduce(w_x), reduce(w_q)
+        lam = ca.solve(jx.T, w_x_r)
+        tau = w_q_r - ca.mtimes(jq.T, lam)
+
+        # eq. (3): finite multipliers at the singular instant
+        t = ca.SX.sym("t", n)
+        wd = ca.jtimes(w, allv, ca.vertcat(xd, qd, xdd, qdd, xddd, qddd))
+        wd_x = reduce(wd[:n])
+        jdt = reduce(ca.jtimes(ca.mtimes(jx, t), ca.vertcat(x, q), ca.vertcat(xd, qd)))  # Jd_x t
+        S = jx.T + ca.mtimes(t, jdt.T)
+        rhs = w_x_r - t * ca.dot(t, w_x_r) + t * ca.dot(t, wd_x)
+        lam_s = ca.solve(S, rhs)
+        tau_s = w_q_r - ca.mtimes(jq.T, lam_s)
+
+        names = ["x", "q", "xd", "xdd", "xi"]
+        dct = self.__dict__
+        dct["kin"], dct["model"] = kin, model
+        dct["_hadamard"] = ca.Function("had", [x, q, xi], [kin.sx_det, _row_norm_product(jx)])
+        dct["wrench_fun"] = ca.Function("wrench", [x, q, xd, qd, xdd, qdd, xi], [w_x, w_q],
+                                        ["x", "q", "xd", "qd", "xdd", "qdd", "xi"], ["w_x", "w_q"])
+        dct["rates_fun"] = ca.Function("rates", [x, q, xd, xdd, xi], [qd_e, qdd_e], names, ["qd", "qdd"])
+        dct["reduced_wrench_fun"] = ca.Function("reduced_wrench", [x, q, xd, xdd, xi], [w_x_r, w_q_r], names,
+                                                ["w_x", "w_q"])
+        dct["torque_fun"] = ca.Function("torque", [x, q, xd, xdd, xi], [tau], names, ["tau"])
+        dct["singular_torque_fun"] = ca.Function(
+            "singular_torque", [x, q, xd, xdd, xddd, xi, t], [tau_s, lam_s],
+            ["x", "q", "xd", "xdd", "xddd", "xi", "t"], ["tau", "lambda"])
+        dct["_frozen"] = True
+
+    def __setattr__(self, name, value):
+        raise AttributeError("LumpedDynamics is immutable")
+
+    def __delattr__(self, name):
+        raise AttributeError("LumpedDynamics is immutable")
+
+    def __repr__(self) -> str:
+        return f"LumpedDynamics({self.kin.robot.name!r}, {len(self.model.masses)} masses)"
+
+    # -------------------------------------------------------------- numeric
+    def _rows(self, *arrays):
+        out = [np.atleast_2d(np.asarray(a, dtype=float)) for a in arrays]
+        for a in out:
+            if a.ndim != 2 or a.shape[1] != self.kin.n:
+                raise InputError(f"expected (N, {self.kin.n}) or ({self.kin.n},) arrays, got shape {a.shape}")
+        npts = max(a.shape[0] for a in out)
+        return [np.broadcast_to(a, (npts, self.kin.n)) for a in out], npts
+
+    def _xi(self, xi) -> np.ndarray:
+        xi = self.kin.robot.xi_nominal_array if xi is None else np.asarray(xi, dtype=float).reshape(-1)
+        if xi.shape != (self.kin.m,):
+            raise InputError(f"xi must have shape ({self.kin.m},), got {xi.shape}")
+        return xi
+
+    def _eval(self, fun: ca.Function, arrays, xi, extra=()):
+        (arrs, npts) = self._rows(*arrays)
+        args = [a.T for a in arrs] + [xi] + [np.asarray(e, float).reshape(-1, 1) for e in extra]
+        res = fun.map(npts)(*args) if npts > 1 else fun(*args)
+        if not isinstance(res, (list, tuple)):
+            res = [res]
+        return [np.asarray(r, dtype=float).T.reshape(npts, -1) for r in res]
+
+    def joint_rates(self, x, q, xd, xdd, xi=None) -> tuple[np.ndarray, np.ndarray]:
+        """Joint velocities (rad/s) and accelerations (rad/s^2), each ``(N, n)``, from pose rates (SI)."""
+        qd, qdd = self._eval(self.rates_fun, (x, q, xd, xdd), self._xi(xi))
+        return qd, qdd
+
+    def wrench(self, x, q, xd, xdd, xi=None) -> tuple[np.ndarray, np.ndarray]:
+        """Generalised forces ``(w_x, w_q)``, each ``(N, n)``: N (translational pose) and N m.
+
+        ``w_x`` is the wrench the platform dynamics require along the pose
+        coordinates, ``w_q`` the one along the joints (module docstring).
+        """
+        w_x, w_q = self._eval(self.reduced_wrench_fun, (x, q, xd, xdd), self._xi(xi))
+        return w_x, w_q
+
+    def criterion_residual(self, x, q, xd, xdd, xi=None, *, direction=None) -> np.ndarray:
+        """``t_s^T w_x``: the component of the platform wrench along the uncontrolled direction, N.
+
+        On the Type 2 locus the inverse dynamics are consistent iff it is 0
+        (eq. (2) of the module docstring).  Off the locus ``t_s`` is the
+        right singular vector of the smallest singular value of ``J_x``.
+
+        Parameters
+        ----------
+        x, q, xd, xdd : array_like, shape (n,) or (N, n)
+            Pose (m), joints (rad), pose velocity (m/s) and acceleration (m/s^2).
+        xi : array_like, shape (m,), optional
+            Geometry (default nominal).
+        direction : array_like, shape (n,) or (N, n), optional
+            Use this (normalised) ``t_s`` instead of the SVD of ``J_x``.
+
+        Returns
+        -------
+        ndarray, shape (N,)
+            Residual, N (for a translational pose and unit ``t_s``).
+        """
+        xi = self._xi(xi)
+        (X, Q, XD, XDD), npts = self._rows(x, q, xd, xdd)
+        w_x, _ = self.wrench(X, Q, XD, XDD, xi)
+        if direction is None:
+            jx = self.kin.jac_x_batch(X, Q, xi)
+            T = np.array([_svd_null(j)[0] for j in jx])
+        else:
+            (T,), _ = self._rows(direction)
+            T = np.broadcast_to(T, (npts, self.kin.n))
+            norm = np.linalg.norm(T, axis=1, keepdims=True)
+            if np.any(norm == 0):
+                raise InputError("direction must be non-zero")
+            T = T / norm
+        return np.einsum("ki,ki->k", T, w_x)
+
+    def is_singular(self, x, q, xi=None, *, rtol: float = SINGULAR_RTOL) -> np.ndarray:
+        """Mask ``(N,)``: ``|det J_x|`` below ``rtol`` times the product of its row norms."""
+        (X, Q), _ = self._rows(x, q)
+        det, had = self._eval(self._hadamard, (X, Q), self._xi(xi))
+        return np.abs(det[:, 0]) <= rtol * had[:, 0]
+
+    def torques(self, x, q, xd, xdd, xi=None) -> np.ndarray:
+        """Actuator torques ``tau = w_q - J_q^T J_x^{-T} w_x``, ``(N, n)``, N m (eq. (1)).
+
+        Valid off the Type 2 locus; NaN where :meth:`is_singular` (use
+        :meth:`singular_torques` at the singular instant).
+        """
+        xi = self._xi(xi)
+        (X, Q, XD, XDD), _ = self._rows(x, q, xd, xdd)
+        tau = self._eval(self.torque_fun, (X, Q, XD, XDD), xi)[0]
+        tau[self.is_singular(X, Q, xi)] = np.nan
+        return tau
+
+    def singular_torques(self, x, q, xd, xdd, xddd, xi=None, *, direction=None) -> np.ndarray:
+        """Torques at the singular instant of a crossing, ``(n,)``, N m (eq. (3)).
+
+        The limit of :meth:`torques` along a motion that crosses the Type 2
+        locus at ``(x, q)`` transversally with continuous jerk ``xddd``
+        (m/s^3), *provided the criterion holds* there (only the component of
+        ``w_x`` normal to ``t_s`` is used; check
+        :meth:`criterion_residual` separately).
+
+        Parameters
+        ----------
+        x, q, xd, xdd, xddd : array_like, shape (n,)
+        xi : array_like, shape (m,), optional
+        direction : array_like, shape (n,), optional
+            ``t_s`` (default: from the SVD of ``J_x``).
+
+        Raises
+        ------
+        InputError
+            If the motion does not cross the locus transversally there (the
+            system of eq. (3) is singular).
+        """
+        xi = self._xi(xi)
+        x, q = (np.asarray(v, float).reshape(-1) for v in (x, q))
+        t = uncontrolled_direction(self.kin, x, q, xi) if direction is None else np.asarray(direction, float)
+        t = t / np.linalg.norm(t)
+        tau, _lam = self._eval(self.singular_torque_fun, (x, q, xd, xdd, xddd), xi, extra=(t,))
+        if not np.all(np.isfinite(tau)):
+            raise InputError("singular_torques: the motion does not cross the Type 2 locus transversally here")
+        return tau[0]
+
+
+def _row_norm_product(jx) -> ca.SX:
+    out = 1
+    for i in range(jx.shape[0]):
+        out = out * ca.norm_2(jx[i, :])
+    return out
+
+
+def criterion_residual(dynamics: LumpedDynamics, x, q, xd, xdd, xi=None, *, direction=None) -> np.ndarray:
+    """Crossing-criterion residual ``t_s^T w_x`` (N); see :meth:`LumpedDynamics.criterion_residual`."""
+    if not isinstance(dynamics, LumpedDynamics):
+        raise InputError(f"criterion_residual needs a LumpedDynamics, got {type(dynamics).__name__}")
+    return dynamics.criterion_residual(x, q, xd, xdd, xi, direction=direction)
