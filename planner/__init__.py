@@ -15,6 +15,7 @@ from .certify import (
     monte_carlo_confirmation,
     plan_crossing,
 )
+from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
 from .refute import RecordingBounds, RefutationBound, refutation_bound, search_bounce, verify_bounce
 from .simulate import SimulatedRun, max_v_sing, random_geometry, simulate_bounce, simulate_crossing
 from .sweep import SweepRow, cruise_for, sweep
@@ -30,6 +31,9 @@ __all__ = [
     "minimal_v_sing",
     "monte_carlo_confirmation",
     "plan_crossing",
+    "GeneratedTrajectory",
+    "GenerationLimits",
+    "generate_crossing",
     "RecordingBounds",
     "RefutationBound",
     "refutation_bound",

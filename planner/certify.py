@@ -119,8 +119,14 @@ class PlanningBounds:
     xi_splits : tuple, optional
         Geometry hypotheses of the tracker (robot default).
     method : str
-        Time law of the plans: ``"smoothstep"`` or ``"time-optimal"``
-        (see :func:`plan_crossing`).
+        Time law of the plans: ``"smoothstep"``, ``"time-optimal"`` or
+        ``"dynamic"`` (see :func:`plan_crossing`).
+    dynamics : robots.dynamics.LumpedMassModel, optional
+        Dynamic model for ``method="dynamic"`` (torque limits, criterion).
+    qd_max, qdd_max : float, optional
+        Joint speed (rad/s) and acceleration (rad/s^2) limits of the
+        ``time-optimal`` and ``dynamic`` plans (30 and 3000 by default for
+        ``dynamic``; none for ``time-optimal``).
     """
 
     eps_q: float | None = None
@@ -132,6 +138,9 @@ class PlanningBounds:
     t_rest: float = 0.05
     xi_splits: tuple | None = None
     method: str = "smoothstep"
+    dynamics: object = field(default=None, repr=False)
+    qd_max: float | None = None
+    qdd_max: float | None = None
 
     def resolved(self, robot) -> "PlanningBounds":
         eps = robot.eps_q if self.eps_q is None else float(self.eps_q)
@@ -143,10 +152,12 @@ class PlanningBounds:
             raise InputError("tracking_error, a_margin and t_rest must be non-negative")
         amax = None if self.a_max is None else tuple(np.broadcast_to(np.asarray(self.a_max, float), (robot.n,)))
         splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
-        if self.method not in ("smoothstep", "time-optimal"):
-            raise InputError(f"unknown planning method {self.method!r}; use 'smoothstep' or 'time-optimal'")
+        if self.method not in ("smoothstep", "time-optimal", "dynamic"):
+            raise InputError(f"unknown planning method {self.method!r}; use 'smoothstep', 'time-optimal' or 'dynamic'")
+        if self.method == "dynamic" and self.dynamics is None:
+            raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
         return PlanningBounds(eps, float(self.tracking_error), amax, float(self.a_margin), float(self.a_peak), ts,
-                              float(self.t_rest), splits, self.method)
+                              float(self.t_rest), splits, self.method, self.dynamics, self.qd_max, self.qdd_max)
 
 
 @dataclass(frozen=True)
@@ -286,6 +297,11 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     (zero acceleration there: the crossing criterion); ramp to rest at
     ``goal``; 0.05 s rest.
 
+    ``"dynamic"``: the CasADi + IPOPT generator
+    (:func:`planner.generate.generate_crossing`, minimal time) with the
+    dynamic model ``bounds.dynamics``: free path, torque limits, the dynamic
+    crossing criterion at the singular instant, ``|xdd| <= a_peak``.
+
     ``method="time-optimal"``: the minimal-time scaling of the same segment
     (:func:`planner.timescale.time_optimal_scaling`, cvxpy) with
     ``|xdd| <= a_peak``, the joint limits of ``limits``
@@ -308,9 +324,15 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
     method = b.method if method is None else method
     if method == "time-optimal":
+        if limits is None and (b.qd_max is not None or b.qdd_max is not None):
+            from .timescale import ScalingLimits
+
+            limits = ScalingLimits(qd_max=b.qd_max, qdd_max=b.qdd_max)
         return _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits)
+    if method == "dynamic":
+        return _plan_dynamic(kin, task, v_sing, b, xi)
     if method != "smoothstep":
-        raise InputError(f"unknown planning method {method!r}; use 'smoothstep' or 'time-optimal'")
+        raise InputError(f"unknown planning method {method!r}; use 'smoothstep', 'time-optimal' or 'dynamic'")
     T, D = ramp_length(v_sing, b.a_peak)
     room = min(s_star, L - s_star)
     if D > room:
@@ -365,6 +387,16 @@ def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
     for arr in arrays:
         arr.setflags(write=False)
     return PlannedTrajectory(*arrays, int(tt.k_star), float(v_sing), task.start + s_star * u, xi.copy())
+
+
+def _plan_dynamic(kin, task, v_sing, b, xi):
+    from .generate import GenerationLimits, generate_crossing
+
+    limits = GenerationLimits(qd_max=30.0 if b.qd_max is None else b.qd_max,
+                              qdd_max=3000.0 if b.qdd_max is None else b.qdd_max, a_max=b.a_peak)
+    gen = generate_crossing(kin, b.dynamics, task, v_sing, limits, objective="time", t_s=b.t_s, t_rest=b.t_rest,
+                            xi_plan=xi)
+    return gen.to_planned_trajectory()
 
 
 def _a_max_for(plan: PlannedTrajectory, b: PlanningBounds):

@@ -10,12 +10,16 @@ from verifier.errors import UnknownRobotError
 
 from .base import LoopClosure, Robot
 from .dextar import DEXTAR, BenchmarkCrossing, benchmark_crossing, elbows_out_ik, singular_y
+from .dynamics import DEXTAR_DYNAMICS, LumpedDynamics, LumpedMassModel
 from .kinematics import KinematicModel
 
 __all__ = [
     "Robot",
     "LoopClosure",
     "KinematicModel",
+    "LumpedMassModel",
+    "LumpedDynamics",
+    "DEXTAR_DYNAMICS",
     "DEXTAR",
     "BenchmarkCrossing",
     "benchmark_crossing",

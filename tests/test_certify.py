@@ -55,6 +55,18 @@ def test_time_optimal_plan_is_certified_and_meets_the_criterion(task):
     assert res.verdict is Verdict.MODE_CHANGED
 
 
+def test_dynamic_plan_is_certified(task):
+    from robots import DEXTAR_DYNAMICS
+
+    b = PlanningBounds(method="dynamic", dynamics=DEXTAR_DYNAMICS)
+    p = plan_crossing(kinematics(), task, 1.3, b)
+    assert abs(np.linalg.norm(p.xd[p.k_sing]) - 1.3) <= 1e-6
+    assert np.abs(p.xdd).max() <= 60.0 * (1 + 1e-6)
+    assert certify_plan(interval_model(), p, b, 1).verdict is Verdict.MODE_CHANGED
+    with pytest.raises(InputError, match="dynamic model"):
+        plan_crossing(kinematics(), task, 1.3, PlanningBounds(method="dynamic"))
+
+
 def test_infeasible_and_contradictory_requests(task):
     kin = kinematics()
     with pytest.raises(InputError, match="no feasible crossing"):

@@ -26,6 +26,20 @@ DEFAULT_ROBOT = "dextar"
 TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
 
 
+METHODS = ("smoothstep", "time-optimal", "dynamic")
+METHOD_HELP = ("time law of the plan: constant speed through the crossing (smoothstep), minimal time along the "
+               "straight path (time-optimal, cvxpy), or minimal time with the robot's dynamic model, torque limits "
+               "and the dynamic crossing criterion (dynamic, CasADi + IPOPT)")
+
+
+def _dynamics(robot):
+    from robots.dynamics import DEXTAR_DYNAMICS
+
+    if robot.name.lower() != DEFAULT_ROBOT:
+        raise InputError(f"robot {robot.name!r} has no dynamic model; use --method smoothstep or time-optimal")
+    return DEXTAR_DYNAMICS
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # usage errors: one line, exit 2
         raise _Usage(f"{self.prog}: {message}")
@@ -80,8 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
     ce.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
     ce.add_argument("--tracking-error", type=float, default=0.0, help="allowed |reading - plan|, rad")
     ce.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
-    ce.add_argument("--method", choices=("smoothstep", "time-optimal"), default="smoothstep",
-                    help="time law: constant speed through the crossing, or minimal time (cvxpy)")
+    ce.add_argument("--method", choices=METHODS, default="smoothstep", help=METHOD_HELP)
     ce.add_argument("--v-low", type=float, default=0.6, help="slowest speed tried, m/s")
     ce.add_argument("--v-high", type=float, help="fastest speed tried, m/s (default: the fastest the segment allows)")
     ce.add_argument("--tol", type=float, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
@@ -96,8 +109,7 @@ def build_parser() -> argparse.ArgumentParser:
     _task_options(pl)
     pl.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
     pl.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
-    pl.add_argument("--method", choices=("smoothstep", "time-optimal"), default="smoothstep",
-                    help="time law: constant speed through the crossing, or minimal time (cvxpy)")
+    pl.add_argument("--method", choices=METHODS, default="smoothstep", help=METHOD_HELP)
     pl.add_argument("-o", "--output", required=True, help="CSV file to write (t, q1..qn, x1..xn)")
 
     w = sub.add_parser("sweep", help="the paper's Table II on the simulated benchmark crossing")
@@ -128,7 +140,8 @@ def _plan(a):
     from planner.certify import PlanningBounds, plan_crossing
 
     robot, kin, task = _task(a)
-    p = plan_crossing(kin, task, a.v_sing, PlanningBounds(a_peak=a.a_peak, method=a.method))
+    dyn = _dynamics(robot) if a.method == "dynamic" else None
+    p = plan_crossing(kin, task, a.v_sing, PlanningBounds(a_peak=a.a_peak, method=a.method, dynamics=dyn))
     write_trajectory(a.output, p.t, p.q, x=p.x)
     print(f"wrote {a.output}: {len(p.t)} samples, crossing at sample {p.k_sing} at {p.v_sing} m/s, "
           f"peak |xdd| {np.abs(p.xdd).max():.1f} m/s^2")
@@ -142,7 +155,7 @@ def _certify(a):
 
     robot, kin, task = _task(a)
     bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak,
-                            method=a.method)
+                            method=a.method, dynamics=_dynamics(robot) if a.method == "dynamic" else None)
     out = Path(a.out)
     bar = None
     cb = None
