@@ -32,7 +32,7 @@ needs, not weaker.
 The whole recording is solved at once, not a window around the crossing: a
 counterexample must explain *every* sample (a tracker may certify at any
 step), and a few hundred samples of an ``n = 2`` robot give a few thousand
-variables, which IPOPT solves in well under a second (DexTAR benchmark:
+variables, which IPOPT solves in well under a second (the two-joint benchmark crossing of the tests:
 K = 250..400 samples, 2000..3200 variables, 0.1..0.4 s to converge,
 0.3..1 s to report infeasibility).  To study a window, pass the slice
 of the recording; the result then refutes only trackers fed that slice.

@@ -89,7 +89,7 @@ FEAS_RTOL = 1e-6
 _BRANCH_JUMP = 0.1
 #: Clarabel settings, a little tighter than its defaults (1e-8): an error e in b
 #: becomes e / (2 ds) in a = (b_{i+1} - b_i) / (2 ds), 5e3 e on a 0.1 mm grid.
-#: 1e-10 and tighter often end "optimal_inaccurate" on 700-node DexTAR paths.
+#: 1e-10 and tighter often end "optimal_inaccurate" on 700-node paths (five-bar benchmark).
 _CLARABEL_OPTS = dict(tol_gap_abs=1e-9, tol_gap_rel=1e-9, tol_feas=1e-9,
                       tol_infeas_abs=1e-10, tol_infeas_rel=1e-10, max_iter=400)
 _SOLVED = ("optimal", "optimal_inaccurate")
