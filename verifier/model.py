@@ -64,7 +64,6 @@ class IntervalModel:
         # expression is tighter than the product of two enclosures
         self.tape_vel = Tape(fun("vel", [x, q, xi, qd], [jx, ca.mtimes(jq, qd)]))
         self.tape_jx_xd = Tape(fun("jx_xd", [x, q, xi, xd], [ca.mtimes(jx, xd)]))
-        self.tape_g = Tape(fun("g", [x, q, xi, xd, qd], [g]))
         self.tape_accel_rhs = Tape(fun("accel_rhs", [x, q, xi, xd, qd, xdd], [ca.mtimes(jx, xdd) + h]))
         self.tape_det = Tape(fun("det", [x, q, xi], [det]))
 
