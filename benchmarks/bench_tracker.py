@@ -53,7 +53,8 @@ if str(ROOT) not in sys.path:
 
 import numpy as np  # noqa: E402
 
-from planner.simulate import ramp_length, random_geometry, simulate_crossing  # noqa: E402
+from planner.sweep import cruise_for as sweep_cruise_for  # noqa: E402
+from planner.simulate import random_geometry, simulate_crossing  # noqa: E402
 from robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
 from verifier.model import IntervalModel  # noqa: E402
 from verifier.tracker import (  # noqa: E402
@@ -76,11 +77,12 @@ BIG = (10_000, 10_000)  # (B, K) of the extrapolated run
 
 def cruise_for(v_sing: float, a_peak: float = A_PEAK) -> float:
     """Half-length (m) of the constant-speed zone so the start is START_DISTANCE away."""
-    return max(0.005, START_DISTANCE - ramp_length(v_sing, a_peak)[1])
+    return sweep_cruise_for(v_sing, a_peak, START_DISTANCE)
 
 
 def settings() -> TrackerSettings:
-    return TrackerSettings(t_s=DEXTAR.t_s, eps_q=DEXTAR.eps_q, a_max=DEXTAR.a_max, xd0=DEXTAR.xd0)
+    # the robot's defaults, including its geometry hypotheses (xi_splits)
+    return TrackerSettings.for_robot(DEXTAR)
 
 
 def simulate(kin: KinematicModel, seed: int):
