@@ -100,7 +100,7 @@ def velocity_displacement(model, X, Q, pasts, XI, XD, a_max):
     X, Q : boxes (B, n) at ``t_k``.
     pasts : list of (X_past, Q_past, DQ, h)
         Boxes (B, n) at ``t_k - h``, the enclosure of ``q_k - q_{k-j}`` (rad)
-        and the baseline ``h`` (s).
+        and the baseline ``h`` (s) as an interval ``(lo, hi)``.
     XI : box (B, m).
     XD : box (B, n), current velocity enclosure at ``t_k``, m/s.
     a_max : array (n,), m/s^2.
@@ -113,7 +113,9 @@ def velocity_displacement(model, X, Q, pasts, XI, XD, a_max):
     if J == 0:
         return XD
     B, n = X[0].shape
-    h = np.repeat(np.array([p[3] for p in pasts], dtype=np.float64), B)[:, None]  # (J B, 1)
+    # baselines h as intervals (J B, 1): j t_s need not be a float
+    h_lo = np.repeat(np.array([float(np.min(p[3][0])) for p in pasts]), B)[:, None]
+    h_hi = np.repeat(np.array([float(np.max(p[3][1])) for p in pasts]), B)[:, None]
     st = lambda boxes: (np.concatenate([b[0] for b in boxes]), np.concatenate([b[1] for b in boxes]))  # noqa: E731
     Xp = st([p[0] for p in pasts])
     Qp = st([p[1] for p in pasts])
@@ -123,9 +125,9 @@ def velocity_displacement(model, X, Q, pasts, XI, XD, a_max):
     XIk = (np.tile(XI[0], (J, 1)), np.tile(XI[1], (J, 1)))
     H = I.hull(*Xk, *Xp)
     HQ = I.hull(*Qk, *Qp)
-    rate = I.div(*DQ, h, h)
+    rate = I.div(*DQ, h_lo, h_hi)
     Jx, R = model.tape_vel.evaluate([H, HQ, XIk, rate])
-    half_h = I.mul(0.5, 0.5, h, h)[1]  # upper bound of h / 2
+    half_h = I.scale(0.5, h_hi, h_hi)[1]  # upper bound of h / 2
     slack = I.mul(-half_h, half_h, -a_max, a_max)
     U0 = I.add(np.tile(XD[0], (J, 1)), np.tile(XD[1], (J, 1)), *slack)
     U = linear_enclosure(Jx[0], Jx[1], -R[1], -R[0], U0[0], U0[1], sweeps=1)

@@ -343,7 +343,8 @@ def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
     """
     ts = s.t_s
     Xs = I.add(*X, *I.mul(0.0, ts, *XD))
-    Xs = I.add(*Xs, *I.mul(0.0, 0.5 * ts * ts, *A))
+    half_ts2 = I.scale(0.5, *I.mul(ts, ts, ts, ts))  # t_s^2 / 2, rounded outward
+    Xs = I.add(*Xs, *I.mul(*I.hull(0.0, 0.0, *half_ts2), *A))
     XDs = I.add(*XD, *I.mul(0.0, ts, *A))
     ql, qh = I.hull(*Q_prev, *Q_now)
     margin = 0.05  # rad; the result must land strictly inside this box
@@ -467,7 +468,7 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
     R = B * P
     XI = (XI[0].reshape(R, model.m), XI[1].reshape(R, model.m))
     A = (np.broadcast_to(-s.a_max, (R, n)), np.broadcast_to(s.a_max, (R, n)))
-    half_ts2_A = I.scale(0.5 * ts * ts, *A)
+    half_ts2_A = I.mul(*I.scale(0.5, *I.mul(ts, ts, ts, ts)), *A)  # (t_s^2 / 2) [a], outward
     ts_A = I.scale(ts, *A)
     rep = lambda a: np.repeat(np.asarray(a, dtype=float), P, axis=0)  # noqa: E731
     X = (rep(np.broadcast_to(x0[0], (B, n))), rep(np.broadcast_to(x0[1], (B, n))))
@@ -533,11 +534,13 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
                         break
                     Xp, Qp, qp = past[-j]
                     DQ = I.add(*I.sub(qk, qk, qp, qp), *two_eps)
-                    pasts.append((Xp, Qp, DQ, j * ts))
+                    pasts.append((Xp, Qp, DQ, I.mul(float(j), float(j), ts, ts)))  # h = j t_s, outward
                 XD = velocity_displacement(model, X, Q, pasts, XI, XD, s.a_max)
             elif np.any(np.isfinite(QD[0])):
                 XD = velocity(model, X, Q, XI, XD, QD)
-            empty = np.any(X[0] > X[1], -1) | np.any(XD[0] > XD[1], -1) | np.any(XI[0] > XI[1], -1) | np.any(Q[0] > Q[1], -1)
+            # ~(lo <= hi) also catches NaN bounds
+            empty = (np.any(~(X[0] <= X[1]), -1) | np.any(~(XD[0] <= XD[1]), -1) | np.any(~(XI[0] <= XI[1]), -1)
+                     | np.any(~(Q[0] <= Q[1]), -1))
             if np.any(empty & alive):
                 row_bad = np.where(empty & alive, k, row_bad)
                 alive = row_bad < 0
@@ -552,7 +555,7 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
         mode = mode_of(model, X, Q, XI)
         if s.split_boxes:
             X, mode = _split_undecided(model, X, Q, XI, mode, alive, s)
-            dead = alive & np.any(X[0] > X[1], -1)
+            dead = alive & np.any(~(X[0] <= X[1]), -1)
             if dead.any():
                 row_bad = np.where(dead, k, row_bad)
                 alive = row_bad < 0
