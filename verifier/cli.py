@@ -198,7 +198,7 @@ def _certify(a):
     if cert.monte_carlo:
         mc = cert.monte_carlo
         print(f"Monte Carlo at v_min: {mc['detected']}/{mc['runs']} executions detected, "
-              f"{len(mc['containment_failures'])} containment failures")
+              f"{len(mc['containment_failures'])} containment failures, {len(mc['wrong_verdicts'])} wrong verdicts")
     print(f"a_max used: {report['a_max_mps2']} m/s^2; elapsed {cert.elapsed_s:.1f} s")
     for f in files:
         print(f"wrote {f}")
