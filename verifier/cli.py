@@ -157,13 +157,7 @@ def _certify(a):
     bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak,
                             method=a.method, dynamics=_dynamics(robot) if a.method == "dynamic" else None)
     out = Path(a.out)
-    bar = None
-    cb = None
-    if not a.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(desc="certify", unit="step", file=sys.stderr, leave=False)
-        cb = lambda k: bar.update(1)  # noqa: E731
+    bar, cb = _progress(None, not a.no_progress, "certify")
     try:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                 monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
@@ -223,6 +217,7 @@ def _true_geometry(robot, seed):
 
 
 def _progress(total, enabled, desc):
+    """A tqdm bar on stderr (``total`` None: open-ended) and its per-sample callback."""
     if not enabled:
         return None, None
     from tqdm import tqdm
@@ -296,13 +291,7 @@ def _sweep(a):
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     models = (VelocityModel.PAPER, VelocityModel.SOUND)
-    bar = None
-    cb = None
-    if not a.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(desc="sweep", unit="step", file=sys.stderr, leave=False)
-        cb = lambda k: bar.update(1)  # noqa: E731
+    bar, cb = _progress(None, not a.no_progress, "sweep")
     try:
         rows, figs = sweep(robot, kin, bench, speeds, models, xi_true=_true_geometry(robot, a.seed), seed=a.seed,
                            progress=cb, record_speed=speeds[0])
