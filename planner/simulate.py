@@ -329,8 +329,9 @@ def _scan_step(robot: Robot) -> float:
 
 # ------------------------------------------------------------------ checks
 def _vec(name: str, v, n: int) -> np.ndarray:
+    """A finite float vector of length ``n`` (a copy), or InputError naming ``name``."""
     try:
-        a = np.asarray(v, dtype=float).reshape(-1)
+        a = np.array(v, dtype=float).reshape(-1)
     except (TypeError, ValueError) as exc:
         raise InputError(f"{name} must be a numeric vector of length {n}") from exc
     if a.shape != (n,) or not np.all(np.isfinite(a)):

@@ -65,6 +65,7 @@ from toppra.constraint import (
 )
 
 from robots.kinematics import KinematicModel
+from .simulate import _vec  # one validator of numeric vectors for planner/
 from verifier.errors import InputError, SimulationError
 
 __all__ = [
@@ -1017,14 +1018,6 @@ def _evaluate(scaling: TimeScaling, tau: np.ndarray):
 
 
 # ------------------------------------------------------------------ checks
-def _vec(name: str, v, n: int) -> np.ndarray:
-    try:
-        a = np.array(v, dtype=float).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"{name} must be a numeric vector of length {n}") from exc
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
-        raise InputError(f"{name} must be a finite vector of length {n}, got {v!r}")
-    return a
 
 
 def _finite(name: str, v) -> float:

@@ -519,6 +519,16 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
             Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), *half_ts2_A)
             XD = I.intersect(*I.add(*XD, *ts_A), *vmax)
             X = Xn
+        # the displacement baselines depend only on past boxes and readings:
+        # build them once per sample, not once per fixpoint round
+        pasts = []
+        if sound:
+            for j in s.baselines:
+                if j > len(past):
+                    break
+                Xp, Qp, qp = past[-j]
+                DQ = I.add(*I.sub(qk, qk, qp, qp), *two_eps)
+                pasts.append((Xp, Qp, DQ, I.mul(float(j), float(j), ts, ts)))  # h = j t_s, outward
         # contraction to a fixpoint
         for _ in range(s.max_iter):
             wx0 = I.width(*X).sum(-1)
@@ -528,13 +538,6 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
                 XI = XIc
             X = newton(model, X, Q, XI, "x")
             if sound:
-                pasts = []
-                for j in s.baselines:
-                    if j > len(past):
-                        break
-                    Xp, Qp, qp = past[-j]
-                    DQ = I.add(*I.sub(qk, qk, qp, qp), *two_eps)
-                    pasts.append((Xp, Qp, DQ, I.mul(float(j), float(j), ts, ts)))  # h = j t_s, outward
                 XD = velocity_displacement(model, X, Q, pasts, XI, XD, s.a_max)
             elif np.any(np.isfinite(QD[0])):
                 XD = velocity(model, X, Q, XI, XD, QD)
