@@ -19,26 +19,30 @@ What a certificate guarantees
 -----------------------------
 Let ``q_plan(t_k)`` be the planned joints (computed with the planning
 geometry, the centre of ``[xi]``).  An *admissible execution* is any motion
-with (i) a constant true geometry in ``[xi]``, (ii) ``|xdd_i(t)| <= a_max_i``
-at all times, (iii) true joints ``|q(t_k) - q_plan(t_k)| <= eps_q +
-tracking_error`` at every sample, (iv) a start at rest up to the robot's
-``xd0`` and in the plan's initial assembly mode, with the pose inside the
-robot's ``x_bounds``, (v) samples exactly ``t_s`` apart.  The certifying run feeds the tracker the
-readings ``q_plan(t_k)`` with the encoder bound ``eps_q + tracking_error``: by
-the tracker's soundness (docs/soundness.md) its boxes contain the pose and
+with (i) one constant true geometry, (ii) ``|xdd_i(t)| <= a_max_i`` at all
+times, (iii) joints in the execution class of :mod:`planner.execution` —
+``cartesian`` (default): the lengths in ``[xi]`` and effective angles
+``q(t_k) + delta = q_plan(t_k) + c + w_k`` with one constant ``c`` in the
+derived box ``C`` and ``|w_k| <=`` the class's reading error (this holds for
+every execution that follows the planned path, whatever its geometry in
+``[xi]``: the encoders absorb the offsets); ``joint``: true joints within
+``eps_q + tracking_error`` of ``q_plan(t_k)``, geometry in ``[xi]`` —, (iv) a
+start at rest up to the robot's ``xd0`` and in the plan's initial assembly
+mode, with the pose inside the robot's ``x_bounds``, (v) samples exactly
+``t_s`` apart.  The certifying run feeds the tracker the readings
+``q_plan(t_k)`` with the class's reading error and geometry box: by the
+tracker's soundness (docs/soundness.md) its boxes contain the pose and
 velocity of every admissible execution, so when it reports ``mode-changed``
-every admissible execution ends in the other assembly mode.  At run time,
-admissibility is checked on the readings: ``|q_read - q_plan| <= tracking_error``
-at every sample implies (iii).
+every admissible execution ends in the other assembly mode.
 
 The midpoint-preconditioned Newton step and the fixpoint thresholds are not
 inclusion-monotone: re-running the tracker on one execution's (narrower)
 readings is not guaranteed to certify whenever the planning run did.  The
 certificate therefore never relies on such a re-run: it is a statement about
-every admissible execution, proved by the planning run itself.  The Monte
-Carlo confirmation goes further than the certificate (true geometries whose
-joints leave the tube of (iii)) and runs the run-time tracker on each
-execution's own readings.
+every admissible execution, proved by the planning run itself.  Whether the
+run-time tracker (robot's own ``[xi]``, readings within ``eps_q``) detects
+the change on each execution is what the Monte Carlo confirmation measures,
+on executions checked to be admissible.
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ from verifier.errors import InputError, SimulationError
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, TrackResult, Verdict, initial_box_from_mode, track, track_batch
 
+from . import execution as ex_
 from .simulate import TimeLaw, ramp_length
 
 __all__ = [
@@ -63,6 +68,7 @@ __all__ = [
     "CrossingCertificate",
     "plan_crossing",
     "certify_plan",
+    "execution_class",
     "minimal_v_sing",
     "monte_carlo_confirmation",
     "certify_crossing",
@@ -129,6 +135,11 @@ class PlanningBounds:
         Joint speed (rad/s) and acceleration (rad/s^2) limits of the
         ``time-optimal`` and ``dynamic`` plans (30 and 3000 by default for
         ``dynamic``; none for ``time-optimal``).
+    execution : str
+        Class of admissible executions the certificate covers
+        (:mod:`planner.execution`): ``"cartesian"`` (default; the end-effector
+        follows the planned path, any geometry in ``[xi]``) or ``"joint"``
+        (joints within ``eps_q + tracking_error`` of the planned joints).
     """
 
     eps_q: float | None = None
@@ -143,6 +154,7 @@ class PlanningBounds:
     dynamics: object = field(default=None, repr=False)
     qd_max: float | None = None
     qdd_max: float | None = None
+    execution: str = "cartesian"
 
     def resolved(self, robot) -> "PlanningBounds":
         eps = robot.eps_q if self.eps_q is None else float(self.eps_q)
@@ -156,10 +168,13 @@ class PlanningBounds:
         splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
         if self.method not in ("smoothstep", "time-optimal", "dynamic"):
             raise InputError(f"unknown planning method {self.method!r}; use 'smoothstep', 'time-optimal' or 'dynamic'")
+        if self.execution not in ex_.KINDS:
+            raise InputError(f"unknown execution class {self.execution!r}; use 'cartesian' or 'joint'")
         if self.method == "dynamic" and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
         return PlanningBounds(eps, float(self.tracking_error), amax, float(self.a_margin), float(self.a_peak), ts,
-                              float(self.t_rest), splits, self.method, self.dynamics, self.qd_max, self.qdd_max)
+                              float(self.t_rest), splits, self.method, self.dynamics, self.qd_max, self.qdd_max,
+                              self.execution)
 
 
 @dataclass(frozen=True)
@@ -220,6 +235,7 @@ class CrossingCertificate:
     versions: dict
     elapsed_s: float
     refutation: tuple = field(default=(), repr=False)
+    execution: ex_.ExecutionClass | None = None
 
     def summary(self) -> dict:
         """JSON-ready summary."""
@@ -233,6 +249,7 @@ class CrossingCertificate:
             "tracking_error_rad": self.bounds.tracking_error,
             "t_s": self.bounds.t_s,
             "xi_splits": None if self.bounds.xi_splits is None else list(self.bounds.xi_splits),
+            "execution": None if self.execution is None else self.execution.summary(),
             "trials": [
                 {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "max_width_pose_m": r.max_width_pose,
                  "max_width_velocity_mps": r.max_width_velocity,
@@ -415,22 +432,44 @@ def _a_max_for(plan: PlannedTrajectory, b: PlanningBounds):
     return tuple(float(v) for v in b.a_max)
 
 
-def _settings(robot, b: PlanningBounds, a_max):
-    return TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q + b.tracking_error, a_max=a_max,
-                                     xi_splits=b.xi_splits)
+def _settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass):
+    return TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=cls.reading_error, a_max=a_max, xi_splits=b.xi_splits)
 
 
-def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int) -> TrackResult:
+def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
+    """The admissible executions of one plan or a list of plans (union of their paths) under ``bounds``.
+
+    See :mod:`planner.execution`; ``cartesian`` classes are derived from the
+    planned poses and joints (seeded, deterministic).
+    """
+    robot = kin.robot
+    b = bounds.resolved(robot)
+    if b.execution == "joint":
+        return ex_.joint_class(robot, b.eps_q, b.tracking_error)
+    plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)
+    x = np.concatenate([p.x for p in plans])
+    q = np.concatenate([p.q for p in plans])
+    return ex_.cartesian_class(kin, x, q, plans[0].xi_plan, b.eps_q, b.tracking_error)
+
+
+def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int, *,
+                 execution: ex_.ExecutionClass | None = None, kin=None) -> TrackResult:
     """Run the tracker on inputs covering every admissible execution of ``plan``.
 
-    Readings ``q_plan`` with the encoder bound ``eps_q + tracking_error``; the
-    initial box encloses every start pose of mode ``initial_mode`` for every
-    geometry in ``[xi]``.  ``MODE_CHANGED`` certifies every admissible execution.
+    Readings ``q_plan`` with the class's reading error and geometry box
+    (``execution``, derived with :func:`execution_class` when not given; ``kin``
+    is then the robot's ``KinematicModel``, built when absent); the initial box
+    encloses every start pose of mode ``initial_mode`` for every geometry of
+    the box.  ``MODE_CHANGED`` certifies every admissible execution.
     """
     robot = imodel.robot
     b = bounds.resolved(robot)
-    s = _settings(robot, b, _a_max_for(plan, b))
-    return track(imodel, plan.q, s, initial_mode=initial_mode)
+    if execution is None:
+        from robots import KinematicModel
+
+        execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
+    s = _settings(robot, b, _a_max_for(plan, b), execution)
+    return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box)
 
 
 def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6, progress=None):
@@ -484,13 +523,16 @@ def _certify_speeds(kin, imodel, task, b, speeds, progress):
     robot = kin.robot
     plans = [plan_crossing(kin, task, v, b) for v in speeds]
     a_max = np.max([_a_max_for(p, b) for p in plans], axis=0)
-    s = _settings(robot, b, a_max)
+    # one class for the batch: the union of the plans' paths (a superset of
+    # each plan's own class; the certificate re-runs its speed alone)
+    cls = execution_class(kin, plans, b)
+    s = _settings(robot, b, a_max, cls)
     K = max(len(p.t) for p in plans)
     q = np.stack([np.vstack([p.q, np.repeat(p.q[-1:], K - len(p.t), axis=0)]) for p in plans])
     m0 = int(kin.mode(plans[0].x[0], plans[0].q[0], plans[0].xi_plan))
-    boxes = [initial_box_from_mode(imodel, p.q[0], m0, s) for p in plans]
+    boxes = [initial_box_from_mode(imodel, p.q[0], m0, s, xi_box=cls.xi_box) for p in plans]
     x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
-    res = track_batch(imodel, q, s, x0, progress=progress)
+    res = track_batch(imodel, q, s, x0, xi_box=cls.xi_box, progress=progress)
     return [
         SpeedTrial(float(v), res.verdict[i], float(res.max_width_pose[i]), float(res.max_width_velocity[i]),
                    int(res.certified_at_step[i]))
@@ -499,20 +541,31 @@ def _certify_speeds(kin, imodel, task, b, speeds, progress):
 
 
 def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
-                             a_max=None, progress=None) -> dict:
+                             a_max=None, progress=None, execution: ex_.ExecutionClass | None = None) -> dict:
     """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
 
     Each execution: geometry uniform in ``[xi]`` (every 5th at a random corner),
     joints by the true IK, readings quantised (floor, round or a uniform
     random error within ``eps_q``), tracked by the run-time tracker (robot
-    defaults, ``a_max`` of the certificate).  Returns counts and the runs
-    whose verdict was not ``mode-changed`` or whose boxes missed the truth.
+    defaults, ``a_max`` of the certificate).  Each execution is checked
+    against the certificate's class ``execution`` (derived from ``bounds``
+    when not given).
+
+    Returns
+    -------
+    dict
+        ``runs``, ``seed``, ``detected`` (verdict ``mode-changed``),
+        ``in_class`` (admissible executions) and ``detected_in_class``, and the
+        lists ``outside_class`` (run indices), ``containment_failures`` (run
+        indices whose boxes missed the truth), ``wrong_verdicts`` and
+        ``not_detected`` (dicts with the run, verdict and geometry).
     """
     from .simulate import random_geometry
 
     robot = kin.robot
     b = bounds.resolved(robot)
     a_max = _a_max_for(plan, b) if a_max is None else a_max
+    cls = execution_class(kin, plan, b) if execution is None else execution
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
     rng = np.random.default_rng(seed)
     qs, truths = [], []
@@ -529,7 +582,8 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
         q_read = np.clip(q_read, q_true - b.eps_q, q_true + b.eps_q)
         modes = kin.mode_batch(plan.x, q_true, xi)
         qs.append(q_read)
-        truths.append((xi, modes))
+        truths.append((xi, modes, ex_.in_class(cls, robot, q_true, plan.q, xi, plan.xi_plan, b.eps_q,
+                                               b.tracking_error)))
     q = np.stack(qs)
     m0 = int(truths[0][1][0])
     boxes = [initial_box_from_mode(imodel, q[r, 0], m0, s) for r in range(runs)]
@@ -549,10 +603,14 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
             wrong.append({"run": r, "verdict": res.verdict[r].value, "xi": truths[r][0].tolist()})
         elif res.verdict[r] is not Verdict.MODE_CHANGED:
             failures.append({"run": r, "verdict": res.verdict[r].value, "xi": truths[r][0].tolist()})
+    admissible = [r for r in range(runs) if truths[r][2]]
     return {
         "runs": runs,
         "seed": seed,
         "detected": int(sum(v is Verdict.MODE_CHANGED for v in res.verdict)),
+        "in_class": len(admissible),
+        "detected_in_class": int(sum(res.verdict[r] is Verdict.MODE_CHANGED for r in admissible)),
+        "outside_class": [r for r in range(runs) if not truths[r][2]],
         "containment_failures": misses,
         "wrong_verdicts": wrong,
         "not_detected": failures,
@@ -607,22 +665,24 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     if v_high <= v_low:
         raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the segment allows at most {v_feasible:.3f} m/s")
     v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
-    plan = enc = mc = a_used = None
+    plan = enc = mc = a_used = cls = None
     # the batched search pads shorter plans with rest samples: re-certify the
     # candidate alone, on its own samples; if it fails, try the next faster
     # certified speed (the certificate's verdict is this run's verdict)
     for cand in ([t.v_sing for t in trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing >= v_min]
                  if v_min is not None else []):
         plan = plan_crossing(kin, task, cand, b)
-        enc = certify_plan(imodel, plan, b, m0)
+        cls = execution_class(kin, plan, b)
+        enc = certify_plan(imodel, plan, b, m0, execution=cls)
         if enc.verdict is Verdict.MODE_CHANGED:
             v_min = cand
             a_used = _a_max_for(plan, b)
             break
     else:
-        v_min = plan = enc = None
+        v_min = plan = enc = cls = None
     if v_min is not None and monte_carlo_runs:
-        mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress)
+        mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
+                                      execution=cls)
     ref_bound = ref = None
     if refute:
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
@@ -641,6 +701,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         versions=_versions(),
         elapsed_s=time.perf_counter() - t0,
         refutation=tuple(ref or ()),
+        execution=cls,
     )
 
 

@@ -86,6 +86,13 @@ class Robot:
         Recommended partition of ``[xi]`` for the tracker (``xi_splits[i]``
         equal parts along parameter ``i``; each part is tracked as its own
         geometry hypothesis).  ``None``: no partition.
+    joint_offsets : tuple of (int or None), length n, optional
+        ``joint_offsets[i] = j`` declares that the loop closure reads joint
+        ``i`` only through ``q_i + xi_j`` (an additive encoder offset); ``None``
+        where joint ``i`` has no such parameter.  The planner uses it to model
+        executions that follow a Cartesian path, whose encoder readings absorb
+        the unknown offset (``planner.execution``).  Checked numerically by the
+        tests, not here.
     mode_sign : float, optional
         ``+1.0`` or ``-1.0``.  The assembly mode is defined as
         ``mode_sign * sign(det J_x)``, so that a robot module can align it with
@@ -110,6 +117,7 @@ class Robot:
     xd0: tuple[float, ...]
     mode_sign: float = 1.0
     xi_splits: tuple[int, ...] | None = None
+    joint_offsets: tuple[int | None, ...] | None = None
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -172,6 +180,15 @@ class Robot:
             if len(splits) != len(self.xi_nominal) or any(v < 1 for v in splits):
                 raise ModelError(f"Robot {self.name}: xi_splits needs one positive count per parameter, got {self.xi_splits}")
             set_(self, "xi_splits", splits)
+        if self.joint_offsets is not None:
+            offs = tuple(None if j is None else int(j) for j in self.joint_offsets)
+            used = [j for j in offs if j is not None]
+            if len(offs) != n or any(not 0 <= j < m for j in used) or len(set(used)) != len(used):
+                raise ModelError(
+                    f"Robot {self.name}: joint_offsets needs, per joint, a distinct parameter index in "
+                    f"[0, {m}) or None, got {self.joint_offsets}"
+                )
+            set_(self, "joint_offsets", offs)
         for attr in ("eps_q", "t_s"):
             v = getattr(self, attr)
             try:

@@ -98,6 +98,8 @@ DEXTAR = Robot(
     # slowest certified crossing of the benchmark from 1.354 to 1.264 m/s;
     # finer or other splits did not certify 1.185 m/s (docs/tracker.md).
     xi_splits=(1, 1, 1, 1, 1, 2, 2),
+    # eq. (7) reads q_i only through q_i + delta_i
+    joint_offsets=(5, 6),
     mode_sign=1.0,
     description=(
         "DexTAR five-bar planar parallel robot (Mecademic), model of eq. (7) and "

@@ -104,6 +104,9 @@ def _robot_kwargs(**over):
         {"n": 0},
         {"param_names": ("a", "a", "b", "c", "d", "e", "f")},
         {"loop_closure": None},
+        {"joint_offsets": (5,)},
+        {"joint_offsets": (5, 5)},
+        {"joint_offsets": (7, None)},
     ],
 )
 def test_robot_validation(over):
@@ -142,6 +145,27 @@ def test_model_is_immutable(model):
     assert model.n == 2 and model.m == 7
     assert model.sx_jx.shape == (2, 2) and model.sx_det.shape == (1, 1)
     assert model.sx_x.shape == (2, 1) and model.sx_xi.shape == (7, 1)
+
+
+@pytest.mark.parametrize("robot", [DEXTAR], ids=lambda r: r.name)
+def test_declared_joint_offsets_enter_as_q_plus_xi(robot):
+    """f(x, q + t e_i, xi - t e_j) == f(x, q, xi) for every declared offset (i, j)."""
+    kin = KinematicModel(robot)
+    rng = np.random.default_rng(21)
+    lo, hi = robot.xi_lo_array, robot.xi_hi_array
+    pairs = [(i, j) for i, j in enumerate(robot.joint_offsets or ()) if j is not None]
+    assert pairs
+    for _ in range(20):
+        x = rng.uniform(robot.x_lo_array, robot.x_hi_array)
+        q = rng.uniform(robot.q_lo_array, robot.q_hi_array)
+        xi = lo + (hi - lo) * rng.random(lo.size)
+        base = kin.f_batch(x, q, xi)
+        for i, j in pairs:
+            t = rng.uniform(-0.3, 0.3)
+            q2, xi2 = q.copy(), xi.copy()
+            q2[i] += t
+            xi2[j] -= t
+            np.testing.assert_allclose(kin.f_batch(x, q2, xi2), base, rtol=1e-9, atol=1e-15)
 
 
 # --------------------------------------------------------------- kinematics

@@ -1,0 +1,249 @@
+"""Execution classes: which motions a planning-time certificate covers.
+
+A certificate is a tracker run on inputs that cover every reading an
+*admissible execution* of a plan can produce (``planner.certify``).  This
+module states the two classes of admissible executions and derives the
+tracker inputs for each.
+
+``joint``
+    The true joints stay within ``eps_q + tracking_error`` of the planned
+    joints ``q_plan(t_k)``; the geometry is anywhere in ``[xi]``.  This is the
+    literal class of the paper's planning perspective, but a robot whose
+    geometry differs from the planning geometry cannot follow ``q_plan``
+    through the singularity: its joints must deviate by the geometry error
+    (up to 7.7 mrad on the DexTAR's Table I box), which no small
+    ``tracking_error`` covers.
+
+``cartesian`` (default)
+    The end-effector follows the planned path, the geometry is anywhere in
+    ``[xi]``.  With additive joint offsets (``Robot.joint_offsets``: the loop
+    closure reads joint ``i`` only through ``q_i + xi_j``), the physics depends
+    on the *effective* angle ``q_i + xi_j``, so the class is stated on it:
+
+        ``q_k + delta = q_plan(t_k) + c + w_k``, ``c`` in ``C``, ``|w_k| <= e``
+
+    for one unknown constant ``c`` per execution (the part of the geometry
+    error that the path does not change) and a drift ``w_k`` bounded by ``e``
+    (plus ``eps_q + tracking_error``).  The tracker covers it exactly by
+    taking ``C`` as the box of the offset parameters and ``e`` as extra
+    reading error: ``f(x, q_plan + w, (lengths, c)) = 0``.  ``C`` and ``e`` are
+    derived from the path by :func:`cartesian_class`; an execution is checked
+    against them by :func:`in_class`.
+
+Nothing here names a robot.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from verifier.errors import InputError, SimulationError
+
+__all__ = ["ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
+
+KINDS = ("cartesian", "joint")
+
+
+@dataclass(frozen=True)
+class ExecutionClass:
+    """The admissible executions of a plan, as tracker inputs.
+
+    Attributes
+    ----------
+    kind : str
+        ``"cartesian"`` or ``"joint"``.
+    reading_error : float
+        Half-width of the tracker's reading intervals around ``q_plan(t_k)``,
+        rad: ``eps_q + tracking_error`` (+ the drift bound ``e`` for
+        ``cartesian``).
+    drift : float
+        ``e``, rad (0 for ``joint``).
+    xi_lo, xi_hi : ndarray, shape (m,)
+        Geometry box of the certifying run: ``[xi]`` with, for ``cartesian``,
+        the offset parameters replaced by ``C``.
+    derivation : dict
+        How ``C`` and ``e`` were obtained (geometries tried, largest drift and
+        constant part measured, safety factor).
+    """
+
+    kind: str
+    reading_error: float
+    drift: float
+    xi_lo: np.ndarray
+    xi_hi: np.ndarray
+    derivation: dict = field(default_factory=dict, compare=False)
+
+    @property
+    def xi_box(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.xi_lo.copy(), self.xi_hi.copy()
+
+    def summary(self) -> dict:
+        return {
+            "kind": self.kind,
+            "reading_error_rad": self.reading_error,
+            "drift_rad": self.drift,
+            "xi_lo": self.xi_lo.tolist(),
+            "xi_hi": self.xi_hi.tolist(),
+            "derivation": self.derivation,
+        }
+
+
+def joint_class(robot, eps_q: float, tracking_error: float = 0.0) -> ExecutionClass:
+    """Joints within ``eps_q + tracking_error`` (rad) of the plan, geometry in ``[xi]``."""
+    return ExecutionClass("joint", float(eps_q + tracking_error), 0.0, robot.xi_lo_array.copy(),
+                          robot.xi_hi_array.copy(), {"source": "robot calibration box"})
+
+
+def _offsets(robot):
+    offs = getattr(robot, "joint_offsets", None) or (None,) * robot.n
+    return [(i, j) for i, j in enumerate(offs) if j is not None]
+
+
+def _geometries(robot, samples: int, rng) -> np.ndarray:
+    """Corners of the non-offset parameters (at most 256, else random ones) and uniform samples of ``[xi]``."""
+    lo, hi = robot.xi_lo_array, robot.xi_hi_array
+    free = [k for k in range(lo.size) if k not in {j for _, j in _offsets(robot)} and hi[k] > lo[k]]
+    rows = []
+    if 2 ** len(free) <= 256:
+        bits = itertools.product((0, 1), repeat=len(free))
+    else:
+        bits = (rng.integers(0, 2, len(free)) for _ in range(256))
+    for b in bits:
+        xi = 0.5 * (lo + hi)
+        for k, bit in zip(free, b):
+            xi[k] = hi[k] if bit else lo[k]
+        rows.append(xi)
+    rows.extend(lo + (hi - lo) * rng.random((samples, lo.size)))
+    return np.array(rows)
+
+
+def effective_deviation(kin, x_path, q_plan, xi_plan, xi) -> np.ndarray:
+    """``q_k + delta - (q_plan,k + delta_plan)`` of an execution following ``x_path`` with geometry ``xi``.
+
+    Parameters
+    ----------
+    x_path : array (K, n)
+        Poses, SI.
+    q_plan : array (K, n)
+        Planned joints at those poses (planning geometry ``xi_plan``), rad.
+    xi : array (m,)
+        Geometry of the execution.
+
+    Returns
+    -------
+    ndarray, shape (K, n), rad.  Offsets are added for the joints that have
+    one (``Robot.joint_offsets``); the raw joint deviation otherwise.
+
+    Raises
+    ------
+    SimulationError
+        If the inverse kinematics from the planned joints does not converge at
+        every pose, or jumps to another branch.
+    """
+    robot = kin.robot
+    X = np.asarray(x_path, float)
+    Qp = np.asarray(q_plan, float)
+    Q, ok = kin.ik_batch(X, xi, Qp)
+    if not np.all(ok):
+        k = int(np.nonzero(~ok)[0][0])
+        raise SimulationError(f"{robot.name}: inverse kinematics failed at path point {k} for geometry {list(xi)}")
+    D = Q - Qp
+    for i, j in _offsets(robot):
+        D[:, i] += xi[j] - xi_plan[j]
+    if np.max(np.abs(D)) > 0.2:
+        raise SimulationError(f"{robot.name}: inverse kinematics left the planned branch for geometry {list(xi)}")
+    return D
+
+
+def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: float = 0.0, *,
+                    samples: int = 32, seed: int = 0, safety: float = 1.25) -> ExecutionClass:
+    """The ``cartesian`` class of a path: ``C`` and the drift bound ``e``.
+
+    For each geometry tried (every corner of the non-offset parameters and
+    ``samples`` uniform draws in ``[xi]``), the effective deviation ``D_k``
+    of :func:`effective_deviation` is split into its mid-range constant
+    ``c`` and the drift ``D_k - c``.  ``e`` is ``safety`` times the largest
+    drift met; ``C`` is ``delta_plan`` plus the hull of the constants, widened
+    by ``(safety - 1)`` times its half-width plus ``eps_q`` on each side.
+
+    ``C`` and ``e`` *define* the class (they are assumptions, measured, not
+    proved): the certificate is sound for the class; whether an execution
+    belongs to it is checked by :func:`in_class` (the Monte Carlo
+    confirmation does, run by run).
+
+    Parameters
+    ----------
+    x_path : array (K, n)
+        Path poses, SI, close enough together for the drift to be resolved
+        (about 1 mm apart).
+    q_plan : array (K, n)
+        Planned joints at ``x_path``, rad.
+    xi_plan : array (m,)
+        Planning geometry.
+    eps_q, tracking_error : float
+        Encoder bound and extra joint tracking error, rad.
+    """
+    robot = kin.robot
+    if not safety >= 1.0:
+        raise InputError(f"safety factor must be >= 1, got {safety}")
+    rng = np.random.default_rng(seed)
+    xi_plan = np.asarray(xi_plan, float)
+    consts, drifts = [], []
+    for xi in _geometries(robot, samples, rng):
+        D = effective_deviation(kin, x_path, q_plan, xi_plan, xi)
+        c = 0.5 * (D.max(axis=0) + D.min(axis=0))
+        consts.append(c)
+        drifts.append(float(np.max(D.max(axis=0) - c)))
+    consts = np.array(consts)
+    drift = safety * max(drifts)
+    lo, hi = robot.xi_lo_array.copy(), robot.xi_hi_array.copy()
+    offs = _offsets(robot)
+    if not offs:
+        # no offset parameter absorbs the constant part: it is drift too
+        drift = safety * float(np.max(np.abs(consts)) + max(drifts))
+    for i, j in offs:
+        c_lo, c_hi = consts[:, i].min(), consts[:, i].max()
+        pad = (safety - 1.0) * 0.5 * (c_hi - c_lo) + eps_q
+        lo[j] = xi_plan[j] + c_lo - pad
+        hi[j] = xi_plan[j] + c_hi + pad
+    derivation = {
+        "geometries": int(consts.shape[0]),
+        "path_points": int(np.asarray(x_path).shape[0]),
+        "largest_drift_rad": float(max(drifts)),
+        "constant_range_rad": [[float(consts[:, i].min()), float(consts[:, i].max())] for i in range(robot.n)],
+        "safety": float(safety),
+        "seed": int(seed),
+    }
+    return ExecutionClass("cartesian", float(eps_q + tracking_error + drift), float(drift), lo, hi, derivation)
+
+
+def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: float, tracking_error: float = 0.0) -> bool:
+    """Whether an execution with true joints ``q_true`` (K, n) and geometry ``xi`` belongs to ``cls``.
+
+    ``joint``: ``|q_true - q_plan| <= eps_q + tracking_error`` and ``xi`` in the box.
+    ``cartesian``: the lengths in the box and a constant ``c`` in ``C`` with
+    ``|q_true + delta - q_plan - c| <= reading_error`` at every sample.
+    """
+    q_true, q_plan, xi = (np.asarray(a, float) for a in (q_true, q_plan, xi))
+    lo, hi = cls.xi_lo, cls.xi_hi
+    if cls.kind == "joint":
+        return bool(np.all(np.abs(q_true - q_plan) <= eps_q + tracking_error) and np.all((lo <= xi) & (xi <= hi)))
+    offs = dict(_offsets(robot))
+    others = [k for k in range(xi.size) if k not in offs.values()]
+    if not np.all((lo[others] <= xi[others]) & (xi[others] <= hi[others])):
+        return False
+    for i in range(robot.n):
+        eff = q_true[:, i] + (xi[offs[i]] if i in offs else 0.0)
+        d = eff - q_plan[:, i]
+        # the constant c must lie within reading_error of every d_k, and in C
+        c_lo, c_hi = d.max() - cls.reading_error, d.min() + cls.reading_error
+        if i in offs:
+            c_lo, c_hi = max(c_lo, lo[offs[i]]), min(c_hi, hi[offs[i]])
+        elif c_lo > 0.0 or c_hi < 0.0:
+            return False
+        if c_lo > c_hi:
+            return False
+    return True

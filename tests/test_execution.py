@@ -1,0 +1,93 @@
+"""Execution classes of planning-time certificates (planner.execution)."""
+
+import numpy as np
+import pytest
+
+from planner.certify import CrossingTask, PlanningBounds, certify_plan, execution_class, plan_crossing
+from planner.execution import cartesian_class, effective_deviation, in_class, joint_class
+from planner.simulate import random_geometry
+from problems import interval_model, kinematics
+from robots import DEXTAR, benchmark_crossing
+from verifier.errors import InputError
+from verifier.tracker import Verdict
+
+
+@pytest.fixture(scope="module")
+def plan():
+    b = benchmark_crossing()
+    task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
+    return plan_crossing(kinematics(), task, 1.45, PlanningBounds())
+
+
+@pytest.fixture(scope="module")
+def cls(plan):
+    return execution_class(kinematics(), plan, PlanningBounds())
+
+
+def test_cartesian_class_replaces_the_offset_box_only(cls):
+    assert cls.kind == "cartesian"
+    offs = [j for j in DEXTAR.joint_offsets if j is not None]
+    others = [k for k in range(7) if k not in offs]
+    np.testing.assert_array_equal(cls.xi_lo[others], DEXTAR.xi_lo_array[others])
+    np.testing.assert_array_equal(cls.xi_hi[others], DEXTAR.xi_hi_array[others])
+    # the length errors move the effective angles by up to a few mrad; the
+    # drift along a 120 mm path is about 1 mrad
+    assert np.all(cls.xi_hi[offs] - cls.xi_lo[offs] < 0.02)
+    assert 1e-4 < cls.drift < 5e-3
+    assert cls.reading_error == pytest.approx(DEXTAR.eps_q + cls.drift)
+
+
+def test_executions_following_the_path_are_in_the_class(plan, cls):
+    """Fresh geometries (other seed, corners of the whole box included) all belong to the derived class."""
+    kin = kinematics()
+    rng = np.random.default_rng(2024)
+    for r in range(60):
+        xi = random_geometry(DEXTAR, rng, corners=(r % 3 == 0))
+        q_true = kin.ik_path(plan.x, xi, plan.q[0])
+        assert in_class(cls, DEXTAR, q_true, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
+        # the effective deviation is the joint deviation plus the offset change
+        D = effective_deviation(kin, plan.x, plan.q, plan.xi_plan, xi)
+        np.testing.assert_allclose(D[:, 0], q_true[:, 0] - plan.q[:, 0] + xi[5] - plan.xi_plan[5], atol=1e-10)
+
+
+def test_in_class_rejects_what_the_class_excludes(plan, cls):
+    kin = kinematics()
+    xi = plan.xi_plan.copy()
+    q = kin.ik_path(plan.x, xi, plan.q[0])
+    assert in_class(cls, DEXTAR, q, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
+    jump = q.copy()
+    jump[len(q) // 2:, 0] += 3 * cls.reading_error  # drift larger than the class allows
+    assert not in_class(cls, DEXTAR, jump, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
+    long = xi.copy()
+    long[0] = DEXTAR.xi_hi_array[0] + 1e-5  # a length outside [xi]
+    assert not in_class(cls, DEXTAR, q, plan.q, long, plan.xi_plan, DEXTAR.eps_q)
+    shifted = q + (cls.xi_hi[5] - cls.xi_lo[5] + 1e-3)  # constant beyond C
+    assert not in_class(cls, DEXTAR, shifted, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
+
+
+def test_joint_class_is_the_literal_tube(plan):
+    jc = joint_class(DEXTAR, DEXTAR.eps_q, 1e-4)
+    assert jc.reading_error == pytest.approx(DEXTAR.eps_q + 1e-4) and jc.drift == 0.0
+    kin = kinematics()
+    assert in_class(jc, DEXTAR, plan.q + 1e-4, plan.q, plan.xi_plan, plan.xi_plan, DEXTAR.eps_q, 1e-4)
+    # a geometry with other offsets moves the joints by mrad: outside the tube
+    xi = plan.xi_plan.copy()
+    xi[5] = DEXTAR.xi_hi_array[5]
+    q = kin.ik_path(plan.x, xi, plan.q[0])
+    assert not in_class(jc, DEXTAR, q, plan.q, xi, plan.xi_plan, DEXTAR.eps_q, 1e-4)
+    with pytest.raises(InputError, match="execution class"):
+        PlanningBounds(execution="cartesain").resolved(DEXTAR)
+    with pytest.raises(InputError, match="safety"):
+        cartesian_class(kin, plan.x, plan.q, plan.xi_plan, DEXTAR.eps_q, safety=0.5)
+
+
+def test_certifying_run_encloses_every_execution_of_the_class(plan, cls):
+    """The class's run certifies at 1.45 m/s and its boxes contain the planned path.
+
+    Every execution following the path has the planned pose and velocity as
+    its truth, whatever its geometry; they must lie in every box.
+    """
+    res = certify_plan(interval_model(), plan, PlanningBounds(), 1, execution=cls)
+    assert res.verdict is Verdict.MODE_CHANGED
+    assert np.all(res.x_lo <= plan.x) and np.all(plan.x <= res.x_hi)
+    assert np.all(res.xd_lo[1:] <= plan.xd[1:]) and np.all(plan.xd[1:] <= res.xd_hi[1:])
