@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -475,8 +476,10 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
 def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6, progress=None):
     """Smallest certified ``v_sing`` in ``[v_low, v_high]`` to ``tol`` (m/s).
 
-    Each round plans ``grid`` speeds spread over the current bracket and
-    certifies them in one batch; the bracket shrinks to the interval between
+    The first round plans ``grid`` speeds spread over ``[v_low, v_high]``, each
+    later round at least ``grid - 2`` interior speeds of the current bracket
+    (more, up to three times that, when it saves a round), certified in one
+    batch per round; the bracket shrinks to the interval between
     the fastest uncertified speed below the slowest certified one and that
     certified speed.  Certification need not be monotone in the speed: the
     table of every trial is returned, and the result is the slowest speed
@@ -516,7 +519,11 @@ def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6
             return v_cert, [trials[v] for v in ordered]
         if v_cert - v_fail <= tol:
             return v_cert, [trials[v] for v in ordered]
-        speeds = list(np.linspace(v_fail, v_cert, grid)[1:-1])
+        # enough interior speeds to reach tol in two more rounds when up to
+        # three times the base grid allows it (one round costs about as much
+        # as one tracked run: the batch is vectorised)
+        interior = int(np.clip(np.ceil(np.sqrt((v_cert - v_fail) / tol)) - 1, grid - 2, 3 * (grid - 2)))
+        speeds = list(np.linspace(v_fail, v_cert, interior + 2)[1:-1])
 
 
 def _certify_speeds(kin, imodel, task, b, speeds, progress):
@@ -628,8 +635,8 @@ def _versions():
 
 
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=0.6, v_high=None,
-                     tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, seed=0, progress=None,
-                     kin=None, imodel=None) -> CrossingCertificate:
+                     tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
+                     seed=0, progress=None, kin=None, imodel=None) -> CrossingCertificate:
     """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
 
     Parameters
@@ -648,12 +655,18 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         Search verified counterexamples (planner.refute) below ``v_min``.
     refute_speeds : sequence of float, optional
         Speeds of the coarse counterexample scan (default every 0.1 m/s from 0.3).
+    refute_in_background : bool
+        Run the counterexample searches in one worker process while the
+        speed search and the Monte Carlo run go on (results are identical;
+        ``False`` runs them here, afterwards).
     seed : int
         Seed of the Monte Carlo executions and of the counterexample starts.
     progress : callable, optional
         ``progress(k)`` after each tracked sample of every batch.
     """
     from robots import KinematicModel
+
+    from .simulate import random_geometry
 
     t0 = time.perf_counter()
     kin = KinematicModel(robot) if kin is None else kin
@@ -664,30 +677,51 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)
     if v_high <= v_low:
         raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the segment allows at most {v_feasible:.3f} m/s")
-    v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
-    plan = enc = mc = a_used = cls = None
-    # the batched search pads shorter plans with rest samples: re-certify the
-    # candidate alone, on its own samples; if it fails, try the next faster
-    # certified speed (the certificate's verdict is this run's verdict)
-    for cand in ([t.v_sing for t in trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing >= v_min]
-                 if v_min is not None else []):
-        plan = plan_crossing(kin, task, cand, b)
-        cls = execution_class(kin, plan, b)
-        enc = certify_plan(imodel, plan, b, m0, execution=cls)
-        if enc.verdict is Verdict.MODE_CHANGED:
-            v_min = cand
-            a_used = _a_max_for(plan, b)
-            break
-    else:
-        v_min = plan = enc = cls = None
-    if v_min is not None and monte_carlo_runs:
-        mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
-                                      execution=cls)
-    ref_bound = ref = None
+    refuter = None
     if refute:
+        # starting geometries of the (non-convex) searches: the box centre and a seeded corner
+        starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
+        scan = refute_speeds if refute_speeds is not None else np.arange(0.3, v_high, 0.1)
+        refuter = _Refuter(robot, task, b, m0, starts, kin, refute_in_background)
+        refuter.submit(sorted({round(float(v), 6) for v in scan}))
+    try:
+        v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
+        plan = enc = mc = a_used = cls = None
+        # the batched search pads shorter plans with rest samples: re-certify the
+        # candidate alone, on its own samples; if it fails, try the next faster
+        # certified speed (the certificate's verdict is this run's verdict)
+        for cand in ([t.v_sing for t in trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing >= v_min]
+                     if v_min is not None else []):
+            plan = plan_crossing(kin, task, cand, b)
+            cls = execution_class(kin, plan, b)
+            enc = certify_plan(imodel, plan, b, m0, execution=cls)
+            if enc.verdict is Verdict.MODE_CHANGED:
+                v_min = cand
+                a_used = _a_max_for(plan, b)
+                break
+        else:
+            v_min = plan = enc = cls = None
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
-        a_ref = a_used if a_used is not None else _a_max_for(plan_crossing(kin, task, top, b), b)
-        ref_bound, ref = _refutation(kin, task, b, m0, a_ref, top, tol, refute_speeds, seed)
+        ref_job = None
+        if refuter is not None:
+            refuter.drop_from(top)
+            if refute_in_background:
+                # the bisection mostly waits on the worker: let it wait beside the Monte Carlo run
+                helper = ThreadPoolExecutor(max_workers=1)
+                ref_job = helper.submit(_refutation, refuter, top, tol)
+                helper.shutdown(wait=False)
+        if v_min is not None and monte_carlo_runs:
+            mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
+                                          execution=cls)
+        if ref_job is not None:
+            ref_bound, ref = ref_job.result()
+        elif refuter is not None:
+            ref_bound, ref = _refutation(refuter, top, tol)
+        else:
+            ref_bound = ref = None
+    finally:
+        if refuter is not None:
+            refuter.close()
     return CrossingCertificate(
         verdict=enc.verdict if enc is not None else Verdict.UNKNOWN,
         v_min=v_min,
@@ -705,37 +739,94 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     )
 
 
-def _refutation(kin, task, b, m0, a_max, v_top, tol, speeds=None, seed=0):
+_WORKER_KIN: dict = {}
+# IPOPT time cap per counterexample attempt, s.  On the DexTAR task every
+# verified counterexample took <= 0.2 s (<= 60 iterations); attempts near the
+# bound can wander for 10-25 s before declaring infeasibility, and a stopped
+# attempt proves nothing either way (it only costs bound tightness).
+REFUTE_CPU_TIME = 2.0
+
+
+def _refute_speed(robot, task, b, m0, starts, v, kin=None):
+    """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
+
+    Module-level so that a worker process can run it; builds (and keeps) the
+    robot's ``KinematicModel`` there.  A speed the planner cannot plan gives
+    a row with no counterexample and the planner's message as status.
+    """
+    from robots import KinematicModel
+
+    from . import refute
+
+    if kin is None:
+        kin = _WORKER_KIN.get(robot.name)
+        if kin is None:
+            kin = _WORKER_KIN[robot.name] = KinematicModel(robot)
+    try:
+        plan = plan_crossing(kin, task, v, b)
+    except (InputError, SimulationError) as exc:
+        nan = float("nan")
+        return refute.SpeedRefutation(float(v), 0, False, False, None, nan, nan, nan, f"no plan: {exc}", 0.0, ())
+    a_max = b.a_max if b.a_max is not None else _a_max_for(plan, b)
+    overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
+    return refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
+                                   bounds=overrides, max_cpu_time=REFUTE_CPU_TIME).rows[0]
+
+
+class _Refuter:
+    """Counterexample searches by speed: in a background worker process, or here when asked."""
+
+    def __init__(self, robot, task, b, m0, starts, kin, background):
+        from ._worker import BackgroundCalls
+
+        self._args = (robot, task, b, m0, starts)
+        self._kin = kin
+        self._speeds: set = set()
+        self._rows: dict = {}
+        self._bg = BackgroundCalls(__name__, "_refute_speed", self._args) if background else None
+
+    def submit(self, speeds):
+        self._speeds.update(speeds)
+        if self._bg is not None:
+            self._bg.submit(speeds)
+
+    def drop_from(self, v_top):
+        """Forget the speeds at or above ``v_top`` (not started ones are never run)."""
+        self._speeds = {v for v in self._speeds if v < v_top}
+        if self._bg is not None:
+            self._bg.drop(lambda v: v >= v_top)
+
+    def speeds(self):
+        return sorted(self._speeds)
+
+    def result(self, v):
+        self._speeds.add(v)
+        if v not in self._rows:
+            self._rows[v] = (self._bg.result(v) if self._bg is not None
+                             else _refute_speed(*self._args, v, kin=self._kin))
+        return self._rows[v]
+
+    def close(self):
+        if self._bg is not None:
+            self._bg.close()
+
+
+def _refutation(refuter: _Refuter, v_top, tol):
     """Refutation bound below ``v_top``: the largest speed with a verified counterexample.
 
-    Coarse scan (0.1 m/s from 0.3 m/s, or the given ``speeds``) with
-    :func:`planner.refute.refutation_bound` on the planned readings, then
-    bisection between the fastest refuted and the slowest non-refuted speed
-    above it, to ``tol``.  Starting geometries: the box centre and a seeded
-    random corner (the NLP is non-convex; a failed search proves nothing).
+    The coarse scan submitted to ``refuter`` (0.1 m/s from 0.3 m/s, or the
+    caller's speeds) below ``v_top``, then bisection between the fastest
+    refuted and the slowest non-refuted speed above it, to ``tol``.  Each
+    speed is searched against its own plan's readings and ``a_max`` (the
+    bounds its certificate would use); a failed search proves nothing (the
+    NLP is non-convex).
 
     Returns
     -------
     bound : float or None
     rows : list of planner.refute.SpeedRefutation (sorted by speed)
     """
-    from . import refute
-    from .simulate import random_geometry
-
-    robot = kin.robot
-    rng = np.random.default_rng(seed)
-    starts = [robot.xi_center, random_geometry(robot, rng, corners=True)]
-    overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
-
-    def recording(v):
-        return plan_crossing(kin, task, v, b).q, b.t_s
-
-    def run(vs):
-        return list(refute.refutation_bound(kin, recording, vs, m0=m0, xi_starts=starts, bounds=overrides).rows)
-
-    if speeds is None:
-        speeds = [round(v, 6) for v in np.arange(0.3, v_top, 0.1)]
-    rows = {r.speed: r for r in run([v for v in speeds if v < v_top])}
+    rows = {v: refuter.result(v) for v in refuter.speeds() if v < v_top}
     while True:
         ordered = sorted(rows)
         refuted = [v for v in ordered if rows[v].verified]
@@ -747,4 +838,4 @@ def _refutation(kin, task, b, m0, a_max, v_top, tol, speeds=None, seed=0):
         if v_no - v_ok <= tol:
             return v_ok, [rows[v] for v in ordered]
         mid = round(0.5 * (v_ok + v_no), 6)
-        rows.update({r.speed: r for r in run([mid])})
+        rows[mid] = refuter.result(mid)

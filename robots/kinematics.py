@@ -256,11 +256,15 @@ class KinematicModel:
             Ja, Fa = J[act], F[act]
             step = np.zeros_like(Fa)
             good = np.isfinite(Ja).all(axis=(1, 2)) & np.isfinite(Fa).all(axis=1)
-            for i in np.nonzero(good)[0]:
-                try:
-                    step[i] = np.linalg.solve(Ja[i], -Fa[i])
-                except np.linalg.LinAlgError:
-                    step[i] = np.linalg.lstsq(Ja[i], -Fa[i], rcond=None)[0]
+            gi = np.nonzero(good)[0]
+            try:  # one stacked solve; row by row only when a matrix is singular
+                step[gi] = np.linalg.solve(Ja[gi], -Fa[gi][:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                for i in gi:
+                    try:
+                        step[i] = np.linalg.solve(Ja[i], -Fa[i])
+                    except np.linalg.LinAlgError:
+                        step[i] = np.linalg.lstsq(Ja[i], -Fa[i], rcond=None)[0]
             size = np.max(np.abs(step), axis=1)
             clip = np.where(size > max_step, max_step / np.maximum(size, 1e-300), 1.0)
             step *= clip[:, None]
@@ -442,8 +446,14 @@ class KinematicModel:
                 sols.append(row)
         return np.array(sols, dtype=float).reshape(-1, self.n)
 
-    def ik_path(self, X, xi, q0_guess, *, tol: float = RESIDUAL_TOL) -> np.ndarray:
-        """IK along a path by continuation: each solution is the guess of the next.
+    def ik_path(self, X, xi, q0_guess, *, tol: float = RESIDUAL_TOL, spacing: float = 2e-3) -> np.ndarray:
+        """IK along a path by continuation.
+
+        Anchors are the first pose and each pose at least ``spacing`` away
+        (inf-norm, pose units) from the previous anchor; each anchor is solved
+        from the previous anchor's joints, then every pose in one batch from
+        its last anchor's joints (less than ``spacing`` away), so Newton stays
+        on the branch as a pose-by-pose continuation would.
 
         Parameters
         ----------
@@ -452,6 +462,8 @@ class KinematicModel:
         xi : array_like, shape (m,)
         q0_guess : array_like, shape (n,)
             Guess for the first pose, rad.
+        spacing : float
+            Largest continuation step between anchors, pose units (m).
 
         Returns
         -------
@@ -464,16 +476,28 @@ class KinematicModel:
             At the first pose where IK fails (index reported).
         """
         X, xi = self._rows(X, "X"), self._xi(xi)
-        Q = np.empty_like(X)
+        N = X.shape[0]
+        owner = np.zeros(N, dtype=int)
+        anchors = [0]
+        for k in range(1, N):
+            if np.max(np.abs(X[k] - X[anchors[-1]])) >= spacing:
+                anchors.append(k)
+            owner[k] = anchors[-1]
+        QA = np.empty((len(anchors), self.n))
         guess = np.asarray(q0_guess, dtype=float).reshape(1, -1)
-        for k in range(X.shape[0]):
+        for i, k in enumerate(anchors):
             Qk, ok = self.ik_batch(X[k:k + 1], xi, guess, tol=tol)
             if not ok[0]:
                 raise SimulationError(
                     f"{self.robot.name}: IK continuation failed at path point {k}, x = {X[k].tolist()}"
                 )
-            Q[k] = Qk[0]
+            QA[i] = Qk[0]
             guess = Qk
+        slot = np.searchsorted(anchors, owner)
+        Q, ok = self.ik_batch(X, xi, QA[slot], tol=tol)
+        if not np.all(ok):
+            k = int(np.nonzero(~ok)[0][0])
+            raise SimulationError(f"{self.robot.name}: IK continuation failed at path point {k}, x = {X[k].tolist()}")
         return Q
 
     # ------------------------------------------------------ differential
