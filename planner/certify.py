@@ -124,7 +124,9 @@ class PlanningBounds:
     t_s : float, optional
         Sampling period, s (robot default).
     t_rest : float
-        Rest before the motion, s.
+        Rest before and after the motion, s (20 samples at 1 kHz: the
+        velocity box contracts from ``xd0`` long before the motion starts;
+        longer rests only add tracked samples).
     xi_splits : tuple, optional
         Geometry hypotheses of the tracker (robot default).
     method : str
@@ -149,7 +151,7 @@ class PlanningBounds:
     a_margin: float = 0.1
     a_peak: float = 60.0
     t_s: float | None = None
-    t_rest: float = 0.05
+    t_rest: float = 0.02
     xi_splits: tuple | None = None
     method: str = "smoothstep"
     dynamics: object = field(default=None, repr=False)
@@ -368,7 +370,7 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
         ((s_star - D) / v_sing, v_sing, v_sing),
         ((L - s_star - D) / v_sing, v_sing, v_sing),
         (T, v_sing, 0.0),
-        (0.05, 0.0, 0.0),
+        (b.t_rest, 0.0, 0.0),
     ])
     t_cross = b.t_rest + T + (s_star - D) / v_sing
     # put the crossing instant on a sample (shift the initial rest by < t_s)
@@ -402,7 +404,7 @@ def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
     lim = limits or ts_.ScalingLimits()
     lim = ts_.ScalingLimits(qd_max=lim.qd_max, qdd_max=lim.qdd_max, a_max=b.a_peak, extra=lim.extra)
     scaling = ts_.time_optimal_scaling(samples, lim, v_sing=v_sing, s_star=s_star)
-    tt = ts_.resample(scaling, samples, b.t_s, t_rest=b.t_rest, t_rest_end=0.05)
+    tt = ts_.resample(scaling, samples, b.t_s, t_rest=b.t_rest, t_rest_end=b.t_rest)
     arrays = [np.array(a) for a in (tt.t, tt.q, tt.qd, tt.qdd, tt.x, tt.xd, tt.xdd)]
     for arr in arrays:
         arr.setflags(write=False)
@@ -415,7 +417,7 @@ def _plan_dynamic(kin, task, v_sing, b, xi):
     limits = GenerationLimits(qd_max=30.0 if b.qd_max is None else b.qd_max,
                               qdd_max=3000.0 if b.qdd_max is None else b.qdd_max, a_max=b.a_peak)
     gen = generate_crossing(kin, b.dynamics, task, v_sing, limits, objective="time", t_s=b.t_s, t_rest=b.t_rest,
-                            xi_plan=xi)
+                            t_after=b.t_rest, xi_plan=xi)
     return gen.to_planned_trajectory()
 
 
