@@ -48,6 +48,7 @@ on executions checked to be admissible.
 from __future__ import annotations
 
 import importlib.metadata as md
+import importlib.util
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -173,11 +174,21 @@ class PlanningBounds:
             raise InputError(f"unknown planning method {self.method!r}; use 'smoothstep', 'time-optimal' or 'dynamic'")
         if self.execution not in ex_.KINDS:
             raise InputError(f"unknown execution class {self.execution!r}; use 'cartesian' or 'joint'")
+        if self.method == "time-optimal":
+            _require_plan_extra()
         if self.method == "dynamic" and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
         return PlanningBounds(eps, float(self.tracking_error), amax, float(self.a_margin), float(self.a_peak), ts,
                               float(self.t_rest), splits, self.method, self.dynamics, self.qd_max, self.qdd_max,
                               self.execution)
+
+
+def _require_plan_extra():
+    """The ``time-optimal`` law needs the ``plan`` extra: say so before anything runs."""
+    missing = [m for m in ("cvxpy", "toppra") if importlib.util.find_spec(m) is None]
+    if missing:
+        raise InputError(f"method 'time-optimal' needs {' and '.join(missing)} (optional dependencies): "
+                         "pip install 'crosscert[plan]'")
 
 
 @dataclass(frozen=True)
@@ -317,7 +328,7 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     ``method`` defaults to ``bounds.method``.  ``"smoothstep"``: rest ``t_rest``; smoothstep speed ramp
     to ``v_sing`` (peak ``a_peak``); constant speed through the crossing point
     (zero acceleration there: the crossing criterion); ramp to rest at
-    ``goal``; 0.05 s rest.
+    ``goal``; rest ``t_rest``.
 
     ``"dynamic"``: the CasADi + IPOPT generator
     (:func:`planner.generate.generate_crossing`, minimal time) with the
@@ -346,6 +357,7 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
     method = b.method if method is None else method
     if method == "time-optimal":
+        _require_plan_extra()
         if limits is None and (b.qd_max is not None or b.qdd_max is not None):
             from .timescale import ScalingLimits
 

@@ -120,6 +120,21 @@ def test_cli_plan_writes_a_file_check_reads(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["verdict"] == "mode-changed"
 
 
+def test_time_optimal_without_the_plan_extra_says_what_to_install(tmp_path, capsys, monkeypatch, task):
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "cvxpy" else real(name, *a))
+    with pytest.raises(InputError, match=r"crosscert\[plan\]"):
+        PlanningBounds(method="time-optimal").resolved(kinematics().robot)
+    with pytest.raises(InputError, match="cvxpy"):
+        plan_crossing(kinematics(), task, 1.3, PlanningBounds(), method="time-optimal")
+    assert main(["certify", "--method", "time-optimal", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "pip install 'crosscert[plan]'" in err and "\n" not in err
+    assert not (tmp_path / "o").exists()
+
+
 def test_cli_certify_bad_input(tmp_path, capsys):
     assert main(["certify", "--start", "0,0.09", "--goal", "0,0.1", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.strip()
