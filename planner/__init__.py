@@ -11,10 +11,12 @@ from .certify import (
     SpeedTrial,
     certify_crossing,
     certify_plan,
+    execution_class,
     minimal_v_sing,
     monte_carlo_confirmation,
     plan_crossing,
 )
+from .execution import ExecutionClass, cartesian_class, in_class, joint_class
 from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
 from .refute import RecordingBounds, RefutationBound, refutation_bound, search_bounce, verify_bounce
 from .simulate import SimulatedRun, max_v_sing, random_geometry, simulate_bounce, simulate_crossing
@@ -28,7 +30,12 @@ __all__ = [
     "SpeedTrial",
     "certify_crossing",
     "certify_plan",
+    "execution_class",
     "minimal_v_sing",
+    "ExecutionClass",
+    "cartesian_class",
+    "in_class",
+    "joint_class",
     "monte_carlo_confirmation",
     "plan_crossing",
     "GeneratedTrajectory",

@@ -235,6 +235,11 @@ class CrossingCertificate:
     no tried speed certifies.  ``refutation_bound`` (m/s, or None when not
     computed / no counterexample) is the largest speed at which a verified
     counterexample exists: no sound tracker can certify at or below it.
+    ``execution`` is the class of admissible executions the certificate
+    covers (:mod:`planner.execution`); ``timings_s`` the wall time of each
+    phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``, and
+    ``refutation``: the wait for the background searches left after the
+    Monte Carlo run).
     """
 
     verdict: Verdict
@@ -250,6 +255,7 @@ class CrossingCertificate:
     elapsed_s: float
     refutation: tuple = field(default=(), repr=False)
     execution: ex_.ExecutionClass | None = None
+    timings_s: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         """JSON-ready summary."""
@@ -278,6 +284,7 @@ class CrossingCertificate:
             "monte_carlo": self.monte_carlo,
             "versions": self.versions,
             "elapsed_s": self.elapsed_s,
+            "timings_s": self.timings_s,
         }
 
 
@@ -671,8 +678,9 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         Speeds of the coarse counterexample scan (default every 0.1 m/s from 0.3).
     refute_in_background : bool
         Run the counterexample searches in one worker process while the
-        speed search and the Monte Carlo run go on (results are identical;
-        ``False`` runs them here, afterwards).
+        speed search and the Monte Carlo run go on (the same searches, with
+        the same 2 s CPU cap per attempt; ``False`` runs them here,
+        afterwards).
     seed : int
         Seed of the Monte Carlo executions and of the counterexample starts.
     progress : callable, optional
@@ -698,8 +706,17 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         scan = refute_speeds if refute_speeds is not None else np.arange(0.3, v_high, 0.1)
         refuter = _Refuter(robot, task, b, m0, starts, kin, refute_in_background)
         refuter.submit(sorted({round(float(v), 6) for v in scan}))
+    # wall time of each phase (the refutation's is the wait left after the Monte Carlo run)
+    clock = {"setup": time.perf_counter() - t0}
+
+    def lap(name, since):
+        clock[name] = time.perf_counter() - since
+        return time.perf_counter()
+
     try:
+        t1 = time.perf_counter()
         v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
+        t1 = lap("search", t1)
         plan = enc = mc = a_used = cls = None
         # the batched search pads shorter plans with rest samples: re-certify the
         # candidate alone, on its own samples; if it fails, try the next faster
@@ -715,6 +732,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
                 break
         else:
             v_min = plan = enc = cls = None
+        t1 = lap("certificate", t1)
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
         ref_job = None
         if refuter is not None:
@@ -727,12 +745,14 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         if v_min is not None and monte_carlo_runs:
             mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
                                           execution=cls)
+        t1 = lap("monte_carlo", t1)
         if ref_job is not None:
             ref_bound, ref = ref_job.result()
         elif refuter is not None:
             ref_bound, ref = _refutation(refuter, top, tol)
         else:
             ref_bound = ref = None
+        lap("refutation", t1)
     finally:
         if refuter is not None:
             refuter.close()
@@ -750,6 +770,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         elapsed_s=time.perf_counter() - t0,
         refutation=tuple(ref or ()),
         execution=cls,
+        timings_s=clock,
     )
 
 

@@ -199,7 +199,8 @@ def _certify(a):
         print(f"Monte Carlo at v_min: {mc['detected_in_class']}/{mc['in_class']} admissible executions detected "
               f"({mc['detected']}/{mc['runs']} in all), {len(mc['containment_failures'])} containment failures, "
               f"{len(mc['wrong_verdicts'])} wrong verdicts")
-    print(f"a_max used: {report['a_max_mps2']} m/s^2; elapsed {cert.elapsed_s:.1f} s")
+    phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
+    print(f"a_max used: {report['a_max_mps2']} m/s^2; elapsed {cert.elapsed_s:.1f} s ({phases})")
     for f in files:
         print(f"wrote {f}")
     return 0
