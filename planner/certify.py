@@ -71,6 +71,7 @@ __all__ = [
     "plan_crossing",
     "certify_plan",
     "execution_class",
+    "speed_ceiling",
     "minimal_v_sing",
     "monte_carlo_confirmation",
     "certify_crossing",
@@ -257,6 +258,13 @@ class CrossingCertificate:
     execution: ex_.ExecutionClass | None = None
     timings_s: dict = field(default_factory=dict)
 
+    @property
+    def certified_below_v_min(self) -> list:
+        """Tried speeds below ``v_min`` that certified (m/s): where certification was not monotone in the speed."""
+        if self.v_min is None:
+            return [t.v_sing for t in self.trials if t.verdict is Verdict.MODE_CHANGED]
+        return [t.v_sing for t in self.trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing < self.v_min]
+
     def summary(self) -> dict:
         """JSON-ready summary."""
         return {
@@ -264,6 +272,7 @@ class CrossingCertificate:
             "v_min_mps": self.v_min,
             "refutation_bound_mps": self.refutation_bound,
             "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
+            "certified_below_v_min_mps": self.certified_below_v_min,
             "a_max_mps2": None if self.a_max_used is None else list(self.a_max_used),
             "eps_q_rad": self.bounds.eps_q,
             "tracking_error_rad": self.bounds.tracking_error,
@@ -365,10 +374,6 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     method = b.method if method is None else method
     if method == "time-optimal":
         _require_plan_extra()
-        if limits is None and (b.qd_max is not None or b.qdd_max is not None):
-            from .timescale import ScalingLimits
-
-            limits = ScalingLimits(qd_max=b.qd_max, qdd_max=b.qdd_max)
         return _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits)
     if method == "dynamic":
         return _plan_dynamic(kin, task, v_sing, b, xi)
@@ -412,7 +417,8 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     return PlannedTrajectory(t, Q, QD, QDD, X, XD, XDD, k_sing, float(v_sing), task.start + s_star * u, xi.copy())
 
 
-def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
+def _time_optimal_setup(kin, task, b, xi, s_star, u, L, limits):
+    """Path samples (about 0.1 mm apart, the crossing point on a node) and limits of the time-optimal law."""
     from . import timescale as ts_
 
     h_target = 1e-4  # m, grid step
@@ -420,8 +426,45 @@ def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
     h = s_star / n1
     N = max(n1 + 2, int(round(L / h)))
     samples = ts_.sample_path(kin, task.start, u, N * h, N, task.working_guess, xi)
+    if limits is None and (b.qd_max is not None or b.qdd_max is not None):
+        limits = ts_.ScalingLimits(qd_max=b.qd_max, qdd_max=b.qdd_max)
     lim = limits or ts_.ScalingLimits()
     lim = ts_.ScalingLimits(qd_max=lim.qd_max, qdd_max=lim.qdd_max, a_max=b.a_peak, extra=lim.extra)
+    return ts_, samples, lim
+
+
+def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
+    """Fastest ``v_sing`` (m/s) the time law of ``bounds`` allows on ``task``: the upper end of a search.
+
+    ``smoothstep`` and ``dynamic``: both speed ramps (length ``1.875 v^2 / (2
+    a_peak)``) must fit between the start, the crossing point and the goal.
+    ``time-optimal``: toppra's controllable and reachable sets at the
+    crossing point (:func:`planner.timescale.max_speed_at`) under the same
+    limits as the plans, the criterion included.  Shrunk by 1e-6 relative so
+    that a plan at the ceiling is feasible.
+
+    Raises
+    ------
+    InputError
+        No admissible time law reaches the crossing point.
+    """
+    robot = kin.robot
+    b = bounds.resolved(robot)
+    xi = robot.xi_center
+    s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
+    if b.method == "time-optimal":
+        ts_, samples, lim = _time_optimal_setup(kin, task, b, xi, s_star, u, L, None)
+        try:
+            top = ts_.max_speed_at(samples, lim, s_star)
+        except SimulationError as exc:
+            raise InputError(f"no feasible crossing speed: {exc}") from None
+    else:
+        top = float(np.sqrt(2.0 * b.a_peak * min(s_star, L - s_star) / 1.875))
+    return top * (1 - 1e-6)
+
+
+def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
+    ts_, samples, lim = _time_optimal_setup(kin, task, b, xi, s_star, u, L, limits)
     scaling = ts_.time_optimal_scaling(samples, lim, v_sing=v_sing, s_star=s_star)
     tt = ts_.resample(scaling, samples, b.t_s, t_rest=b.t_rest, t_rest_end=b.t_rest)
     arrays = [np.array(a) for a in (tt.t, tt.q, tt.qd, tt.qdd, tt.x, tt.xd, tt.xdd)]
@@ -666,8 +709,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     task : CrossingTask
     bounds : PlanningBounds, optional
     v_low, v_high : float
-        Speed bracket, m/s; ``v_high`` defaults to the fastest crossing the
-        segment allows at ``a_peak``.
+        Speed bracket, m/s; ``v_high`` defaults to (and is capped at)
+        :func:`speed_ceiling`: the fastest crossing the time law allows.
     tol : float
         Resolution of ``v_min``, m/s.
     monte_carlo_runs : int
@@ -694,11 +737,12 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
     b = (bounds or PlanningBounds()).resolved(robot)
-    s_star, _, L, m0 = _crossing_on_segment(kin, task, robot.xi_center)
-    v_feasible = float(np.sqrt(2.0 * b.a_peak * min(s_star, L - s_star) / 1.875)) * (1 - 1e-6)
+    *_, m0 = _crossing_on_segment(kin, task, robot.xi_center)
+    v_feasible = speed_ceiling(kin, task, b)
     v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)
     if v_high <= v_low:
-        raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the segment allows at most {v_feasible:.3f} m/s")
+        raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the {b.method} time law allows "
+                         f"at most {v_feasible:.3f} m/s on this task")
     refuter = None
     if refute:
         # starting geometries of the (non-convex) searches: the box centre and a seeded corner

@@ -12,6 +12,7 @@ from planner.certify import (
     minimal_v_sing,
     monte_carlo_confirmation,
     plan_crossing,
+    speed_ceiling,
 )
 from problems import interval_model, kinematics
 from robots import benchmark_crossing
@@ -118,6 +119,24 @@ def test_cli_plan_writes_a_file_check_reads(tmp_path, capsys):
     assert out.read_text().splitlines()[0] == "t,q1,q2,x1,x2"
     assert main(["check", str(out), "--initial-mode", "1", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["verdict"] == "mode-changed"
+
+
+def test_speed_ceiling_is_the_fastest_feasible_plan(task):
+    """Smoothstep: both ramps fit; time-optimal: toppra's sets, close to sqrt(2 a_peak s*) (bang-bang from rest)."""
+    kin = kinematics()
+    s_star = float(np.linalg.norm(benchmark_crossing().point - task.start))
+    smooth = speed_ceiling(kin, task, PlanningBounds())
+    # s_star of the nominal geometry; the planner uses the centre of [xi] (0.3 mm apart)
+    assert smooth == pytest.approx(np.sqrt(2 * 60.0 * s_star / 1.875), rel=3e-3)
+    fast = speed_ceiling(kin, task, PlanningBounds(method="time-optimal"))
+    assert fast == pytest.approx(np.sqrt(2 * 60.0 * s_star), rel=1e-2)
+    for method, v in (("smoothstep", smooth), ("time-optimal", fast)):
+        p = plan_crossing(kin, task, v, PlanningBounds(method=method))
+        assert abs(np.linalg.norm(p.xd[p.k_sing]) - v) <= 1e-6 and np.abs(p.xdd).max() <= 60.0 * (1 + 1e-6)
+    with pytest.raises(InputError):
+        plan_crossing(kin, task, smooth * 1.01, PlanningBounds())
+    with pytest.raises(Exception):
+        plan_crossing(kin, task, fast * 1.02, PlanningBounds(method="time-optimal"))
 
 
 def test_time_optimal_without_the_plan_extra_says_what_to_install(tmp_path, capsys, monkeypatch, task):

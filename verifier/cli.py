@@ -193,6 +193,9 @@ def _certify(a):
     vmin = "none (no tried speed certifies)" if cert.v_min is None else f"{cert.v_min:.4f} m/s"
     ref = "not computed" if a.no_refute else ("none found" if cert.refutation_bound is None else f"{cert.refutation_bound:.4f} m/s")
     print(f"minimal certified v_sing: {vmin}")
+    if cert.certified_below_v_min:
+        print(f"note: certification is not monotone here; also certified below v_min at "
+              f"{', '.join(f'{v:.4f}' for v in cert.certified_below_v_min)} m/s")
     print(f"refutation bound (no sound tracker certifies at or below): {ref}")
     if cert.monte_carlo:
         mc = cert.monte_carlo
