@@ -23,7 +23,8 @@ with (i) one constant true geometry, (ii) ``|xdd_i(t)| <= a_max_i`` at all
 times, (iii) joints in the execution class of :mod:`planner.execution` —
 ``cartesian`` (default): the lengths in ``[xi]`` and effective angles
 ``q(t_k) + delta = q_plan(t_k) + c + w_k`` with one constant ``c`` in the
-derived box ``C`` and ``|w_k| <=`` the class's reading error (this holds for
+derived box ``C``, ``|w_k| <=`` the class's reading error and ``w`` changing
+by at most the class's drift per sample (this holds for
 every execution that follows the planned path, whatever its geometry in
 ``[xi]``: the encoders absorb the offsets); ``joint``: true joints within
 ``eps_q + tracking_error`` of ``q_plan(t_k)``, geometry in ``[xi]`` —, (iv) a
@@ -498,7 +499,12 @@ def _a_max_for(plan: PlannedTrajectory, b: PlanningBounds):
 
 
 def _settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass):
-    return TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=cls.reading_error, a_max=a_max, xi_splits=b.xi_splits)
+    drift = {}
+    if cls.drift_per_sample is not None:
+        # d per sample as a rate, rounded up so that j t_s rate >= j d
+        drift = dict(eps_q_fast=cls.fast_error, drift_rate=float(np.nextafter(cls.drift_per_sample / b.t_s, np.inf)))
+    return TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=cls.reading_error, a_max=a_max, xi_splits=b.xi_splits,
+                                     **drift)
 
 
 def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
@@ -512,9 +518,8 @@ def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
     if b.execution == "joint":
         return ex_.joint_class(robot, b.eps_q, b.tracking_error)
     plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)
-    x = np.concatenate([p.x for p in plans])
-    q = np.concatenate([p.q for p in plans])
-    return ex_.cartesian_class(kin, x, q, plans[0].xi_plan, b.eps_q, b.tracking_error)
+    return ex_.cartesian_class(kin, [p.x for p in plans], [p.q for p in plans], plans[0].xi_plan, b.eps_q,
+                               b.tracking_error)
 
 
 def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int, *,

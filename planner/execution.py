@@ -20,15 +20,19 @@ tracker inputs for each.
     closure reads joint ``i`` only through ``q_i + xi_j``), the physics depends
     on the *effective* angle ``q_i + xi_j``, so the class is stated on it:
 
-        ``q_k + delta = q_plan(t_k) + c + w_k``, ``c`` in ``C``, ``|w_k| <= e``
+        ``q_k + delta = q_plan(t_k) + c + w_k``, ``c`` in ``C``,
+        ``|w_k| <= eps_q + tracking_error + e``,
+        ``|w_k - w_{k-j}| <= 2 (eps_q + tracking_error) + j d``
 
     for one unknown constant ``c`` per execution (the part of the geometry
-    error that the path does not change) and a drift ``w_k`` bounded by ``e``
-    (plus ``eps_q + tracking_error``).  The tracker covers it exactly by
-    taking ``C`` as the box of the offset parameters and ``e`` as extra
-    reading error: ``f(x, q_plan + w, (lengths, c)) = 0``.  ``C`` and ``e`` are
-    derived from the path by :func:`cartesian_class`; an execution is checked
-    against them by :func:`in_class`.
+    error that the path does not change), a drift ``w_k`` bounded by ``e``
+    (plus ``eps_q + tracking_error``) that changes by at most ``d`` per sample.
+    The tracker covers it exactly by taking ``C`` as the box of the offset
+    parameters, ``w`` as reading error (``f(x, q_plan + w, (lengths, c)) =
+    0``) and the drift bound for differences of readings
+    (``TrackerSettings.eps_q_fast`` and ``drift_rate = d / t_s``).  ``C``,
+    ``e`` and ``d`` are derived from the plan by :func:`cartesian_class`; an
+    execution is checked against them by :func:`in_class`.
 
 Nothing here names a robot.
 """
@@ -61,6 +65,12 @@ class ExecutionClass:
         ``cartesian``).
     drift : float
         ``e``, rad (0 for ``joint``).
+    fast_error : float
+        ``eps_q + tracking_error``, rad: the part of the reading error not
+        bound to drift slowly.
+    drift_per_sample : float or None
+        ``d``, rad per sample (``None`` for ``joint``: readings err
+        independently).
     xi_lo, xi_hi : ndarray, shape (m,)
         Geometry box of the certifying run: ``[xi]`` with, for ``cartesian``,
         the offset parameters replaced by ``C``.
@@ -75,6 +85,8 @@ class ExecutionClass:
     xi_lo: np.ndarray
     xi_hi: np.ndarray
     derivation: dict = field(default_factory=dict, compare=False)
+    fast_error: float = 0.0
+    drift_per_sample: float | None = None
 
     @property
     def xi_box(self) -> tuple[np.ndarray, np.ndarray]:
@@ -85,6 +97,8 @@ class ExecutionClass:
             "kind": self.kind,
             "reading_error_rad": self.reading_error,
             "drift_rad": self.drift,
+            "fast_error_rad": self.fast_error,
+            "drift_per_sample_rad": self.drift_per_sample,
             "xi_lo": self.xi_lo.tolist(),
             "xi_hi": self.xi_hi.tolist(),
             "derivation": self.derivation,
@@ -94,7 +108,8 @@ class ExecutionClass:
 def joint_class(robot, eps_q: float, tracking_error: float = 0.0) -> ExecutionClass:
     """Joints within ``eps_q + tracking_error`` (rad) of the plan, geometry in ``[xi]``."""
     return ExecutionClass("joint", float(eps_q + tracking_error), 0.0, robot.xi_lo_array.copy(),
-                          robot.xi_hi_array.copy(), {"source": "robot calibration box"})
+                          robot.xi_hi_array.copy(), {"source": "robot calibration box"},
+                          float(eps_q + tracking_error), None)
 
 
 def _offsets(robot):
@@ -160,26 +175,28 @@ def effective_deviation(kin, x_path, q_plan, xi_plan, xi) -> np.ndarray:
 
 def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: float = 0.0, *,
                     samples: int = 32, seed: int = 0, safety: float = 1.25) -> ExecutionClass:
-    """The ``cartesian`` class of a path: ``C`` and the drift bound ``e``.
+    """The ``cartesian`` class of one or several planned paths: ``C``, ``e`` and ``d``.
 
     For each geometry tried (every corner of the non-offset parameters and
     ``samples`` uniform draws in ``[xi]``), the effective deviation ``D_k``
     of :func:`effective_deviation` is split into its mid-range constant
     ``c`` and the drift ``D_k - c``.  ``e`` is ``safety`` times the largest
-    drift met; ``C`` is ``delta_plan`` plus the hull of the constants, widened
-    by ``(safety - 1)`` times its half-width plus ``eps_q`` on each side.
+    drift met, ``d`` ``safety`` times the largest change of ``D`` between
+    consecutive samples; ``C`` is ``delta_plan`` plus the hull of the
+    constants, widened by ``(safety - 1)`` times its half-width plus
+    ``eps_q`` on each side.
 
-    ``C`` and ``e`` *define* the class (they are assumptions, measured, not
-    proved): the certificate is sound for the class; whether an execution
-    belongs to it is checked by :func:`in_class` (the Monte Carlo
+    ``C``, ``e`` and ``d`` *define* the class (they are assumptions, measured,
+    not proved): the certificate is sound for the class; whether an
+    execution belongs to it is checked by :func:`in_class` (the Monte Carlo
     confirmation does, run by run).
 
     Parameters
     ----------
-    x_path : array (K, n)
-        Path poses, SI, close enough together for the drift to be resolved
-        (about 1 mm apart).
-    q_plan : array (K, n)
+    x_path : array (K, n) or list of them
+        Planned poses at consecutive samples, SI (several plans: one array
+        each; ``d`` is taken within each).
+    q_plan : array (K, n) or list of them
         Planned joints at ``x_path``, rad.
     xi_plan : array (m,)
         Planning geometry.
@@ -189,16 +206,25 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
     robot = kin.robot
     if not safety >= 1.0:
         raise InputError(f"safety factor must be >= 1, got {safety}")
+    xs = list(x_path) if isinstance(x_path, (list, tuple)) else [x_path]
+    qs = list(q_plan) if isinstance(q_plan, (list, tuple)) else [q_plan]
+    if len(xs) != len(qs):
+        raise InputError("x_path and q_plan must hold as many paths")
     rng = np.random.default_rng(seed)
     xi_plan = np.asarray(xi_plan, float)
-    consts, drifts = [], []
+    X, Q = np.concatenate(xs), np.concatenate(qs)
+    ends = np.cumsum([len(x) for x in xs])[:-1]
+    consts, drifts, steps = [], [], []
     for xi in _geometries(robot, samples, rng):
-        D = effective_deviation(kin, x_path, q_plan, xi_plan, xi)
-        c = 0.5 * (D.max(axis=0) + D.min(axis=0))
-        consts.append(c)
-        drifts.append(float(np.max(D.max(axis=0) - c)))
+        D = effective_deviation(kin, X, Q, xi_plan, xi)
+        parts = np.split(D, ends)
+        c = [0.5 * (P.max(axis=0) + P.min(axis=0)) for P in parts]
+        consts.extend(c)
+        drifts.append(max(float(np.max(P.max(axis=0) - ci)) for P, ci in zip(parts, c)))
+        steps.append(max(float(np.max(np.abs(np.diff(P, axis=0)), initial=0.0)) for P in parts))
     consts = np.array(consts)
     drift = safety * max(drifts)
+    step = safety * max(steps)
     lo, hi = robot.xi_lo_array.copy(), robot.xi_hi_array.copy()
     offs = _offsets(robot)
     if not offs:
@@ -210,28 +236,42 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
         lo[j] = xi_plan[j] + c_lo - pad
         hi[j] = xi_plan[j] + c_hi + pad
     derivation = {
-        "geometries": int(consts.shape[0]),
-        "path_points": int(np.asarray(x_path).shape[0]),
+        "geometries": int(len(drifts)),
+        "paths": len(xs),
+        "path_points": int(X.shape[0]),
         "largest_drift_rad": float(max(drifts)),
+        "largest_step_rad": float(max(steps)),
         "constant_range_rad": [[float(consts[:, i].min()), float(consts[:, i].max())] for i in range(robot.n)],
         "safety": float(safety),
         "seed": int(seed),
     }
-    return ExecutionClass("cartesian", float(eps_q + tracking_error + drift), float(drift), lo, hi, derivation)
+    fast = float(eps_q + tracking_error)
+    return ExecutionClass("cartesian", fast + float(drift), float(drift), lo, hi, derivation, fast,
+                          float(step) if offs else None)
 
 
 def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: float, tracking_error: float = 0.0) -> bool:
     """Whether an execution with true joints ``q_true`` (K, n) and geometry ``xi`` belongs to ``cls``.
 
     ``joint``: ``|q_true - q_plan| <= eps_q + tracking_error`` and ``xi`` in the box.
-    ``cartesian``: the lengths in the box and a constant ``c`` in ``C`` with
-    ``|q_true + delta - q_plan - c| <= reading_error`` at every sample.
+    ``cartesian``: the lengths in the box, a constant ``c`` in ``C`` with
+    ``|q_true + delta - q_plan - c| <= reading_error`` at every sample, and
+    that deviation changing by at most ``2 fast_error + j drift_per_sample``
+    over any ``j`` samples.
     """
     q_true, q_plan, xi = (np.asarray(a, float) for a in (q_true, q_plan, xi))
     lo, hi = cls.xi_lo, cls.xi_hi
     if cls.kind == "joint":
         return bool(np.all(np.abs(q_true - q_plan) <= eps_q + tracking_error) and np.all((lo <= xi) & (xi <= hi)))
     offs = dict(_offsets(robot))
+    if cls.drift_per_sample is not None:
+        # |w_k - w_{k-j}| <= 2 fast_error + j d for every pair of samples (w = d_k - c; c cancels)
+        eff = q_true + np.array([xi[offs[i]] if i in offs else 0.0 for i in range(robot.n)])
+        dev = eff - q_plan
+        K = dev.shape[0]
+        for j in range(1, K):
+            if np.any(np.abs(dev[j:] - dev[:-j]) > 2.0 * cls.fast_error + j * cls.drift_per_sample):
+                return False
     others = [k for k in range(xi.size) if k not in offs.values()]
     if not np.all((lo[others] <= xi[others]) & (xi[others] <= hi[others])):
         return False

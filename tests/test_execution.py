@@ -35,6 +35,8 @@ def test_cartesian_class_replaces_the_offset_box_only(cls):
     assert np.all(cls.xi_hi[offs] - cls.xi_lo[offs] < 0.02)
     assert 1e-4 < cls.drift < 5e-3
     assert cls.reading_error == pytest.approx(DEXTAR.eps_q + cls.drift)
+    # the drift changes slowly: a few hundredths of a mrad per sample
+    assert cls.fast_error == DEXTAR.eps_q and 1e-6 < cls.drift_per_sample < 1e-4
 
 
 def test_executions_following_the_path_are_in_the_class(plan, cls):
@@ -63,6 +65,19 @@ def test_in_class_rejects_what_the_class_excludes(plan, cls):
     assert not in_class(cls, DEXTAR, q, plan.q, long, plan.xi_plan, DEXTAR.eps_q)
     shifted = q + (cls.xi_hi[5] - cls.xi_lo[5] + 1e-3)  # constant beyond C
     assert not in_class(cls, DEXTAR, shifted, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
+
+
+def test_in_class_checks_how_fast_the_drift_changes(plan, cls):
+    """A ramp of twice the per-sample bound, small enough for the amplitude, breaks the difference bound."""
+    from dataclasses import replace
+
+    kin = kinematics()
+    q = kin.ik_path(plan.x, plan.xi_plan, plan.q[0]).copy()
+    k0, n = len(q) // 2, 10
+    q[k0:k0 + n, 0] += 2 * cls.drift_per_sample * np.arange(1, n + 1)
+    q[k0 + n:, 0] += 2 * cls.drift_per_sample * n
+    assert not in_class(cls, DEXTAR, q, plan.q, plan.xi_plan, plan.xi_plan, DEXTAR.eps_q)
+    assert in_class(replace(cls, drift_per_sample=None), DEXTAR, q, plan.q, plan.xi_plan, plan.xi_plan, DEXTAR.eps_q)
 
 
 def test_joint_class_is_the_literal_tube(plan):

@@ -117,3 +117,37 @@ def test_joint_fd_model_contains_the_truth(qdd_bound):
     finite = np.isfinite(res.qdd_bound).all(1)
     assert finite[1:50].all()  # a bound is proved away from the singularity
     assert np.all(res.qdd_bound[finite] >= np.abs(run.qdd_true[finite]) - 1e-9)
+
+
+def test_drifting_reading_error_is_contained_and_tightens_the_velocity():
+    """Readings = truth + a slow drift (amplitude 1 mrad, <= 0.02 mrad/sample) + a fast error (<= eps_q).
+
+    With ``eps_q`` = amplitude + fast part alone the differences of readings
+    err by up to 2.2 mrad; the drift model bounds them by 2 eps_fast + j d.
+    Both runs must contain the truth; the drift model's velocity boxes are
+    narrower.
+    """
+    run = simulate(1.458, False, 0)
+    rng = np.random.default_rng(77)
+    K = run.n_samples
+    t = np.arange(K)
+    amp, per_sample, fast = 1e-3, 2e-5, default_settings().eps_q
+    phase = rng.uniform(0, 2 * np.pi, 2)
+    # |d/dk amp sin(w k + p)| = amp w <= per_sample
+    drift = amp * np.sin((per_sample / amp) * t[:, None] + phase[None, :])
+    q = run.q_true + drift + rng.uniform(-fast, fast, run.q_true.shape)
+    m0 = int(run.mode_true[0])
+    plain = track(interval_model(), q, default_settings(eps_q=amp + fast), initial_mode=m0)
+    rate = np.nextafter(per_sample / default_settings().t_s, np.inf)
+    drifting = track(interval_model(), q, default_settings(eps_q=amp + fast, eps_q_fast=fast, drift_rate=rate),
+                     initial_mode=m0)
+    for res in (plain, drifting):
+        assert _inside(res.x_lo, res.x_hi, run.x_true)
+        assert _inside(res.xd_lo[1:], res.xd_hi[1:], run.xd_true[1:])
+        assert res.verdict in (Verdict.MODE_CHANGED, Verdict.UNKNOWN)
+    far = slice(5, run.k_sing - 40)  # before the crossing zone
+    w_plain = (plain.xd_hi - plain.xd_lo)[far].max()
+    w_drift = (drifting.xd_hi - drifting.xd_lo)[far].max()
+    assert w_drift < 0.5 * w_plain, (w_drift, w_plain)
+    with pytest.raises(InputError, match="together"):
+        track(interval_model(), q, default_settings(eps_q_fast=fast), initial_mode=m0)

@@ -41,9 +41,9 @@ def test_certify_crossing_with_background_refutation():
     """End to end on a narrow bracket: v_min, refutation bound below it, Monte Carlo, JSON summary."""
     b = benchmark_crossing()
     task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
-    cert = certify_crossing(DEXTAR, task, PlanningBounds(), v_low=1.2, v_high=1.5, tol=0.1, monte_carlo_runs=4,
+    cert = certify_crossing(DEXTAR, task, PlanningBounds(), v_low=1.0, v_high=1.4, tol=0.1, monte_carlo_runs=4,
                             refute_speeds=[0.5, 1.0], kin=kinematics(), imodel=interval_model())
-    assert cert.verdict is Verdict.MODE_CHANGED and 1.2 < cert.v_min <= 1.5
+    assert cert.verdict is Verdict.MODE_CHANGED and 1.0 < cert.v_min <= 1.4
     assert cert.refutation_bound is not None and 0.7 <= cert.refutation_bound < 1.0
     speeds = [r.speed for r in cert.refutation]
     assert speeds == sorted(speeds) and {0.5, 1.0} <= set(speeds) and max(speeds) < cert.v_min

@@ -124,6 +124,15 @@ class TrackerSettings:
         (default) derives a bound at every step from the boxes and ``a_max``;
         a number is an assumption the user vouches for (intersected with the
         derived one).
+    eps_q_fast, drift_rate : float or array (n,), optional
+        A reading error that drifts slowly (``SOUND`` model only): the error
+        ``e_k = q_meas,k - q_true,k`` is, besides ``|e_k| <= eps_q``, the sum
+        of a part bounded by ``eps_q_fast`` (rad) and a part that changes by at
+        most ``drift_rate`` rad/s, so that a difference over ``j`` samples errs
+        by at most ``min(2 eps_q, 2 eps_q_fast + drift_rate j t_s)``.  Both
+        ``None`` (default): readings err independently, ``2 eps_q``.  Planning
+        uses it for executions whose joints follow the plan up to a slowly
+        varying geometry term (``planner.execution``).
     keep_xi : bool
         Keep the calibration box contracted across steps.
     split_boxes : int
@@ -156,6 +165,8 @@ class TrackerSettings:
     velocity_model: VelocityModel = VelocityModel.SOUND
     baselines: tuple = (1, 2, 4, 8, 16)
     qdd_bound: float | np.ndarray | None = None
+    eps_q_fast: float | np.ndarray | None = None
+    drift_rate: float | np.ndarray | None = None
     keep_xi: bool = False
     split_boxes: int = 64
     split_tol: float = 2e-4
@@ -194,6 +205,10 @@ class TrackerSettings:
             splits = tuple(int(v) for v in self.xi_splits)
             if any(v < 1 for v in splits):
                 raise InputError(f"xi_splits must be positive integers, got {self.xi_splits}")
+        if (self.eps_q_fast is None) != (self.drift_rate is None):
+            raise InputError("eps_q_fast and drift_rate go together: give both or neither")
+        fast = None if self.eps_q_fast is None else vec(self.eps_q_fast, "eps_q_fast")
+        rate = None if self.drift_rate is None else vec(self.drift_rate, "drift_rate")
         base = tuple(sorted({int(j) for j in self.baselines}))
         if not base or base[0] < 1:
             raise InputError(f"baselines must be positive sample counts, got {self.baselines}")
@@ -205,6 +220,8 @@ class TrackerSettings:
             xd0=vec(self.xd0, "xd0", np.inf, allow_inf=True),
             velocity_model=VelocityModel(self.velocity_model),
             qdd_bound=qdd,
+            eps_q_fast=fast,
+            drift_rate=rate,
             baselines=base,
             xi_splits=splits,
         )
@@ -450,6 +467,17 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         return _track_batch(model, q_meas, settings, x0, xi_box, record, progress)
 
 
+def _difference_error(s, j: int, two_eps):
+    """Error interval of a difference of two readings ``j`` samples apart, rad (outward)."""
+    if s.eps_q_fast is None:
+        return two_eps
+    two_fast = I.scale(2.0, -s.eps_q_fast, s.eps_q_fast)[1]
+    span = I.mul(float(j), float(j), s.t_s, s.t_s)[1]  # j t_s, rounded up
+    bound = I.add(two_fast, two_fast, *I.mul(span, span, s.drift_rate, s.drift_rate))[1]
+    bound = np.minimum(bound, two_eps[1])
+    return -bound, bound
+
+
 def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
     t0 = time.perf_counter()
     s = settings.validated(model.n)
@@ -476,6 +504,7 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
     row_bad = np.full(R, -1, np.int64)
     two_eps = I.scale(2.0, -eps, eps)
     quant = I.div(*two_eps, ts, ts)  # 2 eps / t_s
+    diff_err = {j: _difference_error(s, j, two_eps) for j in s.baselines}
 
     init_mode = np.zeros(B, np.int8)
     cur_mode = np.zeros(B, np.int8)
@@ -527,7 +556,7 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
                 if j > len(past):
                     break
                 Xp, Qp, qp = past[-j]
-                DQ = I.add(*I.sub(qk, qk, qp, qp), *two_eps)
+                DQ = I.add(*I.sub(qk, qk, qp, qp), *diff_err[j])
                 pasts.append((Xp, Qp, DQ, I.mul(float(j), float(j), ts, ts)))  # h = j t_s, outward
         # contraction to a fixpoint
         for _ in range(s.max_iter):
