@@ -266,6 +266,11 @@ class CrossingCertificate:
             return [t.v_sing for t in self.trials if t.verdict is Verdict.MODE_CHANGED]
         return [t.v_sing for t in self.trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing < self.v_min]
 
+    @property
+    def v_min_at_lower_end(self) -> bool:
+        """``v_min`` is the slowest speed tried: a smaller one may certify too (lower ``v_low``)."""
+        return self.v_min is not None and self.v_min <= min(t.v_sing for t in self.trials)
+
     def summary(self) -> dict:
         """JSON-ready summary."""
         return {
@@ -274,6 +279,7 @@ class CrossingCertificate:
             "refutation_bound_mps": self.refutation_bound,
             "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
             "certified_below_v_min_mps": self.certified_below_v_min,
+            "v_min_at_lower_end": self.v_min_at_lower_end,
             "a_max_mps2": None if self.a_max_used is None else list(self.a_max_used),
             "eps_q_rad": self.bounds.eps_q,
             "tracking_error_rad": self.bounds.tracking_error,

@@ -184,7 +184,9 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
     drift met, ``d`` ``safety`` times the largest change of ``D`` between
     consecutive samples; ``C`` is ``delta_plan`` plus the hull of the
     constants, widened by ``(safety - 1)`` times its half-width plus
-    ``eps_q`` on each side.
+    ``eps_q`` on each side, and then by the robot's own offset interval
+    (hull): the certifying run never assumes a narrower offset box than the
+    run-time tracker has to.
 
     ``C``, ``e`` and ``d`` *define* the class (they are assumptions, measured,
     not proved): the certificate is sound for the class; whether an
@@ -233,8 +235,10 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
     for i, j in offs:
         c_lo, c_hi = consts[:, i].min(), consts[:, i].max()
         pad = (safety - 1.0) * 0.5 * (c_hi - c_lo) + eps_q
-        lo[j] = xi_plan[j] + c_lo - pad
-        hi[j] = xi_plan[j] + c_hi + pad
+        # never narrower than the robot's own offset interval: the certifying
+        # run must not know the geometry better than the run-time tracker does
+        lo[j] = min(xi_plan[j] + c_lo - pad, lo[j])
+        hi[j] = max(xi_plan[j] + c_hi + pad, hi[j])
     derivation = {
         "geometries": int(len(drifts)),
         "paths": len(xs),
@@ -242,6 +246,7 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
         "largest_drift_rad": float(max(drifts)),
         "largest_step_rad": float(max(steps)),
         "constant_range_rad": [[float(consts[:, i].min()), float(consts[:, i].max())] for i in range(robot.n)],
+        "offset_box": "hull of the derived constants (widened) and the robot's offset intervals",
         "safety": float(safety),
         "seed": int(seed),
     }

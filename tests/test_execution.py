@@ -33,6 +33,8 @@ def test_cartesian_class_replaces_the_offset_box_only(cls):
     # the length errors move the effective angles by up to a few mrad; the
     # drift along a 120 mm path is about 1 mrad
     assert np.all(cls.xi_hi[offs] - cls.xi_lo[offs] < 0.02)
+    # never narrower than the robot's own offset intervals (the run-time tracker's)
+    assert np.all(cls.xi_lo[offs] <= DEXTAR.xi_lo_array[offs]) and np.all(cls.xi_hi[offs] >= DEXTAR.xi_hi_array[offs])
     assert 1e-4 < cls.drift < 5e-3
     assert cls.reading_error == pytest.approx(DEXTAR.eps_q + cls.drift)
     # the drift changes slowly: a few hundredths of a mrad per sample

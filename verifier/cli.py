@@ -193,6 +193,8 @@ def _certify(a):
     vmin = "none (no tried speed certifies)" if cert.v_min is None else f"{cert.v_min:.4f} m/s"
     ref = "not computed" if a.no_refute else ("none found" if cert.refutation_bound is None else f"{cert.refutation_bound:.4f} m/s")
     print(f"minimal certified v_sing: {vmin}")
+    if cert.v_min_at_lower_end:
+        print(f"note: v_min is the slowest speed tried; lower --v-low (now {a.v_low} m/s) to look for a smaller one")
     if cert.certified_below_v_min:
         print(f"note: certification is not monotone here; also certified below v_min at "
               f"{', '.join(f'{v:.4f}' for v in cert.certified_below_v_min)} m/s")
