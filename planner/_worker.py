@@ -30,13 +30,17 @@ def _serve() -> None:
     while True:
         try:
             module, name, args = pickle.load(requests)
+            value = (True, getattr(importlib.import_module(module), name)(*args))
         except EOFError:
             return
-        try:
-            value = (True, getattr(importlib.import_module(module), name)(*args))
         except Exception as exc:  # sent back and re-raised by the parent
             value = (False, exc)
-        pickle.dump(value, channel)
+        try:
+            data = pickle.dumps(value)
+        except Exception as exc:  # an unpicklable result or exception: say so instead
+            data = pickle.dumps((False, RuntimeError(f"worker result could not be sent back: {exc!r}; "
+                                                     f"it was {value[1]!r}")))
+        channel.write(data)
         channel.flush()
 
 
@@ -72,7 +76,7 @@ class BackgroundCalls:
                 pickle.dump((module, name, args + (key,)), self._proc.stdin)
                 self._proc.stdin.flush()
                 out = pickle.load(self._proc.stdout)
-            except (EOFError, OSError, pickle.UnpicklingError) as exc:
+            except Exception as exc:  # unpicklable request or answer, dead worker: never die silently
                 out = (False, WorkerStopped(f"the background worker stopped ({exc!r}); "
                                             "run without the background worker to see the error"))
             with self._cond:

@@ -759,8 +759,12 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         # starting geometries of the (non-convex) searches: the box centre and a seeded corner
         starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
         scan = refute_speeds if refute_speeds is not None else np.arange(0.3, v_high, 0.1)
+        try:
+            scan = sorted({round(float(v), 6) for v in scan})
+        except (TypeError, ValueError):
+            raise InputError(f"refute_speeds must be numbers (m/s), got {refute_speeds!r}") from None
         refuter = _Refuter(robot, task, b, m0, starts, kin, refute_in_background)
-        refuter.submit(sorted({round(float(v), 6) for v in scan}))
+        refuter.submit(scan)
     # wall time of each phase (the refutation's is the wait left after the Monte Carlo run)
     clock = {"setup": time.perf_counter() - t0}
 
@@ -849,9 +853,10 @@ def _refute_speed(robot, task, b, m0, starts, v, kin=None):
     from . import refute
 
     if kin is None:
-        kin = _WORKER_KIN.get(robot.name)
+        # keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes
+        kin = _WORKER_KIN.get(robot)
         if kin is None:
-            kin = _WORKER_KIN[robot.name] = KinematicModel(robot)
+            kin = _WORKER_KIN[robot] = KinematicModel(robot)
     try:
         plan = plan_crossing(kin, task, v, b)
     except (InputError, SimulationError) as exc:
@@ -892,8 +897,19 @@ class _Refuter:
     def result(self, v):
         self._speeds.add(v)
         if v not in self._rows:
-            self._rows[v] = (self._bg.result(v) if self._bg is not None
-                             else _refute_speed(*self._args, v, kin=self._kin))
+            row = None
+            if self._bg is not None:
+                try:
+                    row = self._bg.result(v)
+                except Exception:
+                    # e.g. a robot defined in a script the worker cannot import: go on here
+                    # (a genuine error of the search is raised again by the run here),
+                    # possibly on the helper thread, so with a model of its own (CasADi
+                    # functions are not to be called from two threads at once)
+                    self._bg.close()
+                    self._bg = None
+                    self._kin = None
+            self._rows[v] = row if row is not None else _refute_speed(*self._args, v, kin=self._kin)
         return self._rows[v]
 
     def close(self):

@@ -180,7 +180,8 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
     For each geometry tried (every corner of the non-offset parameters and
     ``samples`` uniform draws in ``[xi]``), the effective deviation ``D_k``
     of :func:`effective_deviation` is split into its mid-range constant
-    ``c`` and the drift ``D_k - c``.  ``e`` is ``safety`` times the largest
+    ``c`` and the drift ``D_k - c`` (``c = 0`` for a joint without an offset
+    parameter: its whole deviation is drift).  ``e`` is ``safety`` times the largest
     drift met, ``d`` ``safety`` times the largest change of ``D`` between
     consecutive samples; ``C`` is ``delta_plan`` plus the hull of the
     constants, widened by ``(safety - 1)`` times its half-width plus
@@ -216,22 +217,21 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
     xi_plan = np.asarray(xi_plan, float)
     X, Q = np.concatenate(xs), np.concatenate(qs)
     ends = np.cumsum([len(x) for x in xs])[:-1]
+    offs = _offsets(robot)
+    # a joint without an offset parameter has c = 0: its whole deviation is drift
+    no_offset = np.array([i not in dict(offs) for i in range(robot.n)])
     consts, drifts, steps = [], [], []
     for xi in _geometries(robot, samples, rng):
         D = effective_deviation(kin, X, Q, xi_plan, xi)
         parts = np.split(D, ends)
-        c = [0.5 * (P.max(axis=0) + P.min(axis=0)) for P in parts]
+        c = [np.where(no_offset, 0.0, 0.5 * (P.max(axis=0) + P.min(axis=0))) for P in parts]
         consts.extend(c)
-        drifts.append(max(float(np.max(P.max(axis=0) - ci)) for P, ci in zip(parts, c)))
+        drifts.append(max(float(np.max(np.abs(P - ci))) for P, ci in zip(parts, c)))
         steps.append(max(float(np.max(np.abs(np.diff(P, axis=0)), initial=0.0)) for P in parts))
     consts = np.array(consts)
     drift = safety * max(drifts)
     step = safety * max(steps)
     lo, hi = robot.xi_lo_array.copy(), robot.xi_hi_array.copy()
-    offs = _offsets(robot)
-    if not offs:
-        # no offset parameter absorbs the constant part: it is drift too
-        drift = safety * float(np.max(np.abs(consts)) + max(drifts))
     for i, j in offs:
         c_lo, c_hi = consts[:, i].min(), consts[:, i].max()
         pad = (safety - 1.0) * 0.5 * (c_hi - c_lo) + eps_q
@@ -251,8 +251,7 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
         "seed": int(seed),
     }
     fast = float(eps_q + tracking_error)
-    return ExecutionClass("cartesian", fast + float(drift), float(drift), lo, hi, derivation, fast,
-                          float(step) if offs else None)
+    return ExecutionClass("cartesian", fast + float(drift), float(drift), lo, hi, derivation, fast, float(step))
 
 
 def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: float, tracking_error: float = 0.0) -> bool:

@@ -4,9 +4,12 @@ import numpy as np
 import pytest
 
 from planner._worker import BackgroundCalls, WorkerStopped
-from planner.certify import CrossingTask, PlanningBounds, certify_crossing
+from planner.certify import CrossingTask, PlanningBounds, _Refuter, certify_crossing
+from planner.execution import in_class
+from planner.simulate import random_geometry
 from problems import interval_model, kinematics
 from robots import DEXTAR, benchmark_crossing
+from robots.dextar import dextar_loop_closure
 from verifier.tracker import Verdict
 
 
@@ -24,6 +27,62 @@ def test_calls_run_in_order_and_errors_come_back():
         assert bg.result(5.0) == 1.2
     finally:
         bg.close()
+
+
+def test_unpicklable_requests_and_answers_come_back_as_errors():
+    bg = BackgroundCalls("operator", "add", (lambda: 0,))  # the request cannot be pickled
+    try:
+        with pytest.raises(WorkerStopped):
+            bg.result(1)
+    finally:
+        bg.close()
+    bg = BackgroundCalls("tempfile", "TemporaryFile", ())  # a file object cannot be sent back
+    try:
+        with pytest.raises(RuntimeError, match="could not be sent back"):
+            bg.result("w")
+        with pytest.raises(RuntimeError, match="could not be sent back"):
+            bg.result("w+b")  # the worker survived
+    finally:
+        bg.close()
+
+
+def local_closure(x, q, xi):
+    """A loop closure the worker process cannot import (tests/ is not on its path)."""
+    return dextar_loop_closure(x, q, xi)
+
+
+def test_refutation_falls_back_to_this_process():
+    import dataclasses
+
+    robot = dataclasses.replace(DEXTAR, loop_closure=local_closure)
+    b = benchmark_crossing()
+    task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
+    ref = _Refuter(robot, task, PlanningBounds().resolved(robot), 1, [robot.xi_center], kinematics(), True)
+    try:
+        row = ref.result(0.5)
+    finally:
+        ref.close()
+    assert row.speed == 0.5 and row.verified
+
+
+def test_cartesian_class_with_a_joint_without_offset():
+    """Only joint 1 declares an offset: joint 2's whole deviation is drift; path-following executions belong."""
+    import dataclasses
+
+    from planner.certify import execution_class, plan_crossing
+    from robots import KinematicModel
+
+    robot = dataclasses.replace(DEXTAR, joint_offsets=(5, None))
+    kin = KinematicModel(robot)
+    b = benchmark_crossing()
+    task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
+    plan = plan_crossing(kin, task, 1.3, PlanningBounds())
+    cls = execution_class(kin, plan, PlanningBounds())
+    rng = np.random.default_rng(5)
+    for r in range(20):
+        xi = random_geometry(robot, rng, corners=(r % 2 == 0))
+        q = kin.ik_path(plan.x, xi, plan.q[0])
+        assert in_class(cls, robot, q, plan.q, xi, plan.xi_plan, robot.eps_q), r
 
 
 def test_a_dying_worker_is_reported_not_waited_for():
