@@ -15,6 +15,7 @@ from .certify import (
     minimal_v_sing,
     monte_carlo_confirmation,
     plan_crossing,
+    speed_ceiling,
 )
 from .execution import ExecutionClass, cartesian_class, in_class, joint_class
 from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
@@ -38,6 +39,7 @@ __all__ = [
     "joint_class",
     "monte_carlo_confirmation",
     "plan_crossing",
+    "speed_ceiling",
     "GeneratedTrajectory",
     "GenerationLimits",
     "generate_crossing",
