@@ -834,8 +834,9 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
 
 
 _WORKER_KIN: dict = {}
-# IPOPT time cap per counterexample attempt, s.  On the DexTAR task every
-# verified counterexample took <= 0.2 s (<= 60 iterations); attempts near the
+# IPOPT time cap per counterexample attempt, s.  On the benchmark task of
+# docs/planning.md every verified counterexample took <= 0.2 s (<= 60
+# iterations); attempts near the
 # bound can wander for 10-25 s before declaring infeasibility, and a stopped
 # attempt proves nothing either way (it only costs bound tightness).
 REFUTE_CPU_TIME = 2.0

@@ -11,8 +11,8 @@ tracker inputs for each.
     literal class of the paper's planning perspective, but a robot whose
     geometry differs from the planning geometry cannot follow ``q_plan``
     through the singularity: its joints must deviate by the geometry error
-    (up to 7.7 mrad on the DexTAR's Table I box), which no small
-    ``tracking_error`` covers.
+    (up to 7.7 mrad on the calibration box measured in docs/planning.md),
+    which no small ``tracking_error`` covers.
 
 ``cartesian`` (default)
     The end-effector follows the planned path, the geometry is anywhere in
@@ -268,21 +268,19 @@ def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: flo
     if cls.kind == "joint":
         return bool(np.all(np.abs(q_true - q_plan) <= eps_q + tracking_error) and np.all((lo <= xi) & (xi <= hi)))
     offs = dict(_offsets(robot))
-    if cls.drift_per_sample is not None:
-        # |w_k - w_{k-j}| <= 2 fast_error + j d for every pair of samples (w = d_k - c; c cancels)
-        eff = q_true + np.array([xi[offs[i]] if i in offs else 0.0 for i in range(robot.n)])
-        dev = eff - q_plan
-        K = dev.shape[0]
-        for j in range(1, K):
-            if np.any(np.abs(dev[j:] - dev[:-j]) > 2.0 * cls.fast_error + j * cls.drift_per_sample):
-                return False
     others = [k for k in range(xi.size) if k not in offs.values()]
     if not np.all((lo[others] <= xi[others]) & (xi[others] <= hi[others])):
         return False
+    # effective deviation q + delta - q_plan, joint by joint (delta = 0 without an offset parameter)
+    dev = q_true + np.array([xi[offs[i]] if i in offs else 0.0 for i in range(robot.n)]) - q_plan
+    if cls.drift_per_sample is not None:
+        # |w_k - w_{k-j}| <= 2 fast_error + j d for every pair of samples (w = dev - c; c cancels)
+        for j in range(1, dev.shape[0]):
+            if np.any(np.abs(dev[j:] - dev[:-j]) > 2.0 * cls.fast_error + j * cls.drift_per_sample):
+                return False
     for i in range(robot.n):
-        eff = q_true[:, i] + (xi[offs[i]] if i in offs else 0.0)
-        d = eff - q_plan[:, i]
-        # the constant c must lie within reading_error of every d_k, and in C
+        d = dev[:, i]
+        # the constant c must lie within reading_error of every d_k, and in C (0 without an offset)
         c_lo, c_hi = d.max() - cls.reading_error, d.min() + cls.reading_error
         if i in offs:
             c_lo, c_hi = max(c_lo, lo[offs[i]]), min(c_hi, hi[offs[i]])
