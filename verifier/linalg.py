@@ -22,26 +22,41 @@ __all__ = [
 
 
 def point_inverse(A):
-    """``inv(A)`` for a batch of float matrices ``(B, n, n)``; identity where singular.
+    """``inv(A)`` for a batch of float matrices ``(B, n, n)``; identity where
+    singular or not finite.
 
-    Any preconditioner keeps the preconditioned system equivalent, so a
-    fallback identity is sound (only weaker).
+    Gauss–Jordan elimination with partial pivoting (the first largest pivot),
+    the very float operations of :func:`verifier.compiled.linalg.point_inverse`
+    so that both backends precondition identically.  Any preconditioner keeps
+    the preconditioned system equivalent, so the fallback identity is sound
+    (only weaker).
     """
     A = np.asarray(A, dtype=np.float64)
-    ok = np.all(np.isfinite(A), axis=(-2, -1))
-    eye = np.broadcast_to(np.eye(A.shape[-1]), A.shape)
-    A = np.where(ok[..., None, None], A, eye)
-    try:
-        C = np.linalg.inv(A)
-    except np.linalg.LinAlgError:
-        C = np.empty_like(A)
-        for b in np.ndindex(A.shape[:-2]):
-            try:
-                C[b] = np.linalg.inv(A[b])
-            except np.linalg.LinAlgError:
-                C[b] = np.eye(A.shape[-1])
-    bad = ~np.all(np.isfinite(C), axis=(-2, -1)) | ~ok
-    return np.where(bad[..., None, None], eye, C)
+    n = A.shape[-1]
+    M = A.reshape(-1, n, n).copy()
+    rows = np.arange(len(M))
+    C = np.broadcast_to(np.eye(n), M.shape).copy()
+    ok = np.all(np.isfinite(M), axis=(-2, -1))
+    M[~ok] = np.eye(n)
+    with np.errstate(all="ignore"):
+        for col in range(n):
+            p = col + np.argmax(np.abs(M[:, col:, col]), axis=-1)
+            ok &= M[rows, p, col] != 0.0
+            for X in (M, C):
+                top = X[rows, col].copy()
+                X[rows, col] = X[rows, p]
+                X[rows, p] = top
+            piv = M[:, col, col][:, None].copy()
+            M[:, col] = M[:, col] / piv
+            C[:, col] = C[:, col] / piv
+            for r in range(n):
+                if r != col:
+                    f = M[:, r, col][:, None].copy()
+                    M[:, r] = M[:, r] - f * M[:, col]
+                    C[:, r] = C[:, r] - f * C[:, col]
+    ok &= np.all(np.isfinite(C), axis=(-2, -1))
+    C[~ok] = np.eye(n)
+    return C.reshape(A.shape)
 
 
 def pmat_imat(C, Ml, Mh):

@@ -25,6 +25,7 @@ for a column vector).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import casadi as ca
 import numpy as np
@@ -32,7 +33,39 @@ import numpy as np
 from . import interval as I
 from .errors import ModelError
 
-__all__ = ["Tape"]
+__all__ = ["Tape", "TapeArrays", "OPCODES"]
+
+#: Opcodes of :meth:`Tape.arrays` (the compiled interpreter's instruction set).
+OPCODES = {name: i for i, name in enumerate((
+    "OP_INPUT", "OP_CONST", "OP_ADD", "OP_SUB", "OP_MUL", "OP_DIV", "OP_NEG", "OP_SQ",
+    "OP_SQRT", "OP_SIN", "OP_COS", "OP_TWICE", "OP_FABS", "OP_INV", "OP_ASSIGN", "OP_CONSTPOW",
+))}
+
+
+class TapeArrays(NamedTuple):
+    """A tape as flat arrays, for the compiled interpreter (``verifier.compiled``).
+
+    Attributes
+    ----------
+    code : int64 array (N, 3)
+        Per node ``(opcode, a, b)``: operand node indices; for ``OP_INPUT``,
+        ``a`` is the slot of the input in the concatenated input vector.
+    value : float64 array (N,)
+        Constant of ``OP_CONST``, integer exponent of ``OP_CONSTPOW``.
+    out_nodes : int64 array (sum of rows_j cols_j,)
+        Node of every dense output entry, outputs one after another, each
+        row-major; -1 for a structural zero (exactly ``[0, 0]``).
+    out_offsets : int64 array (n_out + 1,)
+        Where output ``j`` starts in ``out_nodes``.
+    in_offsets : int64 array (n_in + 1,)
+        Where input ``i`` starts in the concatenated input vector.
+    """
+
+    code: np.ndarray
+    value: np.ndarray
+    out_nodes: np.ndarray
+    out_offsets: np.ndarray
+    in_offsets: np.ndarray
 
 _OP = {name: getattr(ca, name) for name in dir(ca) if name.startswith("OP_")}
 _NAME = {v: k for k, v in _OP.items()}
@@ -122,6 +155,27 @@ class Tape:
                 ins = _Instr("OP_CONSTPOW", ins.out, ins.a, ins.b, float(e))
             fixed.append(ins)
         self._instrs = tuple(fixed)
+
+    def arrays(self) -> TapeArrays:
+        """The same program as flat arrays (see :class:`TapeArrays`); cached."""
+        cached = getattr(self, "_arrays", None)
+        if cached is not None:
+            return cached
+        in_off = np.concatenate([[0], np.cumsum(self.in_sizes)]).astype(np.int64)
+        code = np.full((self.n_nodes, 3), -1, np.int64)
+        value = np.zeros(self.n_nodes)
+        slot = {node: in_off[i] + nz for node, i, nz in self._inputs}
+        for ins in self._instrs:
+            code[ins.out] = (OPCODES[ins.op], slot[ins.out] if ins.op == "OP_INPUT" else ins.a, ins.b)
+            value[ins.out] = ins.value
+        sizes = [r * c for r, c in self.out_shapes]
+        out_off = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        out_nodes = np.full(int(out_off[-1]), -1, np.int64)
+        for node, j, nz in self._outputs:
+            r, c = self._out_rc[j][0][nz], self._out_rc[j][1][nz]
+            out_nodes[out_off[j] + r * self.out_shapes[j][1] + c] = node
+        self._arrays = TapeArrays(code, value, out_nodes, out_off, in_off)
+        return self._arrays
 
     # ------------------------------------------------------------------ forward
     def _program(self):

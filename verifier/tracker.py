@@ -40,7 +40,6 @@ box, the joint-acceleration bound) was violated: the scenario is reported
 
 from __future__ import annotations
 
-import itertools
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
@@ -48,9 +47,9 @@ from enum import Enum
 import numpy as np
 
 from . import interval as I
-from .contractors import hc4_pose, mode_of, newton, pose_solutions, split_prune, velocity, velocity_displacement
+from .contractors import pose_solutions
 from .errors import InputError
-from .linalg import linear_enclosure
+from .step import Backend, advance, configure, init_state
 
 __all__ = [
     "Verdict",
@@ -346,99 +345,8 @@ def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_bo
     return lo, hi
 
 
-def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
-    """Bound ``|qdd|`` over ``[t_k, t_{k+1}]`` from the boxes at ``t_k``.
-
-    Over the interval, ``x`` lies in ``[x]_k + [0, t_s][xd]_k + [0, t_s^2/2][a]``
-    and ``xd`` in ``[xd]_k + [0, t_s][a]``.  The joints are enclosed by Newton
-    on ``f = 0`` in ``q`` from a generous box around both samples; because the
-    joint path is continuous and always solves ``f = 0``, it cannot leave that
-    box if the contracted result lies strictly inside it.  Then
-    ``qd = -J_q^{-1} J_x xd`` and ``qdd = -J_q^{-1}(J_x xdd + h)`` are enclosed
-    by :func:`linear_enclosure`.  Returns ``(lo, hi)`` of ``qdd`` (``-inf, inf``
-    where no bound could be proved).
-    """
-    ts = s.t_s
-    Xs = I.add(*X, *I.mul(0.0, ts, *XD))
-    half_ts2 = I.scale(0.5, *I.mul(ts, ts, ts, ts))  # t_s^2 / 2, rounded outward
-    Xs = I.add(*Xs, *I.mul(*I.hull(0.0, 0.0, *half_ts2), *A))
-    XDs = I.add(*XD, *I.mul(0.0, ts, *A))
-    ql, qh = I.hull(*Q_prev, *Q_now)
-    margin = 0.05  # rad; the result must land strictly inside this box
-    Q0 = (ql - margin, qh + margin)
-    Qs = Q0
-    for _ in range(3):
-        Qs = newton(model, Xs, Qs, XI, "q")
-        Qs = (np.where(Qs[0] > Qs[1], Q0[0], Qs[0]), np.where(Qs[0] > Qs[1], Q0[1], Qs[1]))
-    inside = np.all((Qs[0] > Q0[0]) & (Qs[1] < Q0[1]), axis=-1)
-    Jq = model.tape_jq.evaluate([Xs, Qs, XI])[0]
-    R = model.tape_jx_xd.evaluate([Xs, Qs, XI, XDs])[0]
-    QDs = linear_enclosure(*Jq, -R[1], -R[0])
-    R2 = model.tape_accel_rhs.evaluate([Xs, Qs, XI, XDs, QDs, A])[0]
-    QDD = linear_enclosure(*Jq, -R2[1], -R2[0])
-    ok = inside[:, None] & np.isfinite(QDD[0]) & np.isfinite(QDD[1]) & ~(QDD[0] > QDD[1])
-    return np.where(ok, QDD[0], -np.inf), np.where(ok, QDD[1], np.inf)
-
-
-def _split_undecided(model, X, Q, XI, mode, alive, s):
-    """Branch and prune the pose boxes of scenarios whose mode is undecided.
-
-    Near a Type 2 singularity the box often spans the singular locus although
-    the solutions of ``f = 0`` lie on one side; Newton cannot contract a box
-    with a singular Jacobian, but its pieces can be discarded one by one
-    (:func:`verifier.contractors.split_prune`).  Only pieces proved empty are
-    dropped, so the hull of the rest still encloses the true pose.
-    """
-    narrow = np.all(X[1] - X[0] <= s.split_max_width, -1)  # also False for NaN/inf
-    todo = np.nonzero(alive & (mode == 0) & narrow)[0]
-    if todo.size == 0:
-        return X, mode
-    sub = lambda box: (box[0][todo], box[1][todo])  # noqa: E731
-    (lo_t, hi_t), mode_t = split_prune(model, sub(X), sub(Q), sub(XI), max_pieces=s.split_boxes, tol=s.split_tol)
-    lo, hi = X[0].copy(), X[1].copy()
-    lo[todo], hi[todo] = lo_t, hi_t
-    mode = mode.copy()
-    mode[todo] = mode_t
-    return (lo, hi), mode
-
-
-def _partition(XI, splits):
-    """Split calibration boxes ``(B, m)`` into ``P = prod(splits)`` sub-boxes ``(B, P, m)``.
-
-    Adjacent sub-boxes share the same float split point, so their union is
-    exactly the original box.
-    """
-    lo, hi = (np.asarray(v, dtype=np.float64) for v in XI)
-    B, m = lo.shape
-    if splits is None or all(v == 1 for v in splits):
-        return lo[:, None, :].copy(), hi[:, None, :].copy()
-    if len(splits) != m:
-        raise InputError(f"xi_splits needs {m} counts (one per geometric parameter), got {len(splits)}")
-    points = []
-    for i, cnt in enumerate(splits):
-        inner = [lo[:, i] + (hi[:, i] - lo[:, i]) * (j / cnt) for j in range(1, cnt)]
-        points.append(np.stack([lo[:, i]] + inner + [hi[:, i]], axis=1))  # (B, cnt + 1)
-    combos = np.array(list(itertools.product(*(range(c) for c in splits))))  # (P, m)
-    cols = np.arange(m)
-    sub_lo = np.stack([np.stack([points[i][:, c[i]] for i in cols], axis=1) for c in combos], axis=1)
-    sub_hi = np.stack([np.stack([points[i][:, c[i] + 1] for i in cols], axis=1) for c in combos], axis=1)
-    return sub_lo, sub_hi
-
-
-def _hull_rows(box, live):
-    """Hull over the live rows of each scenario: ``(B P, n)`` -> ``(B, n)``."""
-    B, P = live.shape
-    lo = box[0].reshape(B, P, -1)
-    hi = box[1].reshape(B, P, -1)
-    lv = live[..., None]
-    return np.where(lv, lo, np.inf).min(1), np.where(lv, hi, -np.inf).max(1)
-
-
-def _widths(B):
-    return I.width(*B).max(axis=-1)
-
-
-def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None):
+def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None,
+                backend: str = "compiled"):
     """Run the tracker on ``B`` scenarios at once.
 
     Parameters
@@ -456,176 +364,51 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     record : bool
         Also return every box (memory ``O(B K n)``).
     progress : callable, optional
-        Called as ``progress(k)`` after each sample.
+        Called as ``progress(k)`` after each sample (after each block of
+        samples with the compiled backend).
+    backend : {"compiled", "numpy"}
+        The compiled kernels (default; scenarios in parallel) or the numpy
+        reference (:mod:`verifier.step`).
 
     Returns
     -------
     BatchResult, and when ``record`` a dict of arrays ``x_lo, x_hi, xd_lo,
     xd_hi`` ``(B, K, n)``, ``mode`` ``(B, K)``, ``qdd_hi`` ``(B, K, n)``.
     """
-    with I.quiet_fp():  # one errstate for the whole run instead of one per operation
-        return _track_batch(model, q_meas, settings, x0, xi_box, record, progress)
-
-
-def _difference_error(s, j: int, two_eps):
-    """Error interval of a difference of two readings ``j`` samples apart, rad (outward)."""
-    if s.eps_q_fast is None:
-        return two_eps
-    two_fast = I.scale(2.0, -s.eps_q_fast, s.eps_q_fast)[1]
-    span = I.mul(float(j), float(j), s.t_s, s.t_s)[1]  # j t_s, rounded up
-    bound = I.add(two_fast, two_fast, *I.mul(span, span, s.drift_rate, s.drift_rate))[1]
-    bound = np.minimum(bound, two_eps[1])
-    return -bound, bound
-
-
-def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
     t0 = time.perf_counter()
-    s = settings.validated(model.n)
+    config = configure(model, settings, backend)
     if not isinstance(q_meas, SampleStream):
         q_meas = np.asarray(q_meas, dtype=np.float64)
         if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
             raise InputError(f"q_meas must have shape (B, K, {model.n}), got {q_meas.shape}")
         q_meas = SampleStream.from_array(q_meas)
     B, K, n = q_meas.batch, q_meas.steps, model.n
-    ts = s.t_s
-    eps = s.eps_q
-    vmax = (-s.v_max, s.v_max)
-    XI = model.xi_box() if xi_box is None else xi_box
-    XI = _partition((np.broadcast_to(XI[0], (B, model.m)), np.broadcast_to(XI[1], (B, model.m))), s.xi_splits)
-    P = XI[0].shape[1]  # geometry hypotheses per scenario; rows r = b P + p
-    R = B * P
-    XI = (XI[0].reshape(R, model.m), XI[1].reshape(R, model.m))
-    A = (np.broadcast_to(-s.a_max, (R, n)), np.broadcast_to(s.a_max, (R, n)))
-    half_ts2_A = I.mul(*I.scale(0.5, *I.mul(ts, ts, ts, ts)), *A)  # (t_s^2 / 2) [a], outward
-    ts_A = I.scale(ts, *A)
-    rep = lambda a: np.repeat(np.asarray(a, dtype=float), P, axis=0)  # noqa: E731
-    X = (rep(np.broadcast_to(x0[0], (B, n))), rep(np.broadcast_to(x0[1], (B, n))))
-    XD = (np.broadcast_to(-s.xd0, (R, n)).copy(), np.broadcast_to(s.xd0, (R, n)).copy())
-    row_bad = np.full(R, -1, np.int64)
-    two_eps = I.scale(2.0, -eps, eps)
-    quant = I.div(*two_eps, ts, ts)  # 2 eps / t_s
-    diff_err = {j: _difference_error(s, j, two_eps) for j in s.baselines}
-
-    init_mode = np.zeros(B, np.int8)
-    cur_mode = np.zeros(B, np.int8)
-    streak = np.full(B, -1, np.int64)
-    bad_at = np.full(B, -1, np.int64)
-    mwx = np.zeros(B)
-    mwv = np.zeros(B)
+    state = init_state(config, x0, batch=B, xi_box=xi_box)
     rec = None
     if record:
         rec = {k: np.full((B, K, n), np.nan) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "qdd_hi")}
         rec["mode"] = np.zeros((B, K), np.int8)
-    Q_prev = q_prev = None
-    sound = s.velocity_model is VelocityModel.SOUND
-    depth = max(s.baselines) if sound else 1
-    past = []  # (X, Q) boxes of the last `depth` samples, newest last
-    for k in range(K):
-        qk = np.asarray(q_meas.sample(k), dtype=np.float64)
-        if qk.shape != (B, n) or not np.all(np.isfinite(qk)):
-            raise InputError(f"sample {k}: expected {B}x{n} finite joint values, got shape {qk.shape}")
-        qk = rep(qk)
-        Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
-        alive = row_bad < 0
-        QDD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
-        QD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
-        if k > 0 and not sound:
-            if s.velocity_model is VelocityModel.JOINT_FD:
-                QDD = _qdd_over_step(model, s, X, XD, Q_prev, Q, XI, A)
-                if s.qdd_bound is not None:
-                    QDD = I.intersect(*QDD, -s.qdd_bound, s.qdd_bound)
-            qp = q_prev
-            fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
-            QD = I.add(*fd, *quant)
-            if s.velocity_model is VelocityModel.JOINT_FD:
-                # q_{k-1} = q_k - t_s qd_k + (t_s^2/2) qdd(zeta), per component, so
-                # qd_k = FD + (t_s/2) qdd(zeta)
-                trunc = I.mul(0.5 * ts, 0.5 * ts, *QDD)
-                QD = I.add(*QD, *trunc)
-                QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
-        if k > 0:
-            # prediction (Taylor with Lagrange remainder)
-            Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), *half_ts2_A)
-            XD = I.intersect(*I.add(*XD, *ts_A), *vmax)
-            X = Xn
-        # the displacement baselines depend only on past boxes and readings:
-        # build them once per sample, not once per fixpoint round
-        pasts = []
-        if sound:
-            for j in s.baselines:
-                if j > len(past):
-                    break
-                Xp, Qp, qp = past[-j]
-                DQ = I.add(*I.sub(qk, qk, qp, qp), *diff_err[j])
-                pasts.append((Xp, Qp, DQ, I.mul(float(j), float(j), ts, ts)))  # h = j t_s, outward
-        # contraction to a fixpoint
-        for _ in range(s.max_iter):
-            wx0 = I.width(*X).sum(-1)
-            wv0 = I.width(*XD).sum(-1)
-            X, Q, XIc = hc4_pose(model, X, Q, XI)
-            if s.keep_xi:
-                XI = XIc
-            X = newton(model, X, Q, XI, "x")
-            if sound:
-                XD = velocity_displacement(model, X, Q, pasts, XI, XD, s.a_max)
-            elif np.any(np.isfinite(QD[0])):
-                XD = velocity(model, X, Q, XI, XD, QD)
-            # ~(lo <= hi) also catches NaN bounds
-            empty = (np.any(~(X[0] <= X[1]), -1) | np.any(~(XD[0] <= XD[1]), -1) | np.any(~(XI[0] <= XI[1]), -1)
-                     | np.any(~(Q[0] <= Q[1]), -1))
-            if np.any(empty & alive):
-                row_bad = np.where(empty & alive, k, row_bad)
-                alive = row_bad < 0
-            if np.any(empty):
-                # neutralise dead scenarios so they cannot disturb the batch
-                X, XD, XI, Q = (_revive(B_, ~empty) for B_ in (X, XD, XI, Q))
-            wx1 = I.width(*X).sum(-1)
-            wv1 = I.width(*XD).sum(-1)
-            gain = np.maximum((wx0 - wx1) / np.maximum(wx0, 1e-300), np.where(np.isfinite(wv0), (wv0 - wv1) / np.maximum(wv0, 1e-300), 1.0))
-            if not np.any(alive & (gain > s.rel_tol)):
-                break
-        mode = mode_of(model, X, Q, XI)
-        if s.split_boxes:
-            X, mode = _split_undecided(model, X, Q, XI, mode, alive, s)
-            dead = alive & np.any(~(X[0] <= X[1]), -1)
-            if dead.any():
-                row_bad = np.where(dead, k, row_bad)
-                alive = row_bad < 0
-                X, XD, XI, Q = (_revive(B_, alive) for B_ in (X, XD, XI, Q))
-        # combine the geometry hypotheses of each scenario
-        live = alive.reshape(B, P)
-        scen_alive = live.any(1)
-        bad_at = np.where(~scen_alive & (bad_at < 0), k, bad_at)
-        rm = mode.reshape(B, P).astype(np.int64)
-        mn = np.where(live, rm, 2).min(1)
-        mx = np.where(live, rm, -2).max(1)
-        mode = np.where(scen_alive & (mn == mx), mn, 0).astype(np.int8)
-        Xh = _hull_rows(X, live)
-        XDh = _hull_rows(XD, live)
-        if k == 0:
-            init_mode = mode.copy()
-        changed = mode != cur_mode
-        streak = np.where(changed, k, streak)
-        cur_mode = mode
-        ok = bad_at < 0
-        mwx = np.where(ok, np.maximum(mwx, _widths(Xh)), mwx)
-        mwv = np.where(ok, np.maximum(mwv, _widths(XDh)), mwv)
+    chunk = _BLOCK if config.backend is Backend.COMPILED else 1
+    for k0 in range(0, K, chunk):
+        k1 = min(K, k0 + chunk)
+        q = np.stack([np.asarray(q_meas.sample(k), dtype=np.float64).reshape(B, -1) for k in range(k0, k1)], axis=1)
+        block = None
         if record:
-            rec["x_lo"][:, k], rec["x_hi"][:, k] = Xh
-            rec["xd_lo"][:, k], rec["xd_hi"][:, k] = XDh
-            rec["mode"][:, k] = mode
-            qdd = np.maximum(np.abs(QDD[0]), np.abs(QDD[1])).reshape(B, P, n)
-            rec["qdd_hi"][:, k] = np.where(live[..., None], qdd, 0.0).max(1)
-        Q_prev = Q
-        q_prev = qk
-        if sound:
-            past.append((X, Q, qk))
-            if len(past) > depth:
-                past.pop(0)
+            block = (np.empty((B, k1 - k0, 2, n)), np.empty((B, k1 - k0, 2, n)), np.empty((B, k1 - k0), np.int64),
+                     np.empty((B, k1 - k0, n)))
+        advance(config, state, q, block)
+        if record:
+            rec["x_lo"][:, k0:k1], rec["x_hi"][:, k0:k1] = block[0][:, :, 0], block[0][:, :, 1]
+            rec["xd_lo"][:, k0:k1], rec["xd_hi"][:, k0:k1] = block[1][:, :, 0], block[1][:, :, 1]
+            rec["mode"][:, k0:k1] = block[2]
+            rec["qdd_hi"][:, k0:k1] = block[3]
         if progress is not None:
-            progress(k)
-    final = np.where(bad_at < 0, cur_mode, 0).astype(np.int8)
-    cert = np.where(final != 0, streak, -1)
+            for k in range(k0, k1):
+                progress(k)
+    bad_at = state.bad_at.copy()
+    init_mode = state.init_mode.astype(np.int8)
+    final = np.where(bad_at < 0, state.mode, 0).astype(np.int8)
+    cert = np.where(final != 0, state.streak, -1)
     verdict = np.empty(B, dtype=object)
     for b in range(B):
         if bad_at[b] >= 0:
@@ -642,12 +425,16 @@ def _track_batch(model, q_meas, settings, x0, xi_box, record, progress):
         final_mode=final,
         certified_at_step=cert,
         inconsistent_at_step=bad_at,
-        max_width_pose=mwx,
-        max_width_velocity=mwv,
+        max_width_pose=state.max_width_pose.copy(),
+        max_width_velocity=state.max_width_velocity.copy(),
         steps=K,
         elapsed_s=time.perf_counter() - t0,
     )
     return (res, rec) if record else res
+
+
+#: Samples per kernel call of the compiled backend (progress is reported per block).
+_BLOCK = 256
 
 
 @dataclass(frozen=True)
@@ -675,14 +462,8 @@ class SampleStream:
         return SampleStream(q.shape[0], q.shape[1], lambda k: q[:, k, :])
 
 
-def _revive(box, keep):
-    """Replace the boxes of dead scenarios by ``[0, 0]`` (their results are void)."""
-    lo, hi = box
-    k = keep.reshape(keep.shape + (1,) * (lo.ndim - 1))
-    return np.where(k, lo, 0.0), np.where(k, hi, 0.0)
-
-
-def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None, progress=None) -> TrackResult:
+def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None, progress=None,
+          backend: str = "compiled") -> TrackResult:
     """Track one recorded joint trajectory and give a verdict.
 
     Parameters
@@ -699,6 +480,8 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
         of ``x0`` and ``initial_mode``.
     xi_box : (lo, hi), optional
         Calibration box, the robot's by default.
+    backend : {"compiled", "numpy"}
+        See :func:`track_batch`.
 
     Returns
     -------
@@ -723,7 +506,8 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
         if lo.shape != (model.n,) or hi.shape != (model.n,) or np.any(~(lo <= hi)):
             raise InputError(f"initial pose box must be {model.n} intervals with lo <= hi, got {x0}")
         x0 = (lo, hi)
-    res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress)
+    res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress,
+                           backend=backend)
     s = settings.validated(model.n)
     verdict = res.verdict[0]
     if initial_mode is not None and verdict is not Verdict.INCONSISTENT and res.initial_mode[0] != initial_mode:

@@ -1,0 +1,301 @@
+"""Contractors of one scenario, compiled: those of :mod:`verifier.contractors`
+in the same order of operations, on bounds arrays ``(2, n)`` (row 0 the lower
+bounds, row 1 the upper) contracted in place.
+
+``prog`` is a :class:`verifier.compiled.tape.Program` unpacked into
+``code, value, outs, meta``; ``ws`` is a :class:`Workspace` (scratch arrays).
+Tape inputs are concatenated in the order ``x, q, xi, *rest``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import ops
+from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
+from .ops import jit
+from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
+
+
+@jit
+def set_input(in_lo, in_hi, slot, box):
+    """Copy a ``(2, len)`` box into the input vector from ``slot`` on."""
+    for i in range(box.shape[1]):
+        in_lo[slot + i] = box[0, i]
+        in_hi[slot + i] = box[1, i]
+
+
+@jit
+def hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
+    """HC4Revise on ``f(x, q, xi) = 0``: contracts ``X``, ``Q`` and ``XI`` in place."""
+    n = X.shape[1]
+    m = XI.shape[1]
+    set_input(il, ih, 0, X)
+    set_input(il, ih, n, Q)
+    set_input(il, ih, 2 * n, XI)
+    hc4(code, value, outs, meta, T_F, n, il, ih, nl, nh)
+    for i in range(n):
+        X[0, i] = il[i]
+        X[1, i] = ih[i]
+        Q[0, i] = il[n + i]
+        Q[1, i] = ih[n + i]
+    for i in range(m):
+        XI[0, i] = il[2 * n + i]
+        XI[1, i] = ih[2 * n + i]
+
+
+@jit
+def newton(code, value, outs, meta, X, Q, XI, on_x, nl, nh, il, ih):
+    """One preconditioned Hansen–Sengupta step on ``f = 0`` in ``x`` (``on_x``)
+    or in ``q``; contracts that box in place."""
+    n = X.shape[1]
+    V = X if on_x else Q
+    mid = np.empty(n)
+    for i in range(n):
+        mid[i] = ops.midpoint(V[0, i], V[1, i])
+    set_input(il, ih, 0, X)
+    set_input(il, ih, n, Q)
+    set_input(il, ih, 2 * n, XI)
+    off = 0 if on_x else n
+    for i in range(n):
+        il[off + i] = mid[i]
+        ih[off + i] = mid[i]
+    forward(code, value, meta, T_F, il, ih, nl, nh)
+    Fl = np.empty(n)
+    Fh = np.empty(n)
+    for i in range(n):
+        Fl[i], Fh[i] = output(outs, meta, T_F, i, nl, nh)
+    set_input(il, ih, off, V)
+    forward(code, value, meta, T_JX if on_x else T_JQ, il, ih, nl, nh)
+    Jl = np.empty((n, n))
+    Jh = np.empty((n, n))
+    Jm = np.empty((n, n))
+    for i in range(n):
+        for j in range(n):
+            Jl[i, j], Jh[i, j] = output(outs, meta, T_JX if on_x else T_JQ, i * n + j, nl, nh)
+            Jm[i, j] = ops.midpoint(Jl[i, j], Jh[i, j])
+    C = np.empty((n, n))
+    point_inverse(Jm, C)
+    Al = np.empty((n, n))
+    Ah = np.empty((n, n))
+    pmat_imat(C, Jl, Jh, Al, Ah)
+    bl = np.empty(n)
+    bh = np.empty(n)
+    pmat_ivec(C, Fl, Fh, bl, bh)
+    yl = np.empty(n)
+    yh = np.empty(n)
+    for i in range(n):
+        bl[i], bh[i] = -bh[i], -bl[i]
+        yl[i], yh[i] = ops.sub(V[0, i], V[1, i], mid[i], mid[i])
+    gauss_seidel(Al, Ah, bl, bh, yl, yh, 1)
+    for i in range(n):
+        vl, vh = ops.add(mid[i], mid[i], yl[i], yh[i])
+        V[0, i], V[1, i] = ops.intersect(V[0, i], V[1, i], vl, vh)
+
+
+@jit
+def mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
+    """+1 / -1 when ``mode_sign det J_x`` has that sign over the box, else 0."""
+    n = X.shape[1]
+    set_input(il, ih, 0, X)
+    set_input(il, ih, n, Q)
+    set_input(il, ih, 2 * n, XI)
+    forward(code, value, meta, T_DET, il, ih, nl, nh)
+    dl, dh = output(outs, meta, T_DET, 0, nl, nh)
+    if dl > 0.0:
+        return 1
+    if dh < 0.0:
+        return -1
+    return 0
+
+
+@jit
+def velocity_gs(code, value, outs, meta, X, Q, XI, XD, QD, nl, nh, il, ih):
+    """Contract ``XD`` in place with ``J_x xd = -J_q qd`` (one enclosure of ``J_q qd``)."""
+    n = X.shape[1]
+    m = XI.shape[1]
+    set_input(il, ih, 0, X)
+    set_input(il, ih, n, Q)
+    set_input(il, ih, 2 * n, XI)
+    set_input(il, ih, 2 * n + m, QD)
+    _solve_vel(code, value, outs, meta, XD, nl, nh, il, ih, None, 1)
+
+
+@jit
+def _solve_vel(code, value, outs, meta, Y, nl, nh, il, ih, slack, sweeps):
+    # evaluate the vel tape (inputs already set), then Y <- enclosure of
+    # J_x u = -J_q qd from the start box Y (+ slack when given) (+ slack after)
+    n = Y.shape[1]
+    forward(code, value, meta, T_VEL, il, ih, nl, nh)
+    Jl = np.empty((n, n))
+    Jh = np.empty((n, n))
+    bl = np.empty(n)
+    bh = np.empty(n)
+    for i in range(n):
+        for j in range(n):
+            Jl[i, j], Jh[i, j] = output(outs, meta, T_VEL, i * n + j, nl, nh)
+        rl, rh = output(outs, meta, T_VEL, n * n + i, nl, nh)
+        bl[i] = -rh
+        bh[i] = -rl
+    yl = np.empty(n)
+    yh = np.empty(n)
+    for i in range(n):
+        if slack is None:
+            yl[i] = Y[0, i]
+            yh[i] = Y[1, i]
+        else:
+            yl[i], yh[i] = ops.add(Y[0, i], Y[1, i], slack[0, i], slack[1, i])
+    linear_enclosure(Jl, Jh, bl, bh, yl, yh, True, sweeps)
+    for i in range(n):
+        if slack is None:
+            Y[0, i] = yl[i]
+            Y[1, i] = yh[i]
+        else:
+            Y[0, i], Y[1, i] = ops.add(yl[i], yh[i], slack[0, i], slack[1, i])
+
+
+@jit
+def velocity_displacement(code, value, outs, meta, X, Q, XI, XD, past_x, past_q, DQ, h, idx, n_base, a_max,
+                          nl, nh, il, ih):
+    """Contract ``XD`` in place with the displacements over ``n_base`` baselines
+    (see :func:`verifier.contractors.velocity_displacement`).
+
+    ``past_x[idx[j]]``, ``past_q[idx[j]]`` are the boxes ``(2, n)`` at
+    ``t_k - h_j``; ``DQ[j]`` encloses ``q_k - q_{k-j}``; ``h[j]`` the baseline
+    ``(lo, hi)``, s; ``a_max`` ``(n,)``, m/s^2.
+    """
+    if n_base == 0:
+        return
+    n = X.shape[1]
+    m = XI.shape[1]
+    accl = np.full(n, -np.inf)
+    acch = np.full(n, np.inf)
+    U = np.empty((2, n))
+    slack = np.empty((2, n))
+    for jb in range(n_base):
+        Xp = past_x[idx[jb]]
+        Qp = past_q[idx[jb]]
+        for i in range(n):
+            il[i], ih[i] = ops.hull(X[0, i], X[1, i], Xp[0, i], Xp[1, i])
+            il[n + i], ih[n + i] = ops.hull(Q[0, i], Q[1, i], Qp[0, i], Qp[1, i])
+            il[2 * n + m + i], ih[2 * n + m + i] = ops.div(DQ[jb, 0, i], DQ[jb, 1, i], h[jb, 0], h[jb, 1])
+        for i in range(m):
+            il[2 * n + i] = XI[0, i]
+            ih[2 * n + i] = XI[1, i]
+        half_h = ops.scale(0.5, h[jb, 1], h[jb, 1])[1]
+        for i in range(n):
+            slack[0, i], slack[1, i] = ops.mul(-half_h, half_h, -a_max[i], a_max[i])
+            U[0, i] = XD[0, i]
+            U[1, i] = XD[1, i]
+        _solve_vel(code, value, outs, meta, U, nl, nh, il, ih, slack, 1)
+        for i in range(n):
+            accl[i] = U[0, i] if jb == 0 else ops.maxn(accl[i], U[0, i])
+            acch[i] = U[1, i] if jb == 0 else ops.minn(acch[i], U[1, i])
+    for i in range(n):
+        XD[0, i] = ops.maxn(XD[0, i], accl[i])
+        XD[1, i] = ops.minn(XD[1, i], acch[i])
+
+
+@jit
+def _empty(B):
+    for i in range(B.shape[1]):
+        if not (B[0, i] <= B[1, i]):
+            return True
+    return False
+
+
+@jit
+def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, nh, il, ih):
+    """Branch and prune of one pose box whose mode is undecided (see
+    :func:`verifier.contractors.split_prune`): ``X`` becomes the hull of the
+    surviving pieces (empty when none survives); returns their common mode or 0.
+
+    Pieces are split generation by generation, in the reference's order: the
+    kept pieces, then every left half, then every right half.
+    """
+    n = X.shape[1]
+    cap = 2 * max_pieces + 2
+    P = np.empty((cap, 2, n))
+    Pm = np.empty(cap, np.int64)
+    N = 1
+    P[0] = X
+    Nw = np.empty((cap, 2, n))
+    split = np.empty(cap, np.bool_)
+    box = np.empty((2, n))
+    while True:
+        any_split = False
+        for p in range(N):
+            Pm[p] = mode_of(code, value, outs, meta, P[p], Q, XI, nl, nh, il, ih)
+            wmax = P[p, 1, 0] - P[p, 0, 0]
+            for i in range(1, n):
+                wmax = ops.maxn(wmax, P[p, 1, i] - P[p, 0, i])
+            split[p] = Pm[p] == 0 and wmax >= tol and N < max_pieces
+            any_split |= split[p]
+        if not any_split:
+            break
+        M = 0
+        for p in range(N):
+            if not split[p]:
+                Nw[M] = P[p]
+                M += 1
+        for side in range(2):
+            for p in range(N):
+                if not split[p]:
+                    continue
+                d = 0
+                wd = P[p, 1, 0] - P[p, 0, 0]
+                for i in range(1, n):
+                    w = P[p, 1, i] - P[p, 0, i]
+                    if w > wd:
+                        wd = w
+                        d = i
+                mid = 0.5 * P[p, 0, d] + 0.5 * P[p, 1, d]
+                box[:] = P[p]
+                if side == 0:
+                    box[1, d] = mid
+                else:
+                    box[0, d] = mid
+                alive = True
+                for _ in range(sweeps):
+                    hc4_pose_x(code, value, outs, meta, box, Q, XI, nl, nh, il, ih)
+                    if _empty(box):
+                        alive = False
+                        break
+                    newton(code, value, outs, meta, box, Q, XI, True, nl, nh, il, ih)
+                    if _empty(box):
+                        alive = False
+                        break
+                if alive:
+                    Nw[M] = box
+                    M += 1
+        N = M
+        P[:N] = Nw[:N]
+        if N == 0:
+            break
+    lo_mode = 2
+    hi_mode = -2
+    for i in range(n):
+        X[0, i] = np.inf
+        X[1, i] = -np.inf
+    for p in range(N):
+        for i in range(n):
+            X[0, i] = min(X[0, i], P[p, 0, i])
+            X[1, i] = max(X[1, i], P[p, 1, i])
+        lo_mode = min(lo_mode, Pm[p])
+        hi_mode = max(hi_mode, Pm[p])
+    if N > 0 and lo_mode == hi_mode:
+        return lo_mode
+    return 0
+
+
+@jit
+def hc4_pose_x(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
+    """HC4Revise on ``f = 0`` contracting ``X`` only (``Q``, ``XI`` kept)."""
+    n = X.shape[1]
+    set_input(il, ih, 0, X)
+    set_input(il, ih, n, Q)
+    set_input(il, ih, 2 * n, XI)
+    hc4(code, value, outs, meta, T_F, n, il, ih, nl, nh)
+    for i in range(n):
+        X[0, i] = il[i]
+        X[1, i] = ih[i]

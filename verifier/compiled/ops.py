@@ -1,0 +1,366 @@
+"""Scalar interval operations compiled with numba: the kernels' arithmetic.
+
+Each function takes and returns bounds as plain floats (``lo, hi`` pairs) and
+follows :mod:`verifier.interval` operation for operation, so that a kernel and
+the numpy reference compute the same floats: round-to-nearest IEEE operations,
+then one ``nextafter`` step outward; exact zeros of sums, differences,
+products and quotients are kept; ``sin``/``cos`` carry :data:`TRIG_ULPS` ulp
+of margin plus the smallest normal.  See docs/rounding.md.
+
+Compiled with numba's default flags: no ``fastmath`` (which would allow
+reassociation and FMA contraction, both unsound for directed steps); a test
+checks that ``a * b + c`` stays two rounded operations.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..interval import TRIG_ULPS
+
+INF = np.inf
+TINY_NORMAL = float(np.finfo(np.float64).tiny)
+MAX = float(np.finfo(np.float64).max)
+TWO_PI = 2.0 * math.pi
+_TRIG_ULPS = float(TRIG_ULPS)
+
+jit = njit(cache=True, nogil=True)
+
+
+@jit
+def dn(r):
+    """The float below ``r`` (``-inf`` stays)."""
+    return np.nextafter(r, -INF)
+
+
+@jit
+def up(r):
+    """The float above ``r``."""
+    return np.nextafter(r, INF)
+
+
+@jit
+def dn0(r):
+    # sums/differences that round to 0 are exactly 0 (gradual underflow)
+    return 0.0 if r == 0.0 else dn(r)
+
+
+@jit
+def up0(r):
+    return 0.0 if r == 0.0 else up(r)
+
+
+@jit
+def add(al, ah, bl, bh):
+    """``[a] + [b]``."""
+    return dn0(al + bl), up0(ah + bh)
+
+
+@jit
+def sub(al, ah, bl, bh):
+    """``[a] - [b]``."""
+    return dn0(al - bh), up0(ah - bl)
+
+
+@jit
+def neg(al, ah):
+    return -ah, -al
+
+
+@jit
+def _prod_dn(a, b):
+    return 0.0 if (a == 0.0 or b == 0.0) else dn(a * b)
+
+
+@jit
+def _prod_up(a, b):
+    return 0.0 if (a == 0.0 or b == 0.0) else up(a * b)
+
+
+@jit
+def _min4(a, b, c, d):
+    # numpy's min over an axis of 4: minimum(minimum(minimum(a, b), c), d)
+    return minn(minn(minn(a, b), c), d)
+
+
+@jit
+def _max4(a, b, c, d):
+    return maxn(maxn(maxn(a, b), c), d)
+
+
+@jit
+def mul(al, ah, bl, bh):
+    """``[a] * [b]`` with ``0 * inf = 0``."""
+    lo = _min4(_prod_dn(al, bl), _prod_dn(al, bh), _prod_dn(ah, bl), _prod_dn(ah, bh))
+    hi = _max4(_prod_up(al, bl), _prod_up(al, bh), _prod_up(ah, bl), _prod_up(ah, bh))
+    return lo, hi
+
+
+@jit
+def scale(c, al, ah):
+    """``c [a]`` for a float ``c``."""
+    return mul(c, c, al, ah)
+
+
+@jit
+def _quot_dn(x, y):
+    if x == 0.0 or (math.isinf(y) and math.isfinite(x)):
+        return 0.0
+    if y == 0.0:  # numpy gives +-inf (or NaN for 0/0, excluded above)
+        return dn(math.copysign(INF, x) * math.copysign(1.0, y))
+    return dn(x / y)
+
+
+@jit
+def _quot_up(x, y):
+    if x == 0.0 or (math.isinf(y) and math.isfinite(x)):
+        return 0.0
+    if y == 0.0:
+        return up(math.copysign(INF, x) * math.copysign(1.0, y))
+    return up(x / y)
+
+
+@jit
+def _nan_to(v, repl):
+    return repl if v != v else v
+
+
+@jit
+def div(al, ah, bl, bh):
+    """``[a] / [b]``: hull of ``{x / y : y != 0}`` (see :func:`verifier.interval.div`)."""
+    if bl <= 0.0 and bh >= 0.0:
+        a_nonneg = al >= 0.0
+        a_nonpos = ah <= 0.0
+        if bl == 0.0 and bh == 0.0:
+            return INF, -INF
+        if a_nonneg and a_nonpos:
+            return 0.0, 0.0
+        lo = -INF
+        hi = INF
+        if bl == 0.0 and bh > 0.0:
+            if a_nonneg:
+                lo = _quot_dn(al, bh)
+            if a_nonpos:
+                hi = _quot_up(ah, bh)
+        elif bh == 0.0 and bl < 0.0:
+            if a_nonneg:
+                hi = _quot_up(al, bl)
+            if a_nonpos:
+                lo = _quot_dn(ah, bl)
+        return lo, hi
+    lo = _min4(_nan_to(_quot_dn(al, bl), INF), _nan_to(_quot_dn(al, bh), INF),
+               _nan_to(_quot_dn(ah, bl), INF), _nan_to(_quot_dn(ah, bh), INF))
+    hi = _max4(_nan_to(_quot_up(al, bl), -INF), _nan_to(_quot_up(al, bh), -INF),
+               _nan_to(_quot_up(ah, bl), -INF), _nan_to(_quot_up(ah, bh), -INF))
+    return lo, hi
+
+
+@jit
+def sqr(al, ah):
+    """``[a]^2``, lower bound clamped at 0."""
+    l2 = al * al
+    h2 = ah * ah
+    mn = min(l2, h2)
+    mx = max(l2, h2)
+    if al <= 0.0 and ah >= 0.0:
+        lo = 0.0
+    else:
+        lo = max(dn(mn), 0.0)
+    if mx == 0.0 and al == 0.0 and ah == 0.0:
+        hi = 0.0
+    else:
+        hi = up(mx)
+    return lo, hi
+
+
+@jit
+def absolute(al, ah):
+    """``|[a]|`` (exact)."""
+    if al >= 0.0:
+        lo = al
+    elif ah <= 0.0:
+        lo = -ah
+    else:
+        lo = 0.0
+    return lo, max(abs(al), abs(ah))
+
+
+@jit
+def _point_pow(v, n):
+    # repeated squaring in the order of verifier.interval._point_pow
+    bl = v
+    bh = v
+    rl = 0.0
+    rh = 0.0
+    first = True
+    while True:
+        if n & 1:
+            if first:
+                rl, rh = bl, bh
+                first = False
+            else:
+                rl, rh = mul(rl, rh, bl, bh)
+        n >>= 1
+        if n == 0:
+            return rl, rh
+        bl, bh = sqr(bl, bh)
+
+
+@jit
+def pown(al, ah, n):
+    """``[a]^n`` for an integer ``n``."""
+    if n < 0:
+        lo, hi = pown(al, ah, -n)
+        return div(1.0, 1.0, lo, hi)
+    if n == 0:
+        return 1.0, 1.0
+    if n % 2 == 0:
+        al, ah = absolute(al, ah)
+    lo = _point_pow(al, n)[0]
+    hi = _point_pow(ah, n)[1]
+    if n % 2 == 0:
+        lo = max(lo, 0.0)
+    return lo, hi
+
+
+@jit
+def sqrt(al, ah):
+    """``sqrt([a] ∩ [0, inf))``; empty when ``[a] < 0``."""
+    if ah < 0.0:
+        return INF, -INF
+    sl = math.sqrt(max(al, 0.0))
+    sh = math.sqrt(max(ah, 0.0))
+    lo = 0.0 if sl == 0.0 else max(dn(sl), 0.0)
+    hi = 0.0 if sh == 0.0 else up(sh)
+    return lo, hi
+
+
+@jit
+def _spacing(r):
+    # ulp of a finite non-negative r: the gap to the next float (exact)
+    return np.nextafter(r, INF) - r
+
+
+@jit
+def _margin(r):
+    return _TRIG_ULPS * _spacing(abs(r)) + TINY_NORMAL
+
+
+@jit
+def _contains_phase(al, ah, phase):
+    slack = 1e-9 * (1.0 + max(abs(al), abs(ah)))
+    # np.ceil/np.floor stay float as in numpy: math.ceil/floor return int64 in
+    # numba, undefined beyond 2**63 (|x| > 5.8e19 gave a different answer)
+    k_lo = np.ceil((al - phase) / TWO_PI - slack)
+    k_hi = np.floor((ah - phase) / TWO_PI + slack)
+    return k_lo <= k_hi
+
+
+@jit
+def _enclose_sin(x):
+    f = math.sin(x)
+    m = _margin(f)
+    if x == 0.0:
+        return 0.0, 0.0
+    return dn(f - m), up(f + m)
+
+
+@jit
+def _enclose_cos(x):
+    f = math.cos(x)
+    m = _margin(f)
+    return dn(f - m), up(f + m)
+
+
+@jit
+def _finish_periodic(al, ah, lo, hi, max_phase, min_phase):
+    finite = math.isfinite(al) and math.isfinite(ah)
+    if not finite or (ah - al) >= TWO_PI:
+        return -1.0, 1.0
+    if _contains_phase(al, ah, min_phase):
+        lo = -1.0
+    if _contains_phase(al, ah, max_phase):
+        hi = 1.0
+    return max(lo, -1.0), min(hi, 1.0)
+
+
+@jit
+def sin(al, ah):
+    """``sin([a])`` with the :data:`TRIG_ULPS` margin."""
+    if not (math.isfinite(al) and math.isfinite(ah)):
+        return -1.0, 1.0
+    la, ha = _enclose_sin(al)
+    lb, hb = _enclose_sin(ah)
+    return _finish_periodic(al, ah, min(la, lb), max(ha, hb), 0.5 * math.pi, -0.5 * math.pi)
+
+
+@jit
+def cos(al, ah):
+    """``cos([a])`` with the :data:`TRIG_ULPS` margin."""
+    if not (math.isfinite(al) and math.isfinite(ah)):
+        return -1.0, 1.0
+    la, ha = _enclose_cos(al)
+    lb, hb = _enclose_cos(ah)
+    return _finish_periodic(al, ah, min(la, lb), max(ha, hb), 0.0, math.pi)
+
+
+@jit
+def maxn(a, b):
+    """``np.maximum(a, b)``: NaN propagates and a tie gives ``b``, as numpy's
+    does (the builtin ``max`` keeps ``a``: ``max(0.0, -0.0)`` differs in sign)."""
+    if a != a or b != b:
+        return a + b
+    return a if a > b else b
+
+
+@jit
+def minn(a, b):
+    """``np.minimum(a, b)``: NaN propagates and a tie gives ``b``."""
+    if a != a or b != b:
+        return a + b
+    return a if a < b else b
+
+
+@jit
+def intersect(al, ah, bl, bh):
+    """``[a] ∩ [b]`` (empty when ``lo > hi``; NaN bounds propagate)."""
+    return maxn(al, bl), minn(ah, bh)
+
+
+@jit
+def hull(al, ah, bl, bh):
+    """Hull of ``[a] ∪ [b]``, an empty operand ignored."""
+    if al > ah:
+        return bl, bh
+    if bl > bh:
+        return al, ah
+    return minn(al, bl), maxn(ah, bh)
+
+
+@jit
+def is_empty(al, ah):
+    return not (al <= ah)
+
+
+@jit
+def width(al, ah):
+    """Upper bound of ``hi - lo`` (0 for an empty or degenerate interval)."""
+    if not (al <= ah) or ah == al:
+        return 0.0
+    return up(ah - al)
+
+
+@jit
+def midpoint(al, ah):
+    """A float inside ``[a]`` (finite whenever possible)."""
+    m = 0.5 * al + 0.5 * ah
+    if al == -INF and ah == INF:
+        m = 0.0
+    elif al == -INF and math.isfinite(ah):
+        m = 0.0 if ah >= 0.0 else max(2.0 * ah, -MAX)
+    elif ah == INF and math.isfinite(al):
+        m = 0.0 if al <= 0.0 else min(2.0 * al, MAX)
+    return minn(maxn(m, al), ah)  # np.clip(m, al, ah)

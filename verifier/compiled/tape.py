@@ -1,0 +1,230 @@
+"""The tape interpreter: forward interval evaluation and HC4Revise, compiled once.
+
+A robot's tapes (:meth:`verifier.tape.Tape.arrays`) are packed into one
+:class:`Program` of flat arrays; the kernels interpret them, so no robot needs
+a compile of its own.  Semantics are those of :class:`verifier.tape.Tape`,
+operation for operation: the numpy reference and these kernels compute the
+same floats (see :mod:`verifier.compiled.ops`).
+
+Kernels work on ONE scenario: node bounds in scratch arrays ``lo, hi`` of
+length ``n_nodes``; inputs in a concatenated vector ``in_lo, in_hi``.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..tape import OPCODES
+from . import ops
+from .ops import jit
+
+__all__ = ["Program", "TAPES", "pack"]
+
+#: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
+TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
+T_F, T_JX, T_JQ, T_VEL, T_JX_XD, T_ACCEL, T_DET = range(len(TAPES))
+
+_INPUT = OPCODES["OP_INPUT"]
+_CONST = OPCODES["OP_CONST"]
+_ADD = OPCODES["OP_ADD"]
+_SUB = OPCODES["OP_SUB"]
+_MUL = OPCODES["OP_MUL"]
+_DIV = OPCODES["OP_DIV"]
+_NEG = OPCODES["OP_NEG"]
+_SQ = OPCODES["OP_SQ"]
+_SQRT = OPCODES["OP_SQRT"]
+_SIN = OPCODES["OP_SIN"]
+_COS = OPCODES["OP_COS"]
+_TWICE = OPCODES["OP_TWICE"]
+_FABS = OPCODES["OP_FABS"]
+_INV = OPCODES["OP_INV"]
+_ASSIGN = OPCODES["OP_ASSIGN"]
+_CONSTPOW = OPCODES["OP_CONSTPOW"]
+
+
+class Program(NamedTuple):
+    """Every tape of one robot, concatenated.
+
+    Attributes
+    ----------
+    code : int64 (N, 3)
+        ``(opcode, a, b)`` per node, operand indices local to their tape.
+    value : float64 (N,)
+    outs : int64 (M,)
+        Dense output entries (node index local to the tape, -1 = structural zero).
+    meta : int64 (T, 3)
+        Per tape (order :data:`TAPES`): first node, node count, first output entry.
+    n_nodes : int
+        Largest node count (size of the scratch arrays).
+    """
+
+    code: np.ndarray
+    value: np.ndarray
+    outs: np.ndarray
+    meta: np.ndarray
+    n_nodes: int
+
+
+def pack(model) -> Program:
+    """Concatenate the tapes of an :class:`verifier.model.IntervalModel`."""
+    arrs = [getattr(model, name).arrays() for name in TAPES]
+    meta = np.zeros((len(arrs), 3), np.int64)
+    c0 = o0 = 0
+    for t, a in enumerate(arrs):
+        meta[t] = (c0, len(a.code), o0)
+        c0 += len(a.code)
+        o0 += len(a.out_nodes)
+    return Program(
+        code=np.ascontiguousarray(np.concatenate([a.code for a in arrs])),
+        value=np.concatenate([a.value for a in arrs]),
+        outs=np.concatenate([a.out_nodes for a in arrs]),
+        meta=meta,
+        n_nodes=int(max(len(a.code) for a in arrs)),
+    )
+
+
+@jit
+def forward(code, value, meta, t, in_lo, in_hi, lo, hi):
+    """Evaluate tape ``t`` over the input box; node bounds land in ``lo, hi``."""
+    c0 = meta[t, 0]
+    for i in range(meta[t, 1]):
+        op = code[c0 + i, 0]
+        a = code[c0 + i, 1]
+        b = code[c0 + i, 2]
+        if op == _INPUT:
+            lo[i] = in_lo[a]
+            hi[i] = in_hi[a]
+        elif op == _CONST:
+            lo[i] = value[c0 + i]
+            hi[i] = value[c0 + i]
+        elif op == _ADD:
+            lo[i], hi[i] = ops.add(lo[a], hi[a], lo[b], hi[b])
+        elif op == _SUB:
+            lo[i], hi[i] = ops.sub(lo[a], hi[a], lo[b], hi[b])
+        elif op == _MUL:
+            lo[i], hi[i] = ops.mul(lo[a], hi[a], lo[b], hi[b])
+        elif op == _DIV:
+            lo[i], hi[i] = ops.div(lo[a], hi[a], lo[b], hi[b])
+        elif op == _NEG:
+            lo[i], hi[i] = ops.neg(lo[a], hi[a])
+        elif op == _SQ:
+            lo[i], hi[i] = ops.sqr(lo[a], hi[a])
+        elif op == _SQRT:
+            lo[i], hi[i] = ops.sqrt(lo[a], hi[a])
+        elif op == _SIN:
+            lo[i], hi[i] = ops.sin(lo[a], hi[a])
+        elif op == _COS:
+            lo[i], hi[i] = ops.cos(lo[a], hi[a])
+        elif op == _TWICE:
+            lo[i], hi[i] = ops.add(lo[a], hi[a], lo[a], hi[a])
+        elif op == _FABS:
+            lo[i], hi[i] = ops.absolute(lo[a], hi[a])
+        elif op == _INV:
+            lo[i], hi[i] = ops.div(1.0, 1.0, lo[a], hi[a])
+        elif op == _ASSIGN:
+            lo[i] = lo[a]
+            hi[i] = hi[a]
+        else:  # _CONSTPOW
+            lo[i], hi[i] = ops.pown(lo[a], hi[a], int(value[c0 + i]))
+
+
+@jit
+def output(outs, meta, t, e, lo, hi):
+    """Bounds of dense output entry ``e`` of tape ``t`` after :func:`forward`."""
+    node = outs[meta[t, 2] + e]
+    if node < 0:
+        return 0.0, 0.0
+    return lo[node], hi[node]
+
+
+@jit
+def _project_factor(al, ah, zl, zh, bl, bh):
+    # [a] ∩ {a : a b in [z], b in [b]}; no contraction when 0 in [b] and 0 in [z]
+    ql, qh = ops.div(zl, zh, bl, bh)
+    if bl <= 0.0 and bh >= 0.0 and zl <= 0.0 and zh >= 0.0:
+        ql = -np.inf
+        qh = np.inf
+    return ops.intersect(al, ah, ql, qh)
+
+
+@jit
+def _project_square(al, ah, zl, zh):
+    sl, sh = ops.sqrt(zl, zh)
+    pl, ph = ops.intersect(al, ah, sl, sh)
+    nl, nh = ops.intersect(al, ah, -sh, -sl)
+    return ops.hull(pl, ph, nl, nh)
+
+
+@jit
+def hc4(code, value, outs, meta, t, n_out, in_lo, in_hi, lo, hi):
+    """HC4Revise: contract the input box in place with ``output_0(inputs) = 0``.
+
+    ``n_out`` is the number of entries of output 0 (the constrained one).
+    """
+    forward(code, value, meta, t, in_lo, in_hi, lo, hi)
+    o0 = meta[t, 2]
+    for e in range(n_out):
+        node = outs[o0 + e]
+        if node >= 0:
+            lo[node], hi[node] = ops.intersect(lo[node], hi[node], 0.0, 0.0)
+    c0 = meta[t, 0]
+    for i in range(meta[t, 1] - 1, -1, -1):
+        op = code[c0 + i, 0]
+        if op == _INPUT or op == _CONST:
+            continue
+        zl = lo[i]
+        zh = hi[i]
+        a = code[c0 + i, 1]
+        b = code[c0 + i, 2]
+        al = lo[a]
+        ah = hi[a]
+        if op == _ADD:
+            bl = lo[b]
+            bh = hi[b]
+            sl, sh = ops.sub(zl, zh, bl, bh)
+            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
+            sl, sh = ops.sub(zl, zh, lo[a], hi[a])
+            lo[b], hi[b] = ops.intersect(bl, bh, sl, sh)
+        elif op == _SUB:
+            bl = lo[b]
+            bh = hi[b]
+            sl, sh = ops.add(zl, zh, bl, bh)
+            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
+            sl, sh = ops.sub(lo[a], hi[a], zl, zh)
+            lo[b], hi[b] = ops.intersect(bl, bh, sl, sh)
+        elif op == _MUL:
+            bl = lo[b]
+            bh = hi[b]
+            lo[a], hi[a] = _project_factor(al, ah, zl, zh, bl, bh)
+            lo[b], hi[b] = _project_factor(bl, bh, zl, zh, lo[a], hi[a])
+        elif op == _DIV:
+            bl = lo[b]
+            bh = hi[b]
+            pl, ph = ops.mul(zl, zh, bl, bh)
+            lo[a], hi[a] = ops.intersect(al, ah, pl, ph)
+            lo[b], hi[b] = _project_factor(bl, bh, lo[a], hi[a], zl, zh)
+        elif op == _NEG:
+            lo[a], hi[a] = ops.intersect(al, ah, -zh, -zl)
+        elif op == _TWICE:
+            sl, sh = ops.scale(0.5, zl, zh)
+            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
+        elif op == _SQ or (op == _CONSTPOW and value[c0 + i] == 2.0):
+            lo[a], hi[a] = _project_square(al, ah, zl, zh)
+        elif op == _SQRT:
+            zl0 = ops.maxn(zl, 0.0)
+            sl, sh = ops.sqr(zl0, ops.maxn(zh, zl0))
+            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
+            if zh < 0.0:
+                lo[a] = np.inf
+        elif op == _INV:
+            lo[a], hi[a] = _project_factor(al, ah, 1.0, 1.0, zl, zh)
+        elif op == _ASSIGN:
+            lo[a], hi[a] = ops.intersect(al, ah, zl, zh)
+        # sin, cos, fabs, other powers: no projection (sound, only weaker)
+    for i in range(meta[t, 1]):
+        if code[c0 + i, 0] == _INPUT:
+            s = code[c0 + i, 1]
+            in_lo[s] = ops.maxn(in_lo[s], lo[i])
+            in_hi[s] = ops.minn(in_hi[s], hi[i])
