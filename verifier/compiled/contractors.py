@@ -3,7 +3,9 @@ in the same order of operations, on bounds arrays ``(2, n)`` (row 0 the lower
 bounds, row 1 the upper) contracted in place.
 
 ``prog`` is a :class:`verifier.compiled.tape.Program` unpacked into
-``code, value, outs, meta``; ``ws`` is a :class:`Workspace` (scratch arrays).
+``code, value, outs, meta``; ``nl, nh`` (node bounds), ``il, ih`` (tape
+inputs) and ``ws`` (temporaries, :func:`workspace_size` floats) are scratch
+vectors: the hot path allocates nothing.
 Tape inputs are concatenated in the order ``x, q, xi, *rest``.
 """
 
@@ -12,9 +14,16 @@ from __future__ import annotations
 import numpy as np
 
 from . import ops
-from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
+from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse, work
 from .ops import jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
+
+
+@jit
+def workspace_size(n):
+    """Scratch floats the contractors need for dimension ``n``: at most
+    ``12 n + 7 n^2`` (the displacement contractor's chain), with room."""
+    return 16 * n + 16 * n * n + 64
 
 
 @jit
@@ -45,12 +54,25 @@ def hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
 
 
 @jit
-def newton(code, value, outs, meta, X, Q, XI, on_x, nl, nh, il, ih):
+def newton(code, value, outs, meta, X, Q, XI, on_x, nl, nh, il, ih, ws):
     """One preconditioned Hansen–Sengupta step on ``f = 0`` in ``x`` (``on_x``)
     or in ``q``; contracts that box in place."""
     n = X.shape[1]
+    nn = n * n
     V = X if on_x else Q
-    mid = np.empty(n)
+    mid = ws[0:n]
+    Fl = ws[n:2 * n]
+    Fh = ws[2 * n:3 * n]
+    bl = ws[3 * n:4 * n]
+    bh = ws[4 * n:5 * n]
+    yl = ws[5 * n:6 * n]
+    yh = ws[6 * n:7 * n]
+    Jl = work(ws, 7 * n, n, n)
+    Jh = work(ws, 7 * n + nn, n, n)
+    Jm = work(ws, 7 * n + 2 * nn, n, n)
+    C = work(ws, 7 * n + 3 * nn, n, n)
+    Al = work(ws, 7 * n + 4 * nn, n, n)
+    Ah = work(ws, 7 * n + 5 * nn, n, n)
     for i in range(n):
         mid[i] = ops.midpoint(V[0, i], V[1, i])
     set_input(il, ih, 0, X)
@@ -61,29 +83,17 @@ def newton(code, value, outs, meta, X, Q, XI, on_x, nl, nh, il, ih):
         il[off + i] = mid[i]
         ih[off + i] = mid[i]
     forward(code, value, meta, T_F, il, ih, nl, nh)
-    Fl = np.empty(n)
-    Fh = np.empty(n)
     for i in range(n):
         Fl[i], Fh[i] = output(outs, meta, T_F, i, nl, nh)
     set_input(il, ih, off, V)
     forward(code, value, meta, T_JX if on_x else T_JQ, il, ih, nl, nh)
-    Jl = np.empty((n, n))
-    Jh = np.empty((n, n))
-    Jm = np.empty((n, n))
     for i in range(n):
         for j in range(n):
             Jl[i, j], Jh[i, j] = output(outs, meta, T_JX if on_x else T_JQ, i * n + j, nl, nh)
             Jm[i, j] = ops.midpoint(Jl[i, j], Jh[i, j])
-    C = np.empty((n, n))
-    point_inverse(Jm, C)
-    Al = np.empty((n, n))
-    Ah = np.empty((n, n))
+    point_inverse(Jm, C, ws, 7 * n + 6 * nn)
     pmat_imat(C, Jl, Jh, Al, Ah)
-    bl = np.empty(n)
-    bh = np.empty(n)
     pmat_ivec(C, Fl, Fh, bl, bh)
-    yl = np.empty(n)
-    yh = np.empty(n)
     for i in range(n):
         bl[i], bh[i] = -bh[i], -bl[i]
         yl[i], yh[i] = ops.sub(V[0, i], V[1, i], mid[i], mid[i])
@@ -110,7 +120,7 @@ def mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
 
 
 @jit
-def velocity_gs(code, value, outs, meta, X, Q, XI, XD, QD, nl, nh, il, ih):
+def velocity_gs(code, value, outs, meta, X, Q, XI, XD, QD, nl, nh, il, ih, ws):
     """Contract ``XD`` in place with ``J_x xd = -J_q qd`` (one enclosure of ``J_q qd``)."""
     n = X.shape[1]
     m = XI.shape[1]
@@ -118,34 +128,36 @@ def velocity_gs(code, value, outs, meta, X, Q, XI, XD, QD, nl, nh, il, ih):
     set_input(il, ih, n, Q)
     set_input(il, ih, 2 * n, XI)
     set_input(il, ih, 2 * n + m, QD)
-    _solve_vel(code, value, outs, meta, XD, nl, nh, il, ih, None, 1)
+    _solve_vel(code, value, outs, meta, XD, nl, nh, il, ih, None, 1, ws, 0)
 
 
 @jit
-def _solve_vel(code, value, outs, meta, Y, nl, nh, il, ih, slack, sweeps):
+def _solve_vel(code, value, outs, meta, Y, nl, nh, il, ih, slack, sweeps, ws, off):
     # evaluate the vel tape (inputs already set), then Y <- enclosure of
     # J_x u = -J_q qd from the start box Y (+ slack when given) (+ slack after)
     n = Y.shape[1]
+    nn = n * n
     forward(code, value, meta, T_VEL, il, ih, nl, nh)
-    Jl = np.empty((n, n))
-    Jh = np.empty((n, n))
-    bl = np.empty(n)
-    bh = np.empty(n)
+    Jl = work(ws, off, n, n)
+    Jh = work(ws, off + nn, n, n)
+    o = off + 2 * nn
+    bl = ws[o:o + n]
+    bh = ws[o + n:o + 2 * n]
+    yl = ws[o + 2 * n:o + 3 * n]
+    yh = ws[o + 3 * n:o + 4 * n]
     for i in range(n):
         for j in range(n):
             Jl[i, j], Jh[i, j] = output(outs, meta, T_VEL, i * n + j, nl, nh)
         rl, rh = output(outs, meta, T_VEL, n * n + i, nl, nh)
         bl[i] = -rh
         bh[i] = -rl
-    yl = np.empty(n)
-    yh = np.empty(n)
     for i in range(n):
         if slack is None:
             yl[i] = Y[0, i]
             yh[i] = Y[1, i]
         else:
             yl[i], yh[i] = ops.add(Y[0, i], Y[1, i], slack[0, i], slack[1, i])
-    linear_enclosure(Jl, Jh, bl, bh, yl, yh, True, sweeps)
+    linear_enclosure(Jl, Jh, bl, bh, yl, yh, True, sweeps, ws, o + 4 * n)
     for i in range(n):
         if slack is None:
             Y[0, i] = yl[i]
@@ -156,7 +168,7 @@ def _solve_vel(code, value, outs, meta, Y, nl, nh, il, ih, slack, sweeps):
 
 @jit
 def velocity_displacement(code, value, outs, meta, X, Q, XI, XD, past_x, past_q, DQ, h, idx, n_base, a_max,
-                          nl, nh, il, ih):
+                          nl, nh, il, ih, ws):
     """Contract ``XD`` in place with the displacements over ``n_base`` baselines
     (see :func:`verifier.contractors.velocity_displacement`).
 
@@ -168,10 +180,10 @@ def velocity_displacement(code, value, outs, meta, X, Q, XI, XD, past_x, past_q,
         return
     n = X.shape[1]
     m = XI.shape[1]
-    accl = np.full(n, -np.inf)
-    acch = np.full(n, np.inf)
-    U = np.empty((2, n))
-    slack = np.empty((2, n))
+    accl = ws[0:n]
+    acch = ws[n:2 * n]
+    U = work(ws, 2 * n, 2, n)
+    slack = work(ws, 4 * n, 2, n)
     for jb in range(n_base):
         Xp = past_x[idx[jb]]
         Qp = past_q[idx[jb]]
@@ -187,7 +199,7 @@ def velocity_displacement(code, value, outs, meta, X, Q, XI, XD, past_x, past_q,
             slack[0, i], slack[1, i] = ops.mul(-half_h, half_h, -a_max[i], a_max[i])
             U[0, i] = XD[0, i]
             U[1, i] = XD[1, i]
-        _solve_vel(code, value, outs, meta, U, nl, nh, il, ih, slack, 1)
+        _solve_vel(code, value, outs, meta, U, nl, nh, il, ih, slack, 1, ws, 6 * n)
         for i in range(n):
             accl[i] = U[0, i] if jb == 0 else ops.maxn(accl[i], U[0, i])
             acch[i] = U[1, i] if jb == 0 else ops.minn(acch[i], U[1, i])
@@ -205,7 +217,7 @@ def _empty(B):
 
 
 @jit
-def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, nh, il, ih):
+def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, nh, il, ih, ws):
     """Branch and prune of one pose box whose mode is undecided (see
     :func:`verifier.contractors.split_prune`): ``X`` becomes the hull of the
     surviving pieces (empty when none survives); returns their common mode or 0.
@@ -261,7 +273,7 @@ def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, 
                     if _empty(box):
                         alive = False
                         break
-                    newton(code, value, outs, meta, box, Q, XI, True, nl, nh, il, ih)
+                    newton(code, value, outs, meta, box, Q, XI, True, nl, nh, il, ih, ws)
                     if _empty(box):
                         alive = False
                         break

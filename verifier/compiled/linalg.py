@@ -12,14 +12,23 @@ from .ops import jit
 
 
 @jit
-def point_inverse(A, C):
+def work(ws, off, shape0, shape1):
+    """A ``(shape0, shape1)`` view of the scratch vector ``ws`` from ``off``
+    (kernels carve their temporaries from one buffer instead of allocating)."""
+    return ws[off:off + shape0 * shape1].reshape((shape0, shape1))
+
+
+@jit
+def point_inverse(A, C, ws, off):
     """``C <- inv(A)`` by Gauss–Jordan with partial pivoting; identity where
     ``A`` is singular or not finite (any preconditioner is sound).
 
-    The same float operations as :func:`verifier.linalg.point_inverse`.
+    The same float operations as :func:`verifier.linalg.point_inverse`;
+    ``ws[off:]`` is scratch (``n^2`` floats).
     """
     n = A.shape[0]
-    M = A.copy()
+    M = work(ws, off, n, n)
+    M[:] = A
     ok = True
     for i in range(n):
         for j in range(n):
@@ -112,22 +121,23 @@ def gauss_seidel(Al, Ah, bl, bh, yl, yh, sweeps):
 
 
 @jit
-def linear_enclosure(Al, Ah, bl, bh, yl, yh, has_y, sweeps):
+def linear_enclosure(Al, Ah, bl, bh, yl, yh, has_y, sweeps, ws, off):
     """Enclose ``{y : A y = b}`` into ``[y]`` in place (see
     :func:`verifier.linalg.linear_enclosure`); ``has_y`` False: ``[y]`` is
-    only the Neumann-series bound."""
+    only the Neumann-series bound.  ``ws[off:]`` is scratch (``5 n^2 + 2 n``)."""
     n = Al.shape[0]
-    mid = np.empty((n, n))
+    nn = n * n
+    mid = work(ws, off, n, n)
+    C = work(ws, off + nn, n, n)
+    Gl = work(ws, off + 2 * nn, n, n)
+    Gh = work(ws, off + 3 * nn, n, n)
+    cl = ws[off + 4 * nn:off + 4 * nn + n]
+    ch = ws[off + 4 * nn + n:off + 4 * nn + 2 * n]
     for i in range(n):
         for j in range(n):
             mid[i, j] = ops.midpoint(Al[i, j], Ah[i, j])
-    C = np.empty((n, n))
-    point_inverse(mid, C)
-    Gl = np.empty((n, n))
-    Gh = np.empty((n, n))
+    point_inverse(mid, C, ws, off + 4 * nn + 2 * n)
     pmat_imat(C, Al, Ah, Gl, Gh)
-    cl = np.empty(n)
-    ch = np.empty(n)
     pmat_ivec(C, bl, bh, cl, ch)
     beta = 0.0
     cmag = 0.0

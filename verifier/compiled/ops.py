@@ -17,7 +17,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 from ..interval import TRIG_ULPS
 
@@ -30,16 +32,55 @@ _TRIG_ULPS = float(TRIG_ULPS)
 jit = njit(cache=True, nogil=True)
 
 
-@jit
-def dn(r):
-    """The float below ``r`` (``-inf`` stays)."""
-    return np.nextafter(r, -INF)
+@intrinsic
+def _bits(typingctx, x):
+    """The IEEE 754 bit pattern of a float64, as an int64 (no conversion)."""
+    if x != types.float64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.IntType(64))
+
+    return types.int64(types.float64), codegen
+
+
+@intrinsic
+def _float(typingctx, i):
+    """The float64 whose bit pattern is the int64 ``i``."""
+    if i != types.int64:
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.DoubleType())
+
+    return types.float64(types.int64), codegen
 
 
 @jit
 def up(r):
-    """The float above ``r``."""
-    return np.nextafter(r, INF)
+    """The float above ``r`` (``np.nextafter(r, inf)``, on the bit pattern).
+
+    Positive floats are ordered like their bit patterns, negative ones
+    reversedly; the steps from ``+-0`` and the fixed points ``inf``, NaN are
+    handled first.
+    """
+    if r != r or r == INF:
+        return r
+    if r == 0.0:
+        return 5e-324
+    b = _bits(r)
+    return _float(b + 1 if b > 0 else b - 1)
+
+
+@jit
+def dn(r):
+    """The float below ``r`` (``np.nextafter(r, -inf)``)."""
+    if r != r or r == -INF:
+        return r
+    if r == 0.0:
+        return -5e-324
+    b = _bits(r)
+    return _float(b - 1 if b > 0 else b + 1)
 
 
 @jit

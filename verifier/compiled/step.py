@@ -25,6 +25,7 @@ from .contractors import (
     split_prune,
     velocity_displacement,
     velocity_gs,
+    workspace_size,
 )
 from .linalg import linear_enclosure
 from .ops import jit
@@ -54,7 +55,7 @@ def _empty(B):
 
 
 @jit
-def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl, nh, il, ih):
+def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl, nh, il, ih, ws):
     """Joint-acceleration bound over the sampling interval (``JOINT_FD``), see
     :func:`verifier.tracker._qdd_over_step`; writes ``QDD`` ``(2, n)``."""
     n = X.shape[1]
@@ -79,7 +80,7 @@ def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl,
         Q0[1, i] = qh + 0.05
     Qs = Q0.copy()
     for _ in range(3):
-        newton(code, value, outs, meta, Xs, Qs, XI, False, nl, nh, il, ih)
+        newton(code, value, outs, meta, Xs, Qs, XI, False, nl, nh, il, ih, ws)
         for i in range(n):
             if Qs[0, i] > Qs[1, i]:
                 Qs[0, i] = Q0[0, i]
@@ -109,7 +110,7 @@ def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl,
         bh[i] = -rl
     QDl = np.empty(n)
     QDh = np.empty(n)
-    linear_enclosure(Jl, Jh, bl, bh, QDl, QDh, False, 2)
+    linear_enclosure(Jl, Jh, bl, bh, QDl, QDh, False, 2, ws, 0)
     for i in range(n):
         il[3 * n + m + i] = QDl[i]
         ih[3 * n + m + i] = QDh[i]
@@ -120,7 +121,7 @@ def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl,
         rl, rh = output(outs, meta, T_ACCEL, i, nl, nh)
         bl[i] = -rh
         bh[i] = -rl
-    linear_enclosure(Jl, Jh, bl, bh, QDl, QDh, False, 2)
+    linear_enclosure(Jl, Jh, bl, bh, QDl, QDh, False, 2, ws, 0)
     for i in range(n):
         ok = inside and math.isfinite(QDl[i]) and math.isfinite(QDh[i]) and not (QDl[i] > QDh[i])
         QDD[0, i] = QDl[i] if ok else -np.inf
@@ -129,7 +130,7 @@ def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl,
 
 @jit
 def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad, n_past,
-              fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih):
+              fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws):
     """Advance row ``r`` by the reading ``qk`` ``(n,)``; returns its mode.
     ``QDD`` ``(2, n)`` receives the joint-acceleration bound used."""
     n = qk.shape[0]
@@ -153,7 +154,7 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
         prev = (k - 1) % D
         if vmodel == JOINT_FD:
             _qdd_over_step(code, value, outs, meta, Xr, XDr, past_q[r, prev], Qn, XIr, vec, ts, QDD,
-                           nl, nh, il, ih)
+                           nl, nh, il, ih, ws)
             if ipar[I_HAS_QDD]:
                 for i in range(n):
                     QDD[0, i], QDD[1, i] = ops.intersect(QDD[0, i], QDD[1, i], -vec[V_QDD, i], vec[V_QDD, i])
@@ -210,12 +211,12 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
         hc4_pose(code, value, outs, meta, Xr, Qr, XIw, nl, nh, il, ih)
         if keep_xi:
             XIr[:] = XIw
-        newton(code, value, outs, meta, Xr, Qr, XIr, True, nl, nh, il, ih)
+        newton(code, value, outs, meta, Xr, Qr, XIr, True, nl, nh, il, ih, ws)
         if vmodel == SOUND:
             velocity_displacement(code, value, outs, meta, Xr, Qr, XIr, XDr, past_x[r], past_q[r], DQ, h, idx,
-                                  n_base, vec[V_AMAX], nl, nh, il, ih)
+                                  n_base, vec[V_AMAX], nl, nh, il, ih, ws)
         elif has_qd:
-            velocity_gs(code, value, outs, meta, Xr, Qr, XIr, XDr, QD, nl, nh, il, ih)
+            velocity_gs(code, value, outs, meta, Xr, Qr, XIr, XDr, QD, nl, nh, il, ih, ws)
         if _empty(Xr) or _empty(XDr) or _empty(XIr) or _empty(Qr):
             dead = True
             break
@@ -234,7 +235,7 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
                 narrow &= Xr[1, i] - Xr[0, i] <= fpar[F_SPLIT_MAX_W]
             if narrow:
                 mode = split_prune(code, value, outs, meta, Xr, Qr, XIr, ipar[I_SPLIT_BOXES],
-                                   fpar[F_SPLIT_TOL], 2, nl, nh, il, ih)
+                                   fpar[F_SPLIT_TOL], 2, nl, nh, il, ih, ws)
                 dead = _empty(Xr)
     if dead:
         row_bad[r] = k
@@ -262,6 +263,7 @@ def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, pas
     il = np.empty(5 * n + m)
     ih = np.empty(5 * n + m)
     QDD = np.empty((2, n))
+    ws = np.empty(workspace_size(n))
     modes = np.empty(P, np.int64)
     record = ipar[I_RECORD] != 0
     for kk in range(q.shape[1]):
@@ -275,7 +277,7 @@ def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, pas
             if row_bad[r] >= 0:
                 continue
             modes[p] = _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r,
-                                 row_bad, n_past, fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih)
+                                 row_bad, n_past, fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws)
             if row_bad[r] < 0:
                 for i in range(n):
                     qdd_hull[b, i] = max(qdd_hull[b, i], max(abs(QDD[0, i]), abs(QDD[1, i])))
