@@ -1,4 +1,4 @@
-"""Optional IEEE 1788 conformance check of :mod:`verifier.interval` (ITF1788).
+"""Optional IEEE 1788 conformance check of the interval cores (ITF1788).
 
 The ITF1788 test vectors (``*.itl`` files of the "Interval Test Framework for
 IEEE 1788") are *not* vendored: they are read from
@@ -7,7 +7,9 @@ environment variable ``CROSSCERT_ITF1788_DIR``; the module is skipped when
 neither exists.
 
 For every bare (undecorated) test case of an operation we implement, the
-result computed by :mod:`verifier.interval` must *contain* the tightest result
+result computed by each core (the ``core`` fixture: the numpy reference
+:mod:`verifier.interval` and the compiled operations through
+:mod:`verifier.compiled.vectorized`) must *contain* the tightest result
 stated by the vector (soundness).  Being tightest is not required (we round
 outward by one ulp even for exact results, and sin/cos carry a margin): the
 number of cases that are not tightest is reported, not failed.
@@ -31,6 +33,7 @@ import numpy as np
 import pytest
 
 from verifier import interval as I
+from verifier.compiled import vectorized as V
 
 
 def _itf_dir() -> Path:
@@ -43,6 +46,12 @@ def _itf_dir() -> Path:
 ITF_DIR = _itf_dir()
 if not ITF_DIR.is_dir() or not any(ITF_DIR.glob("*.itl")):
     pytest.skip(f"ITF1788 test vectors not found in {ITF_DIR}", allow_module_level=True)
+
+
+@pytest.fixture(scope="module", params=["numpy", "compiled"])
+def core(request):
+    """The interval core under test."""
+    return {"numpy": I, "compiled": V}[request.param]
 
 
 # ---------------------------------------------------------------------------
@@ -238,17 +247,17 @@ def _is_empty(iv) -> bool:
     return not (iv[0] <= iv[1])
 
 
-def evaluate(op: str, args) -> tuple[float, float]:
-    """Our result for one case; empty inputs are handled here.
+def evaluate(core, op: str, args) -> tuple[float, float]:
+    """The result of ``core`` for one case; empty inputs are handled here.
 
-    The arithmetic of :mod:`verifier.interval` assumes non-empty operands (the
+    The arithmetic of the cores assumes non-empty operands (the
     tracker tests emptiness after each intersection), so an empty operand of an
     arithmetic operation short-circuits to empty, as IEEE 1788 prescribes.
     The set operations accept empties and get them as they are.
     """
     name, arity, _ = OPS[op]
     ivs = args[:arity]
-    fun = getattr(I, name)
+    fun = getattr(core, name)
     if name not in ("intersect", "hull") and any(_is_empty(iv) for iv in ivs):
         return EMPTY
     flat = [np.float64(b) for iv in ivs for b in iv]
@@ -274,12 +283,15 @@ def check(case: Case, got) -> tuple[bool, bool]:
 @pytest.fixture(scope="module")
 def tightness_report(request):
     """Collects per-op counts; prints one summary table after the module."""
-    report: dict[str, tuple[int, int]] = {}
+    report: dict[tuple[str, str], tuple[int, int]] = {}  # (core, op) -> counts
     yield report
-    lines = ["ITF1788 conformance of verifier.interval (op: run / not tightest)"]
-    lines += [f"  {op:<13s} {n:5d} / {nt:4d}" for op, (n, nt) in sorted(report.items())]
-    tot = sum(n for n, _ in report.values())
-    lines.append(f"  {'total':<13s} {tot:5d} / {sum(nt for _, nt in report.values()):4d}")
+    lines = []
+    for name in sorted({c for c, _ in report}):
+        rows = {op: v for (c, op), v in report.items() if c == name}
+        lines.append(f"ITF1788 conformance of {name} (op: run / not tightest)")
+        lines += [f"  {op:<13s} {n:5d} / {nt:4d}" for op, (n, nt) in sorted(rows.items())]
+        tot = sum(n for n, _ in rows.values())
+        lines.append(f"  {'total':<13s} {tot:5d} / {sum(nt for _, nt in rows.values()):4d}")
     tr = request.config.pluginmanager.getplugin("terminalreporter")
     cap = request.config.pluginmanager.getplugin("capturemanager")
     if tr is None or cap is None:
@@ -292,7 +304,7 @@ def tightness_report(request):
 
 
 @pytest.mark.parametrize("op", sorted(OPS))
-def test_itf1788_containment(op, tightness_report):
+def test_itf1788_containment(core, op, tightness_report):
     cases = CASES.get(op, [])
     assert len(cases) >= EXPECTED_MIN[op], (
         f"only {len(cases)} ITF1788 cases of {op!r} found in {ITF_DIR} "
@@ -300,19 +312,19 @@ def test_itf1788_containment(op, tightness_report):
     )
     unsound, loose = [], []
     for case in cases:
-        got = evaluate(op, case.args)
+        got = evaluate(core, op, case.args)
         sound, tight = check(case, got)
         if not sound:
             unsound.append(f"{case.where}: {case.text}  -> got [{got[0]!r}, {got[1]!r}]")
         elif not tight:
             loose.append(case)
-    tightness_report[op] = (len(cases), len(loose))
+    tightness_report[core.__name__, op] = (len(cases), len(loose))
     print(f"{op}: {len(cases)} cases, {len(loose)} not tightest")
     assert not unsound, f"{len(unsound)} unsound results:\n" + "\n".join(unsound[:30])
 
 
 @pytest.mark.parametrize("op", sorted(OPS))
-def test_itf1788_batched_equals_scalar(op):
+def test_itf1788_batched_equals_scalar(core, op):
     """One vectorised call over all cases gives the per-case answers."""
     name, arity, has_int = OPS[op]
     groups: dict[tuple, list[Case]] = defaultdict(list)
@@ -322,9 +334,9 @@ def test_itf1788_batched_equals_scalar(op):
     assert groups
     for extra, cases in groups.items():
         cols = [np.array([c.args[k][j] for c in cases]) for k in range(arity) for j in (0, 1)]
-        lo, hi = getattr(I, name)(*cols, *extra)
+        lo, hi = getattr(core, name)(*cols, *extra)
         for c, l, h in zip(cases, lo, hi):
-            want = evaluate(op, c.args)
+            want = evaluate(core, op, c.args)
             assert (l, h) == want or (np.isnan(l) and np.isnan(want[0])), c.where
 
 

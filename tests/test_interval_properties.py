@@ -1,4 +1,8 @@
-"""Property tests of :mod:`verifier.interval` against exact oracles.
+"""Property tests of the interval cores against exact oracles.
+
+Every test runs on both cores (the ``core`` fixture): the numpy reference
+:mod:`verifier.interval` and the compiled scalar operations of
+:mod:`verifier.compiled.ops` through :mod:`verifier.compiled.vectorized`.
 
 Every operation is checked for *containment*: for random intervals (with 0 as a
 bound, subnormal, tiny and huge bounds, some unbounded ones) and random real
@@ -8,7 +12,8 @@ for the rational operations, exact squaring for ``sqrt`` and Arb balls
 Further checks: exact zeros are not widened, inexact results are, lower bounds of
 ``sqr``/``sqrt``/``abs`` are non-negative, batched calls equal elementwise ones,
 the core raises no floating-point warnings, and the sin/cos margin
-:data:`~verifier.interval.TRIG_ULPS` covers numpy's error measured with mpmath.
+:data:`~verifier.interval.TRIG_ULPS` covers the error of the core's sin/cos
+(numpy's; libm's as called by numba) measured with mpmath.
 
 Hypothesis runs derandomized (fixed seed derived from each test), so the suite
 is reproducible and takes a few seconds.
@@ -26,8 +31,10 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from numba import njit
 
 from verifier import interval as I
+from verifier.compiled import vectorized as V
 
 MAX = float(np.finfo(np.float64).max)
 TINY = float(np.finfo(np.float64).tiny)  # smallest normal
@@ -41,6 +48,13 @@ PROPS = settings(
     max_examples=400,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much],
 )
+
+
+@pytest.fixture(scope="module", params=["numpy", "compiled"])
+def core(request):
+    """The interval core under test (module scope: hypothesis allows no
+    function-scoped fixture in a ``@given`` test)."""
+    return {"numpy": I, "compiled": V}[request.param]
 
 
 @pytest.fixture(autouse=True)
@@ -118,9 +132,9 @@ def is_empty(r) -> bool:
 
 @PROPS
 @given(st.data(), intervals(unbounded=True), intervals(unbounded=True))
-def test_add_sub_mul_contain_exact(data, a, b):
-    ra, rb = I.add(*a, *b), I.sub(*a, *b)
-    rm = I.mul(*a, *b)
+def test_add_sub_mul_contain_exact(core, data, a, b):
+    ra, rb = core.add(*a, *b), core.sub(*a, *b)
+    rm = core.mul(*a, *b)
     for x in data.draw(points_in(a)):
         for y in data.draw(points_in(b)):
             assert inside(x + y, *ra), (a, b, x, y, ra)
@@ -130,8 +144,8 @@ def test_add_sub_mul_contain_exact(data, a, b):
 
 @PROPS
 @given(st.data(), intervals(unbounded=True), intervals(unbounded=True))
-def test_div_contains_exact(data, a, b):
-    r = I.div(*a, *b)
+def test_div_contains_exact(core, data, a, b):
+    r = core.div(*a, *b)
     if b == (0.0, 0.0):
         assert is_empty(r)  # {x / y : y in [0, 0], y != 0} is empty
         return
@@ -143,10 +157,10 @@ def test_div_contains_exact(data, a, b):
 
 @settings(PROPS, max_examples=200)
 @given(st.data(), intervals(), st.sampled_from([-1.0, 1.0]), st.floats(0.0, 1e300))
-def test_div_by_interval_containing_zero(data, a, s, w):
+def test_div_by_interval_containing_zero(core, data, a, s, w):
     """Divisors [0, w], [-w, 0], [-w, w] and [0, 0] (with signed zeros)."""
     for b in ((0.0, w), (-w, 0.0), (-w, w), (-0.0, w), (-w, -0.0), (s * 0.0, s * 0.0)):
-        r = I.div(*a, *b)
+        r = core.div(*a, *b)
         ys = [y for y in data.draw(points_in(b)) if y != 0]
         if not ys:
             assert is_empty(r), (a, b, r)
@@ -158,8 +172,8 @@ def test_div_by_interval_containing_zero(data, a, s, w):
 
 @PROPS
 @given(st.data(), intervals(unbounded=True))
-def test_unary_contain_exact(data, a):
-    rn, rabs, rsq = I.neg(*a), I.absolute(*a), I.sqr(*a)
+def test_unary_contain_exact(core, data, a):
+    rn, rabs, rsq = core.neg(*a), core.absolute(*a), core.sqr(*a)
     assert rabs[0] >= 0.0 and rsq[0] >= 0.0
     for x in data.draw(points_in(a)):
         assert inside(-x, *rn)
@@ -169,8 +183,8 @@ def test_unary_contain_exact(data, a):
 
 @PROPS
 @given(st.data(), intervals(unbounded=True), st.integers(-9, 9))
-def test_pown_contains_exact(data, a, n):
-    r = I.pown(*a, n)
+def test_pown_contains_exact(core, data, a, n):
+    r = core.pown(*a, n)
     if n < 0 and a == (0.0, 0.0):
         assert is_empty(r)
         return
@@ -184,8 +198,8 @@ def test_pown_contains_exact(data, a, n):
 
 @PROPS
 @given(st.data(), intervals(unbounded=True))
-def test_sqrt_contains_exact(data, a):
-    lo, hi = (float(v) for v in I.sqrt(*a))
+def test_sqrt_contains_exact(core, data, a):
+    lo, hi = (float(v) for v in core.sqrt(*a))
     if a[1] < 0.0:
         assert lo > hi  # empty
         return
@@ -200,30 +214,30 @@ def test_sqrt_contains_exact(data, a):
 
 @PROPS
 @given(intervals(unbounded=True), intervals(unbounded=True))
-def test_intersect_hull_exact(a, b):
-    lo, hi = I.intersect(*a, *b)
+def test_intersect_hull_exact(core, a, b):
+    lo, hi = core.intersect(*a, *b)
     if max(a[0], b[0]) <= min(a[1], b[1]):
         assert (lo, hi) == (max(a[0], b[0]), min(a[1], b[1]))
     else:
         assert is_empty((lo, hi))
-    assert I.hull(*a, *b) == (min(a[0], b[0]), max(a[1], b[1]))
+    assert core.hull(*a, *b) == (min(a[0], b[0]), max(a[1], b[1]))
     e = I.empty_like(0.0)
-    assert I.hull(*a, *e) == a and I.hull(*e, *b) == b
-    assert is_empty(I.intersect(*a, *e)) and is_empty(I.hull(*e, *e))
+    assert core.hull(*a, *e) == a and core.hull(*e, *b) == b
+    assert is_empty(core.intersect(*a, *e)) and is_empty(core.hull(*e, *e))
 
 
 @PROPS
 @given(st.data(), intervals(unbounded=True), st.floats(allow_nan=False, allow_infinity=False))
-def test_width_midpoint_scale_contains(data, a, c):
-    w = I.width(*a)
+def test_width_midpoint_scale_contains(core, data, a, c):
+    w = core.width(*a)
     if math.isfinite(a[0]) and math.isfinite(a[1]):
         assert w == INF or Fraction(a[1]) - Fraction(a[0]) <= Fraction(float(w))
     else:
         assert w == INF
-    m = float(I.midpoint(*a))
+    m = float(core.midpoint(*a))
     assert a[0] <= m <= a[1] and math.isfinite(m), (a, m)
     assert I.contains(*a, m)
-    r = I.scale(c, *a)
+    r = core.scale(c, *a)
     for x in data.draw(points_in(a)):
         assert inside(Fraction(c) * x, *r)
 
@@ -233,93 +247,93 @@ def test_width_midpoint_scale_contains(data, a, c):
 # ---------------------------------------------------------------------------
 
 
-def test_exact_zeros_not_widened():
-    assert I.add(0.0, 1.0, 0.0, 0.0)[0] == 0.0
-    assert I.sub(0.0, 1.0, 0.0, 0.0)[0] == 0.0
-    assert I.sub(1.0, 1.0, 1.0, 1.0) == (0.0, 0.0)
-    assert I.add(-2.5, 1.0, 2.5, 3.0)[0] == 0.0
-    assert I.mul(0.0, 2.0, 3.0, 4.0)[0] == 0.0
-    assert I.mul(-2.0, 0.0, 3.0, 4.0)[1] == 0.0
-    assert I.mul(0.0, 0.0, -INF, INF) == (0.0, 0.0)  # 0 * inf = 0
-    assert I.scale(0.0, -1e300, 1e300) == (0.0, 0.0)
-    assert I.div(0.0, 0.0, 1.0, 2.0) == (0.0, 0.0)
-    assert I.div(0.0, 3.0, 1.0, 2.0)[0] == 0.0
-    assert I.div(-3.0, 0.0, 1.0, 2.0)[1] == 0.0
-    assert I.sqr(0.0, 0.0) == (0.0, 0.0)
-    assert I.sqr(0.0, 3.0)[0] == 0.0 and I.sqr(-2.0, 0.0)[0] == 0.0
-    assert I.sqr(-2.0, 3.0)[0] == 0.0
-    assert I.pown(0.0, 2.0, 3)[0] == 0.0 and I.pown(-2.0, 0.0, 3)[1] == 0.0
-    assert I.pown(0.0, 0.0, 5) == (0.0, 0.0)
-    assert I.sqrt(0.0, 4.0)[0] == 0.0 and I.sqrt(-1.0, 0.0) == (0.0, 0.0)
-    assert I.absolute(0.0, 1.0)[0] == 0.0 and I.absolute(-1.0, 1.0)[0] == 0.0
-    assert I.sin(0.0, 0.0) == (0.0, 0.0)  # sin(0) = 0 exactly
-    assert I.sin(-0.0, 1.0)[0] == 0.0
-    assert I.width(3.0, 3.0) == 0.0
+def test_exact_zeros_not_widened(core):
+    assert core.add(0.0, 1.0, 0.0, 0.0)[0] == 0.0
+    assert core.sub(0.0, 1.0, 0.0, 0.0)[0] == 0.0
+    assert core.sub(1.0, 1.0, 1.0, 1.0) == (0.0, 0.0)
+    assert core.add(-2.5, 1.0, 2.5, 3.0)[0] == 0.0
+    assert core.mul(0.0, 2.0, 3.0, 4.0)[0] == 0.0
+    assert core.mul(-2.0, 0.0, 3.0, 4.0)[1] == 0.0
+    assert core.mul(0.0, 0.0, -INF, INF) == (0.0, 0.0)  # 0 * inf = 0
+    assert core.scale(0.0, -1e300, 1e300) == (0.0, 0.0)
+    assert core.div(0.0, 0.0, 1.0, 2.0) == (0.0, 0.0)
+    assert core.div(0.0, 3.0, 1.0, 2.0)[0] == 0.0
+    assert core.div(-3.0, 0.0, 1.0, 2.0)[1] == 0.0
+    assert core.sqr(0.0, 0.0) == (0.0, 0.0)
+    assert core.sqr(0.0, 3.0)[0] == 0.0 and core.sqr(-2.0, 0.0)[0] == 0.0
+    assert core.sqr(-2.0, 3.0)[0] == 0.0
+    assert core.pown(0.0, 2.0, 3)[0] == 0.0 and core.pown(-2.0, 0.0, 3)[1] == 0.0
+    assert core.pown(0.0, 0.0, 5) == (0.0, 0.0)
+    assert core.sqrt(0.0, 4.0)[0] == 0.0 and core.sqrt(-1.0, 0.0) == (0.0, 0.0)
+    assert core.absolute(0.0, 1.0)[0] == 0.0 and core.absolute(-1.0, 1.0)[0] == 0.0
+    assert core.sin(0.0, 0.0) == (0.0, 0.0)  # sin(0) = 0 exactly
+    assert core.sin(-0.0, 1.0)[0] == 0.0
+    assert core.width(3.0, 3.0) == 0.0
 
 
-def test_exact_nonzero_results_are_widened():
+def test_exact_nonzero_results_are_widened(core):
     # the model widens every non-zero rounded result, exact or not
-    lo, hi = I.add(0.1, 0.1, 0.2, 0.2)
+    lo, hi = core.add(0.1, 0.1, 0.2, 0.2)
     assert lo < Fraction(0.1) + Fraction(0.2) < hi
-    lo, hi = I.mul(3.0, 3.0, 1.0 / 3.0, 1.0 / 3.0)
+    lo, hi = core.mul(3.0, 3.0, 1.0 / 3.0, 1.0 / 3.0)
     assert lo < Fraction(3) * Fraction(1.0 / 3.0) < hi
-    assert I.add(1.0, 1.0, 1.0, 1.0) == (math.nextafter(2.0, 0.0), math.nextafter(2.0, 3.0))
+    assert core.add(1.0, 1.0, 1.0, 1.0) == (math.nextafter(2.0, 0.0), math.nextafter(2.0, 3.0))
     # products that underflow to 0 from non-zero factors are widened
-    lo, hi = I.mul(1e-200, 1e-200, 1e-200, 1e-200)
+    lo, hi = core.mul(1e-200, 1e-200, 1e-200, 1e-200)
     assert lo <= 0.0 and hi >= SUB
-    lo, hi = I.mul(-1e-200, -1e-200, 1e-200, 1e-200)
+    lo, hi = core.mul(-1e-200, -1e-200, 1e-200, 1e-200)
     assert lo <= -SUB and hi >= 0.0
-    lo, hi = I.sqr(1e-200, 1e-200)
+    lo, hi = core.sqr(1e-200, 1e-200)
     assert lo == 0.0 and hi >= SUB
-    lo, hi = I.div(1e-300, 1e-300, 1e300, 1e300)
+    lo, hi = core.div(1e-300, 1e-300, 1e300, 1e300)
     assert lo <= 0.0 and hi >= SUB
-    assert I.sqrt(2.0, 2.0)[0] ** 2 < 2.0 < I.sqrt(2.0, 2.0)[1] ** 2
+    assert core.sqrt(2.0, 2.0)[0] ** 2 < 2.0 < core.sqrt(2.0, 2.0)[1] ** 2
     # sums that round to zero are exactly zero (gradual underflow)
-    assert I.add(SUB, SUB, -SUB, -SUB) == (0.0, 0.0)
+    assert core.add(SUB, SUB, -SUB, -SUB) == (0.0, 0.0)
 
 
 @PROPS
 @given(intervals(), intervals())
-def test_inexact_results_strictly_enclosed(a, b):
+def test_inexact_results_strictly_enclosed(core, a, b):
     """A result that is not a float is strictly inside (so it was widened)."""
     x, y = Fraction(a[0]), Fraction(b[1])
-    for op, exact in ((I.add, x + y), (I.sub, x - y), (I.mul, x * y)):
+    for op, exact in ((core.add, x + y), (core.sub, x - y), (core.mul, x * y)):
         lo, hi = (float(v) for v in op(a[0], a[0], b[1], b[1]))
         if math.isfinite(lo) and math.isfinite(hi):
             assert Fraction(lo) < exact < Fraction(hi) or Fraction(float(exact)) == exact
     if y != 0:
-        lo, hi = (float(v) for v in I.div(a[0], a[0], b[1], b[1]))
+        lo, hi = (float(v) for v in core.div(a[0], a[0], b[1], b[1]))
         if math.isfinite(lo) and math.isfinite(hi):
             assert Fraction(lo) < x / y < Fraction(hi) or Fraction(float(x / y)) == x / y
 
 
-def test_regressions():
+def test_regressions(core):
     """Defects found by this suite (see the history of verifier/interval.py)."""
     # integer arrays used to wrap around (1e10 * 1e10 -> 7.8e18; 2**62 + 2**62 < 0)
-    lo, hi = I.mul(*(np.array([10**10]),) * 4)
+    lo, hi = core.mul(*(np.array([10**10]),) * 4)
     assert inside(Fraction(10**20), lo[0], hi[0])
-    lo, hi = I.add(*(np.array([2**62]),) * 4)
+    lo, hi = core.add(*(np.array([2**62]),) * 4)
     assert inside(Fraction(2**63), lo[0], hi[0])
     # midpoint of a half-line with a huge bound used to be -inf / inf
     for a in ((-INF, -MAX), (-INF, -1e308), (MAX, INF), (1e308, INF), (-INF, -SUB)):
-        m = float(I.midpoint(*a))
+        m = float(core.midpoint(*a))
         assert math.isfinite(m) and a[0] <= m <= a[1], (a, m)
     # inf/inf corners used to make the quotient the entire line
-    assert I.div(-INF, -15.0, -INF, -3.0) == (0.0, INF)
-    assert I.div(15.0, INF, 3.0, INF) == (0.0, INF)
-    assert I.div(1.0, 2.0, 1.0, INF)[0] == 0.0
+    assert core.div(-INF, -15.0, -INF, -3.0) == (0.0, INF)
+    assert core.div(15.0, INF, 3.0, INF) == (0.0, INF)
+    assert core.div(1.0, 2.0, 1.0, INF)[0] == 0.0
     # a dividend with 0 as a bound over a divisor with 0 as a bound: a half-line
-    assert I.div(0.0, 30.0, 0.0, 3.0) == (0.0, INF)
-    assert I.div(-30.0, -0.0, 0.0, 3.0) == (-INF, 0.0)
-    assert I.div(0.0, 30.0, -3.0, 0.0) == (-INF, 0.0)
-    assert I.div(-30.0, 0.0, -INF, 0.0) == (0.0, INF)
-    assert I.div(0.0, 30.0, -3.0, 3.0) == (-INF, INF)
+    assert core.div(0.0, 30.0, 0.0, 3.0) == (0.0, INF)
+    assert core.div(-30.0, -0.0, 0.0, 3.0) == (-INF, 0.0)
+    assert core.div(0.0, 30.0, -3.0, 0.0) == (-INF, 0.0)
+    assert core.div(-30.0, 0.0, -INF, 0.0) == (0.0, INF)
+    assert core.div(0.0, 30.0, -3.0, 3.0) == (-INF, INF)
     # even powers are non-negative (1 / [0, inf] used to give -5e-324)
-    assert I.pown(-INF, INF, -2)[0] == 0.0
-    assert I.pown(0.1, 0.3, 1) == (0.1, 0.3)  # v**1 is exact
+    assert core.pown(-INF, INF, -2)[0] == 0.0
+    assert core.pown(0.1, 0.3, 1) == (0.1, 0.3)  # v**1 is exact
 
 
-def test_no_floating_point_exceptions():
+def test_no_floating_point_exceptions(core):
     """Overflow to inf and underflow are intended: no numpy FP event escapes."""
     bounds = np.array([-INF, -MAX, -1e300, -1.0, -SUB, -0.0, 0.0, SUB, TINY, 1e-300, 1.0, 1e300, MAX, INF])
     al, bl = np.meshgrid(bounds, bounds)
@@ -329,27 +343,34 @@ def test_no_floating_point_exceptions():
     i, j = np.meshgrid(np.arange(lo.size), np.arange(lo.size))
     i, j = i.ravel(), j.ravel()
     with np.errstate(all="raise"):
-        for f in (I.add, I.sub, I.mul, I.div, I.intersect, I.hull):
+        for f in (core.add, core.sub, core.mul, core.div, core.intersect, core.hull):
             f(lo[i], hi[i], lo[j], hi[j])
-        for f in (I.neg, I.sqr, I.sqrt, I.absolute, I.sin, I.cos, I.width, I.midpoint):
+        for f in (core.neg, core.sqr, core.sqrt, core.absolute, core.sin, core.cos, core.width,
+                  core.midpoint):
             f(lo, hi)
         for n in (-3, -2, -1, 0, 1, 2, 3, 8):
-            I.pown(lo, hi, n)
-        I.scale(-MAX, lo, hi)
+            core.pown(lo, hi, n)
+        core.scale(-MAX, lo, hi)
 
 
 # ---------------------------------------------------------------------------
 # batched == elementwise
 # ---------------------------------------------------------------------------
 
-UNARY = {
-    "neg": I.neg, "sqr": I.sqr, "sqrt": I.sqrt, "absolute": I.absolute, "sin": I.sin,
-    "cos": I.cos, "pown3": lambda l, h: I.pown(l, h, 3), "pown-2": lambda l, h: I.pown(l, h, -2),
-    "pown4": lambda l, h: I.pown(l, h, 4), "width": lambda l, h: (I.width(l, h),) * 2,
-    "midpoint": lambda l, h: (I.midpoint(l, h),) * 2,
-}
-BINARY = {"add": I.add, "sub": I.sub, "mul": I.mul, "div": I.div,
-          "intersect": I.intersect, "hull": I.hull}
+def _unary(core):
+    return {
+        "neg": core.neg, "sqr": core.sqr, "sqrt": core.sqrt, "absolute": core.absolute,
+        "sin": core.sin, "cos": core.cos, "pown3": lambda l, h: core.pown(l, h, 3),
+        "pown-2": lambda l, h: core.pown(l, h, -2), "pown4": lambda l, h: core.pown(l, h, 4),
+        "width": lambda l, h: (core.width(l, h),) * 2,
+        "midpoint": lambda l, h: (core.midpoint(l, h),) * 2,
+    }
+
+
+def _binary(core):
+    return {"add": core.add, "sub": core.sub, "mul": core.mul, "div": core.div,
+            "intersect": core.intersect, "hull": core.hull}
+
 
 interval_lists = st.lists(intervals(unbounded=True), min_size=1, max_size=12)
 
@@ -361,26 +382,26 @@ def _same(u, v) -> bool:
 
 @settings(PROPS, max_examples=200)
 @given(interval_lists, interval_lists)
-def test_batched_equals_elementwise(la, lb):
+def test_batched_equals_elementwise(core, la, lb):
     n = min(len(la), len(lb))
     la, lb = la[:n], lb[:n]
     al, ah = (np.array(v) for v in zip(*la))
     bl, bh = (np.array(v) for v in zip(*lb))
-    for name, f in UNARY.items():
+    for name, f in _unary(core).items():
         lo, hi = f(al, ah)
         for i, a in enumerate(la):
             el, eh = f(*a)
             assert _same(lo[i], el) and _same(hi[i], eh), (name, a)
-    for name, f in BINARY.items():
+    for name, f in _binary(core).items():
         lo, hi = f(al, ah, bl, bh)
         for i, (a, b) in enumerate(zip(la, lb)):
             el, eh = f(*a, *b)
             assert _same(lo[i], el) and _same(hi[i], eh), (name, a, b)
     # a (B, n) box with broadcasting against a scalar interval
-    lo, hi = I.mul(al[:, None], ah[:, None], np.array([[2.0, -3.0]]), np.array([[2.5, 0.5]]))
+    lo, hi = core.mul(al[:, None], ah[:, None], np.array([[2.0, -3.0]]), np.array([[2.5, 0.5]]))
     assert lo.shape == (n, 2)
     for i in range(n):
-        assert _same(lo[i, 1], I.mul(al[i], ah[i], -3.0, 0.5)[0])
+        assert _same(lo[i, 1], core.mul(al[i], ah[i], -3.0, 0.5)[0])
 
 
 # ---------------------------------------------------------------------------
@@ -402,32 +423,49 @@ def _trig_arguments() -> np.ndarray:
     ])
 
 
-def test_numpy_trig_error_within_margin():
-    """numpy's sin/cos stay within TRIG_ULPS ulp (+ smallest normal) of mpmath.
+@njit(cache=False)
+def _libm_trig(x, cosine):
+    # the point values of the compiled core: math.sin/cos in numba call libm
+    out = np.empty_like(x)
+    for i in range(x.size):
+        out[i] = math.cos(x[i]) if cosine else math.sin(x[i])
+    return out
+
+
+def _point_trig(core):
+    """(sin, cos) on float arrays as the core evaluates them at a point."""
+    if core is I:
+        return np.sin, np.cos
+    return (lambda x: _libm_trig(x, False)), (lambda x: _libm_trig(x, True))
+
+
+def test_numpy_trig_error_within_margin(core):
+    """The core's sin/cos stay within TRIG_ULPS ulp (+ smallest normal) of mpmath.
 
     This documents the margin of :func:`verifier.interval.sin`/``cos``: over
     ~200k seeded arguments (uniform in [-10, 10], up to 1e6 and beyond, and
-    next to multiples of pi/2) the error of numpy, measured against mpmath with
-    200 bits, must not exceed ``TRIG_ULPS * spacing(|result|) + tiny``.  Both a
-    whole-array call and short calls (SIMD tails) are measured.
+    next to multiples of pi/2) the error of numpy (compiled core: of libm as
+    called by numba), measured against mpmath with 200 bits, must not exceed
+    ``TRIG_ULPS * spacing(|result|) + tiny``.  Both a whole-array call and short
+    calls (SIMD tails) are measured.
     """
     x = _trig_arguments()
     assert x.size >= 200_000
     worst = {}
     with mpmath.workprec(200):
         mpf = mpmath.mpf
-        for name, npf, mpfun in (("sin", np.sin, mpmath.sin), ("cos", np.cos, mpmath.cos)):
+        for name, npf, mpfun in zip(("sin", "cos"), _point_trig(core), (mpmath.sin, mpmath.cos)):
             xs = np.concatenate([x, x[:3000]])
             y = np.concatenate([npf(x), *(npf(x[i : i + 3]) for i in range(0, 3000, 3))])
             err = [abs(mpf(yi) - mpfun(xi)) for xi, yi in zip(xs.tolist(), y.tolist())]
             ulp = np.spacing(np.abs(y))
-            margin = I.TRIG_ULPS * ulp
+            margin = core.TRIG_ULPS * ulp
             err_f = np.array([float(e) for e in err])
             # exact check wherever the rounded error is not far below the margin
             for k in np.flatnonzero(err_f > 0.5 * (margin + TINY)):
                 assert err[k] <= mpf(float(margin[k])) + TINY, (name, xs[k], y[k], err_f[k] / ulp[k])
             worst[name] = float(np.max(err_f / ulp))
-    print(f"numpy worst error in ulp: {worst} (TRIG_ULPS = {I.TRIG_ULPS})")
+    print(f"{core.__name__} worst error in ulp: {worst} (TRIG_ULPS = {core.TRIG_ULPS})")
 
 
 @st.composite
@@ -483,7 +521,7 @@ def _trig_inside(fname: str, x: float, rl: float, rh: float) -> bool:
 
 @settings(PROPS, max_examples=1500)
 @given(st.data(), trig_intervals())
-def test_sin_cos_contain_exact(data, iv):
+def test_sin_cos_contain_exact(core, data, iv):
     lo, hi = iv
     pts = {lo, hi}
     for t in data.draw(st.lists(st.floats(0.0, 1.0), min_size=3, max_size=3)):
@@ -492,7 +530,7 @@ def test_sin_cos_contain_exact(data, iv):
     flint.ctx.prec = 200
     try:
         half_pi = flint.arb.pi() / 2
-        for f, af, max_phase in ((I.sin, "sin", half_pi), (I.cos, "cos", flint.arb(0))):
+        for f, af, max_phase in ((core.sin, "sin", half_pi), (core.cos, "cos", flint.arb(0))):
             rl, rh = f(lo, hi)
             assert -1.0 <= rl <= rh <= 1.0
             for x in pts:
@@ -508,10 +546,10 @@ def test_sin_cos_contain_exact(data, iv):
         flint.ctx.prec = old
 
 
-def test_sin_cos_special_intervals():
-    assert I.sin(-INF, 0.0) == (-1.0, 1.0) and I.cos(0.0, INF) == (-1.0, 1.0)
-    assert I.cos(0.0, 0.0)[1] == 1.0 and I.cos(-0.1, 0.1)[1] == 1.0
-    assert I.sin(1.5, 1.6)[1] == 1.0 and I.sin(4.7, 4.8)[0] == -1.0
-    assert I.cos(3.1, 3.2)[0] == -1.0
-    lo, hi = I.sin(0.1, 0.2)
+def test_sin_cos_special_intervals(core):
+    assert core.sin(-INF, 0.0) == (-1.0, 1.0) and core.cos(0.0, INF) == (-1.0, 1.0)
+    assert core.cos(0.0, 0.0)[1] == 1.0 and core.cos(-0.1, 0.1)[1] == 1.0
+    assert core.sin(1.5, 1.6)[1] == 1.0 and core.sin(4.7, 4.8)[0] == -1.0
+    assert core.cos(3.1, 3.2)[0] == -1.0
+    lo, hi = core.sin(0.1, 0.2)
     assert 0.0 < lo < math.sin(0.1) and math.sin(0.2) < hi < 0.2

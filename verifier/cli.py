@@ -1,4 +1,4 @@
-"""``crosscert`` command line: certify a planned crossing, plan one, check a recording, simulate, sweep.
+"""``crosscert`` command line: certify a planned crossing, plan one, check a recording, monitor a stream, simulate, sweep.
 
 Exit codes: 0 a verdict was given, 2 bad input or usage (one line on
 stderr, no traceback), 3 the data contradict the assumptions (inconsistent).
@@ -9,21 +9,26 @@ names it).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
-from .errors import CrosscertError, InputError
-from .tracker import TrackerSettings, VelocityModel, Verdict, track
-from .trajfile import read_trajectory, write_trajectory
+from .errors import CrosscertError, InputError, TrajectoryFileError
+from .tracker import TrackerSettings, VelocityModel, Verdict, track, verdict_of
+from .trajfile import TrajectoryReader, read_trajectory, write_trajectory
 
 __all__ = ["build_parser", "main"]
 
 DEFAULT_ROBOT = "dextar"
 #: Table II speeds of the paper, m/s, and two slower ones.
 TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
+#: What ``check`` and ``monitor`` print on stderr for an inconsistent run.
+_INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box, eps_q or the initial box is "
+                      "violated by the data")
 
 
 METHODS = ("smoothstep", "time-optimal", "dynamic")
@@ -66,18 +71,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = sub.add_parser("check", help="certify the assembly mode of a recorded joint trajectory")
     c.add_argument("trajectory", help="CSV file: t,q1..qn[,qd1..qdn] (s, rad, rad/s)")
-    c.add_argument("--robot", default=DEFAULT_ROBOT)
-    g = c.add_mutually_exclusive_group(required=True)
-    g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
-    g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
-    c.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (all components)")
-    c.add_argument("--eps-q", type=float, help="encoder error bound, rad")
-    c.add_argument("--xd0", type=float, help="initial velocity bound, m/s (all components)")
-    c.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
-                   help="joint-data error model (paper = quantisation only, NOT sound)")
+    _tracker_options(c)
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.add_argument("--plot", help="write a PNG figure of the boxes")
     c.add_argument("--no-progress", action="store_true")
+
+    mo = sub.add_parser("monitor", help="certify the assembly mode online, from samples read one line at a time")
+    mo.add_argument("trajectory", nargs="?", default="-",
+                    help="CSV stream t,q1..qn[,qd1..qdn]: '-' (default) for stdin, a named pipe or a file")
+    _tracker_options(mo)
+    mo.add_argument("--t-s", type=float, help="sampling period, s (default: fixed by the first two samples)")
+    mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
 
     s = sub.add_parser("simulate", help="simulate encoder readings of a crossing (or a bounce)")
     s.add_argument("--robot", default=DEFAULT_ROBOT)
@@ -123,6 +127,38 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
     w.add_argument("--no-progress", action="store_true")
     return p
+
+
+def _tracker_options(p):
+    """The tracker-bound options ``check`` and ``monitor`` share (read back by :func:`_tracker_setup`)."""
+    p.add_argument("--robot", default=DEFAULT_ROBOT)
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
+    g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
+    p.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (all components)")
+    p.add_argument("--eps-q", type=float, help="encoder error bound, rad")
+    p.add_argument("--xd0", type=float, help="initial velocity bound, m/s (all components)")
+    p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
+                   help="joint-data error model (paper = quantisation only, NOT sound)")
+
+
+def _tracker_setup(a):
+    """Robot, interval model, the settings maker ``t_s -> TrackerSettings`` and the ``--x0`` box (or None)."""
+    from robots import get_robot
+
+    from .model import IntervalModel
+
+    robot = get_robot(a.robot)
+    x0 = None
+    if a.x0 is not None:
+        v = _floats(a.x0, 2 * robot.n, "--x0")
+        x0 = (np.array(v[0::2]), np.array(v[1::2]))
+
+    def settings(t_s):
+        return TrackerSettings.for_robot(robot, t_s=t_s, eps_q=a.eps_q, a_max=a.a_max, xd0=a.xd0,
+                                         velocity_model=a.velocity_model)
+
+    return robot, IntervalModel(robot), settings, x0
 
 
 def _task_options(p):
@@ -239,19 +275,9 @@ def _progress(total, enabled, desc):
 
 
 def _check(a):
-    from robots import get_robot
-
-    from .model import IntervalModel
-
-    robot = get_robot(a.robot)
+    robot, model, make_settings, x0 = _tracker_setup(a)
     traj = read_trajectory(a.trajectory, robot.n)
-    settings = TrackerSettings.for_robot(robot, t_s=traj.t_s, eps_q=a.eps_q, a_max=a.a_max, xd0=a.xd0,
-                                         velocity_model=a.velocity_model)
-    model = IntervalModel(robot)
-    x0 = None
-    if a.x0 is not None:
-        v = _floats(a.x0, 2 * robot.n, "--x0")
-        x0 = (np.array(v[0::2]), np.array(v[1::2]))
+    settings = make_settings(traj.t_s)
     bar, cb = _progress(len(traj.t), not a.no_progress and not a.json, "tracking")
     try:
         res = track(model, traj.q, settings, x0=x0, initial_mode=a.initial_mode, progress=cb)
@@ -275,9 +301,138 @@ def _check(a):
         print(f"max width velocity (m_xd): {out['max_width_velocity_mps']:.4g} m/s")
         print(f"elapsed: {out['elapsed_s']:.2f} s")
         if res.verdict is Verdict.INCONSISTENT:
-            print(f"a box became empty at step {res.inconsistent_at_step}: a_max, the calibration box, eps_q or the "
-                  "initial box is violated by the data", file=sys.stderr)
+            print(_INCONSISTENT_HINT.format(k=res.inconsistent_at_step), file=sys.stderr)
     return 3 if res.verdict is Verdict.INCONSISTENT else 0
+
+
+class _Monitor:
+    """What ``crosscert monitor`` has decided so far.
+
+    Samples wait in ``pending`` until the sampling period is known (at the
+    second sample, or the first with ``--t-s``); then the compiled
+    :class:`~verifier.step.Tracker` starts from ``--x0`` or from the first
+    sample's box of ``--initial-mode``, and every later sample is tracked as
+    soon as it is fed.
+
+    Parameters
+    ----------
+    a : argparse.Namespace
+    model : verifier.model.IntervalModel
+    make_settings : callable
+        ``t_s -> TrackerSettings``.
+    x0 : (lo, hi) or None
+        The ``--x0`` box.
+    """
+
+    def __init__(self, a, model, make_settings, x0):
+        self.a, self.model, self.make_settings, self.x0 = a, model, make_settings, x0
+        self.tracker = None
+        self.pending = []  # (line, t, q) read before the tracker could start
+        self.samples = 0
+        self.latency_ns = []
+
+    def feed(self, line: int, t: float, q, t_s: float | None) -> None:
+        """Track the sample read on ``line`` (time ``t`` s, readings ``q`` rad) and print its events."""
+        from .step import Tracker
+        from .tracker import initial_box_from_mode
+
+        self.samples += 1
+        self.pending.append((line, float(t), q))
+        if self.tracker is None:
+            if t_s is None:
+                return
+            settings = self.make_settings(t_s)
+            x0 = self.x0
+            if x0 is None:
+                x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings)
+            self.tracker = Tracker(self.model, settings, x0)
+        for line, t, q in self.pending:
+            t0 = time.perf_counter_ns()
+            r = self.tracker.update(q)
+            self.latency_ns.append(time.perf_counter_ns() - t0)
+            for e in r.events:
+                ev = {"event": e.value, "k": r.k, "t": t, "line": line, "mode": r.mode}
+                text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
+                print(json.dumps(ev) if self.a.json else text, flush=True)
+        self.pending.clear()
+
+    def summary(self, error: str | None = None) -> dict:
+        """The verdict so far (rules of :func:`verifier.tracker.verdict_of`), counts and latencies (us)."""
+        st = None if self.tracker is None else self.tracker.state
+        bad = -1 if st is None else int(st.bad_at[0])
+        init = 0 if st is None else int(st.init_mode[0])
+        final = int(st.mode[0]) if st is not None and bad < 0 else 0
+        lat = np.array(self.latency_ns, dtype=float) / 1e3
+        stat = (lambda f: round(float(f(lat)), 1) if lat.size else None)  # noqa: E731
+        return {
+            "verdict": verdict_of(init, final, bad >= 0).value,
+            "initial_mode": init,
+            "final_mode": final,
+            "certified_at_step": int(st.streak[0]) if final else None,
+            "inconsistent_at_step": bad if bad >= 0 else None,
+            "steps": 0 if st is None else st.k,
+            "t_s": None if st is None else float(self.tracker.config.settings.t_s),
+            "max_width_pose_m": None if st is None else float(st.max_width_pose[0]),
+            "max_width_velocity_mps": None if st is None else float(st.max_width_velocity[0]),
+            "velocity_model": self.a.velocity_model,
+            "latency_us_mean": stat(np.mean),
+            "latency_us_p99": stat(lambda v: np.percentile(v, 99)),
+            "latency_us_max": stat(np.max),
+            "interrupted": error is not None,
+            "error": error,
+        }
+
+    def finish(self, error: str | None = None) -> int:
+        """Print the summary (the last line of output) and return the exit code."""
+        out = self.summary(error)
+        if self.a.json:
+            print(json.dumps(out), flush=True)
+        else:
+            print(f"verdict: {out['verdict']}" + (" (so far: input interrupted)" if error else ""))
+            for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
+                print(f"{key}: {out[key]}")
+            if out["steps"]:
+                print(f"update latency: mean {out['latency_us_mean']} us, p99 {out['latency_us_p99']} us, "
+                      f"max {out['latency_us_max']} us")
+            sys.stdout.flush()
+        if out["inconsistent_at_step"] is not None and error is None:  # else the error is the one line on stderr
+            print(_INCONSISTENT_HINT.format(k=out["inconsistent_at_step"]), file=sys.stderr)
+        return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
+
+
+def _load_kernels(robot, model, settings):
+    """Load the compiled kernels (about 0.4 s from the on-disk cache) on a throw-away tracker, before the
+    first sample is read, so that the latencies measured are those of the tracking alone."""
+    from .step import Tracker
+
+    box = tuple(np.asarray(v, dtype=np.float64) for v in robot.x_bounds)
+    Tracker(model, settings, box).update(np.zeros(robot.n))
+
+
+def _monitor(a):
+    """``crosscert monitor``: track a CSV stream line by line, print events as they happen, then the summary.
+
+    Returns the exit code; on an error (bad line, Ctrl-C) the summary so far is
+    printed, marked interrupted, before the error propagates to :func:`main`.
+    """
+    robot, model, make_settings, x0 = _tracker_setup(a)
+    settings = make_settings(robot.t_s if a.t_s is None else a.t_s)
+    settings.validated(robot.n)  # bad bounds fail before any input is read
+    _load_kernels(robot, model, settings)
+    mon = _Monitor(a, model, make_settings, x0)
+    stdin = a.trajectory == "-"
+    with contextlib.nullcontext(sys.stdin) if stdin else open(a.trajectory, newline="") as src:
+        reader = TrajectoryReader(src, robot.n, "<stdin>" if stdin else a.trajectory, t_s=a.t_s)
+        try:
+            for line, values in reader:
+                t, q = reader.columns(values)[:2]
+                mon.feed(line, t, q, reader.t_s)
+            if mon.samples < 2:
+                raise TrajectoryFileError(f"{reader.name}: at least two samples are needed, got {mon.samples}")
+        except (CrosscertError, OSError, KeyboardInterrupt) as exc:
+            mon.finish(error=str(exc) or type(exc).__name__)
+            raise
+    return mon.finish()
 
 
 def _simulate(a):
@@ -329,7 +484,7 @@ def main(argv=None) -> int:
     """Entry point of the ``crosscert`` script; returns the exit code."""
     try:
         a = build_parser().parse_args(argv)
-        return {"check": _check, "simulate": _simulate, "sweep": _sweep, "plan": _plan, "certify": _certify}[a.command](a)
+        return {"check": _check, "monitor": _monitor, "simulate": _simulate, "sweep": _sweep, "plan": _plan, "certify": _certify}[a.command](a)
     except _Usage as exc:
         print(str(exc), file=sys.stderr)
         return 2

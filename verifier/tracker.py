@@ -58,6 +58,7 @@ __all__ = [
     "TrackResult",
     "BatchResult",
     "initial_box_from_mode",
+    "verdict_of",
     "track",
     "track_batch",
     "SampleStream",
@@ -345,6 +346,19 @@ def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_bo
     return lo, hi
 
 
+def verdict_of(initial_mode: int, final_mode: int, inconsistent: bool) -> Verdict:
+    """The verdict of a run from its certified modes at the first and last sample (0: not certified).
+
+    ``inconsistent`` (a box became empty) overrides everything; a mode not
+    certified at either end gives ``unknown``.
+    """
+    if inconsistent:
+        return Verdict.INCONSISTENT
+    if initial_mode == 0 or final_mode == 0:
+        return Verdict.UNKNOWN
+    return Verdict.MODE_UNCHANGED if initial_mode == final_mode else Verdict.MODE_CHANGED
+
+
 def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None,
                 backend: str = "compiled"):
     """Run the tracker on ``B`` scenarios at once.
@@ -411,14 +425,7 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     cert = np.where(final != 0, state.streak, -1)
     verdict = np.empty(B, dtype=object)
     for b in range(B):
-        if bad_at[b] >= 0:
-            verdict[b] = Verdict.INCONSISTENT
-        elif init_mode[b] == 0 or final[b] == 0:
-            verdict[b] = Verdict.UNKNOWN
-        elif init_mode[b] == final[b]:
-            verdict[b] = Verdict.MODE_UNCHANGED
-        else:
-            verdict[b] = Verdict.MODE_CHANGED
+        verdict[b] = verdict_of(init_mode[b], final[b], bad_at[b] >= 0)
     res = BatchResult(
         verdict=verdict,
         initial_mode=init_mode,

@@ -13,6 +13,9 @@ Format (CSV, comma-separated, one header row):
 
 Any other column, a missing column, a non-numeric, NaN or infinite value is
 an error (:class:`~verifier.errors.TrajectoryFileError`).
+:func:`read_trajectory` reads a whole file (the period is the mean step);
+:class:`TrajectoryReader` reads a stream line by line (``crosscert monitor``;
+the period is given or fixed by the first step).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ import numpy as np
 
 from .errors import TrajectoryFileError
 
-__all__ = ["Trajectory", "read_trajectory", "write_trajectory", "TIME_STEP_RTOL"]
+__all__ = ["Trajectory", "TrajectoryReader", "read_trajectory", "write_trajectory", "TIME_STEP_RTOL"]
 
 #: Relative tolerance on the sampling step (time stamps written in decimal).
 TIME_STEP_RTOL = 1e-6
@@ -58,6 +61,137 @@ class Trajectory:
     x: np.ndarray | None = None
 
 
+class TrajectoryReader:
+    """Read a trajectory CSV one sample at a time, validating each line as it comes.
+
+    The header is read at the first iteration; then each non-blank line is
+    parsed and checked (cell count, numbers, finite values, increasing time,
+    and with ``even`` the step) when it is read, so a stream (a pipe, stdin)
+    is processed sample by sample.
+
+    Parameters
+    ----------
+    stream : text stream
+        Open for reading, ideally with ``newline=""``.
+    n : int
+        Number of joints of the robot.
+    name : str
+        Names the source in error messages.
+    t_s : float, optional
+        Expected sampling period, s; ``None``: the first step fixes it.
+    even : bool
+        Check every step against ``t_s`` (within :data:`TIME_STEP_RTOL`) as it
+        is read; :func:`read_trajectory` checks against the mean step instead.
+
+    Attributes
+    ----------
+    header : list of str
+        Column names, once read.
+    t_s : float or None
+        Sampling period, once known.
+    line : int
+        Number of the last line read (non-blank rows, the header being line 1).
+
+    Raises
+    ------
+    TrajectoryFileError
+        While iterating, with a message naming the source, the line and what is wrong.
+    """
+
+    def __init__(self, stream, n: int, name, *, t_s: float | None = None, even: bool = True):
+        self.name, self.n, self.t_s, self.even = str(name), n, t_s, even
+        self.header = None
+        self.line = 0
+        self._rows = csv.reader(stream)
+        self._cols = {"q": [f"q{i + 1}" for i in range(n)], "qd": [f"qd{i + 1}" for i in range(n)],
+                      "x": [f"x{i + 1}" for i in range(n)]}
+
+    def _next_row(self):
+        """The next non-blank row, or None at the end."""
+        try:
+            for row in self._rows:
+                if any(c.strip() for c in row):
+                    self.line += 1
+                    return row
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise TrajectoryFileError(f"{self.name}: cannot read as CSV ({exc})") from None
+        return None
+
+    def _error(self, message):
+        return TrajectoryFileError(f"{self.name}, line {self.line}: {message}")
+
+    def _read_header(self):
+        row = self._next_row()
+        qcols, qdcols, xcols = self._cols["q"], self._cols["qd"], self._cols["x"]
+        if row is None:
+            raise TrajectoryFileError(f"{self.name}: empty file (expected a header t,q1..q{self.n})")
+        header = [c.strip() for c in row]
+        missing = [c for c in ["t"] + qcols if c not in header]
+        if missing:
+            raise TrajectoryFileError(f"{self.name}: missing column(s) {', '.join(missing)}; "
+                                      f"expected t,{','.join(qcols)}[,{','.join(qdcols)}]")
+        extra = [c for c in header if c not in ["t"] + qcols + qdcols + xcols]
+        if extra:
+            raise TrajectoryFileError(
+                f"{self.name}: unexpected column(s) {', '.join(extra)}; expected t,{','.join(qcols)}"
+                f"[,{','.join(qdcols)}][,{','.join(xcols)}]"
+            )
+        if len(set(header)) != len(header):
+            raise TrajectoryFileError(f"{self.name}: duplicated column names in the header")
+        for group in (qdcols, xcols):
+            if any(c in header for c in group) and not all(c in header for c in group):
+                raise TrajectoryFileError(f"{self.name}: give all of {','.join(group)} or none")
+        self.header = header
+
+    def _parse(self, row):
+        header = self.header
+        if len(row) != len(header):
+            raise self._error(f"{len(row)} values for {len(header)} columns")
+        values = np.empty(len(header))
+        for j, cell in enumerate(row):
+            try:
+                values[j] = float(cell)
+            except ValueError:
+                raise self._error(f"{cell.strip()!r} in column {header[j]} is not a number") from None
+            if not np.isfinite(values[j]):
+                raise self._error(f"column {header[j]} is {values[j]} (NaN and infinities are not allowed)")
+        return values
+
+    def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
+        """Raise unless the step ``t - t_prev`` ending on ``line`` is within ``TIME_STEP_RTOL * t_s`` of ``t_s``."""
+        if abs((t - t_prev) - t_s) > TIME_STEP_RTOL * t_s:
+            raise TrajectoryFileError(
+                f"{self.name}, line {line}: uneven sampling (step {t - t_prev:.9g} s, {what} {t_s:.9g} s); "
+                "the tracker assumes one constant sampling period: resample or split the file"
+            )
+
+    def __iter__(self):
+        """Yield ``(line, values)``: the line number and its values in header order (array)."""
+        if self.header is None:
+            self._read_header()
+        it = self.header.index("t")
+        t_prev = None
+        while (row := self._next_row()) is not None:
+            values = self._parse(row)
+            t = values[it]
+            if t_prev is not None:
+                if not t > t_prev:
+                    raise self._error(f"time {t} does not increase (previous {t_prev}); "
+                                      "the tracker needs strictly increasing times")
+                if self.even:
+                    if self.t_s is None:
+                        self.t_s = float(t - t_prev)
+                    self.check_step(t_prev, t, self.t_s, self.line)
+            yield self.line, values
+            t_prev = t
+
+    def columns(self, values):
+        """Split values in header order, one row ``(C,)`` or rows ``(K, C)``, into ``t, q, qd, x`` (``None`` when absent)."""
+        h = self.header
+        pick = lambda cols: values[..., [h.index(c) for c in cols]] if cols[0] in h else None  # noqa: E731
+        return values[..., h.index("t")], pick(self._cols["q"]), pick(self._cols["qd"]), pick(self._cols["x"])
+
+
 def read_trajectory(path, n: int) -> Trajectory:
     """Read and validate a trajectory file for a robot with ``n`` joints.
 
@@ -71,63 +205,16 @@ def read_trajectory(path, n: int) -> Trajectory:
         raise TrajectoryFileError(f"{path}: no such file")
     try:
         with path.open(newline="") as fh:
-            rows = list(csv.reader(fh))
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            reader = TrajectoryReader(fh, n, path, even=False)
+            samples = list(reader)
+    except OSError as exc:
         raise TrajectoryFileError(f"{path}: cannot read as CSV ({exc})") from None
-    rows = [r for r in rows if any(c.strip() for c in r)]
-    if not rows:
-        raise TrajectoryFileError(f"{path}: empty file (expected a header t,q1..q{n})")
-    header = [c.strip() for c in rows[0]]
-    qcols = [f"q{i + 1}" for i in range(n)]
-    qdcols = [f"qd{i + 1}" for i in range(n)]
-    xcols = [f"x{i + 1}" for i in range(n)]
-    missing = [c for c in ["t"] + qcols if c not in header]
-    if missing:
-        raise TrajectoryFileError(f"{path}: missing column(s) {', '.join(missing)}; expected t,{','.join(qcols)}[,{','.join(qdcols)}]")
-    extra = [c for c in header if c not in ["t"] + qcols + qdcols + xcols]
-    if extra:
-        raise TrajectoryFileError(
-            f"{path}: unexpected column(s) {', '.join(extra)}; expected t,{','.join(qcols)}"
-            f"[,{','.join(qdcols)}][,{','.join(xcols)}]"
-        )
-    if len(set(header)) != len(header):
-        raise TrajectoryFileError(f"{path}: duplicated column names in the header")
-    has_qd = any(c in header for c in qdcols)
-    for group in (qdcols, xcols):
-        if any(c in header for c in group) and not all(c in header for c in group):
-            raise TrajectoryFileError(f"{path}: give all of {','.join(group)} or none")
-    has_x = xcols[0] in header
-    data = np.empty((len(rows) - 1, len(header)))
-    for i, row in enumerate(rows[1:], start=2):
-        if len(row) != len(header):
-            raise TrajectoryFileError(f"{path}, line {i}: {len(row)} values for {len(header)} columns")
-        for j, cell in enumerate(row):
-            try:
-                data[i - 2, j] = float(cell)
-            except ValueError:
-                raise TrajectoryFileError(f"{path}, line {i}: {cell.strip()!r} in column {header[j]} is not a number") from None
-    bad = ~np.isfinite(data)
-    if bad.any():
-        i, j = np.argwhere(bad)[0]
-        raise TrajectoryFileError(f"{path}, line {i + 2}: column {header[j]} is {data[i, j]} (NaN and infinities are not allowed)")
-    if len(data) < 2:
-        raise TrajectoryFileError(f"{path}: at least two samples are needed, got {len(data)}")
-    t = data[:, header.index("t")]
-    dt = np.diff(t)
-    if np.any(dt <= 0):
-        i = int(np.argmax(dt <= 0))
-        raise TrajectoryFileError(f"{path}, line {i + 3}: time {t[i + 1]} does not increase (previous {t[i]}); the tracker needs strictly increasing times")
+    if len(samples) < 2:
+        raise TrajectoryFileError(f"{path}: at least two samples are needed, got {len(samples)}")
+    t, q, qd, x = reader.columns(np.array([v for _, v in samples]))
     t_s = float((t[-1] - t[0]) / (len(t) - 1))
-    uneven = np.abs(dt - t_s) > TIME_STEP_RTOL * t_s
-    if uneven.any():
-        i = int(np.argmax(uneven))
-        raise TrajectoryFileError(
-            f"{path}, line {i + 3}: uneven sampling (step {dt[i]:.9g} s, mean {t_s:.9g} s); "
-            "the tracker assumes one constant sampling period: resample or split the file"
-        )
-    q = data[:, [header.index(c) for c in qcols]]
-    qd = data[:, [header.index(c) for c in qdcols]] if has_qd else None
-    x = data[:, [header.index(c) for c in xcols]] if has_x else None
+    for i in np.flatnonzero(np.abs(np.diff(t) - t_s) > TIME_STEP_RTOL * t_s)[:1] + 1:  # the first uneven step
+        reader.check_step(t[i - 1], t[i], t_s, samples[i][0], "mean")
     return Trajectory(t=t, q=q, qd=qd, t_s=t_s, x=x)
 
 

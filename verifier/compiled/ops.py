@@ -112,31 +112,48 @@ def neg(al, ah):
 
 
 @jit
-def _prod_dn(a, b):
+def _corner_dn(a, b):
     return 0.0 if (a == 0.0 or b == 0.0) else dn(a * b)
 
 
 @jit
-def _prod_up(a, b):
+def _corner_up(a, b):
     return 0.0 if (a == 0.0 or b == 0.0) else up(a * b)
 
 
 @jit
-def _min4(a, b, c, d):
-    # numpy's min over an axis of 4: minimum(minimum(minimum(a, b), c), d)
-    return minn(minn(minn(a, b), c), d)
-
-
-@jit
-def _max4(a, b, c, d):
-    return maxn(maxn(maxn(a, b), c), d)
-
-
-@jit
 def mul(al, ah, bl, bh):
-    """``[a] * [b]`` with ``0 * inf = 0``."""
-    lo = _min4(_prod_dn(al, bl), _prod_dn(al, bh), _prod_dn(ah, bl), _prod_dn(ah, bh))
-    hi = _max4(_prod_up(al, bl), _prod_up(al, bh), _prod_up(ah, bl), _prod_up(ah, bh))
+    """``[a] * [b]`` with ``0 * inf = 0``.
+
+    The reference rounds each of the four corner products outward and takes
+    the extremes; ``nextafter`` is monotone, so rounding only the extreme
+    products gives the same floats with two steps instead of eight.  Products
+    with a zero factor are exactly 0 and never widened.  A bound equal to 0 is
+    recomputed corner by corner, in the reference's order, so that even the
+    sign of a zero bound is the reference's.
+    """
+    lo = INF
+    hi = -INF
+    regular = False
+    zero = False
+    for a, b in ((al, bl), (al, bh), (ah, bl), (ah, bh)):
+        if a == 0.0 or b == 0.0:
+            zero = True
+        else:
+            p = a * b
+            lo = minn(lo, p)
+            hi = maxn(hi, p)
+            regular = True
+    if regular:
+        lo = dn(lo)
+        hi = up(hi)
+    if zero:
+        lo = minn(lo, 0.0)
+        hi = maxn(hi, 0.0)
+    if lo == 0.0:
+        lo = minn(minn(minn(_corner_dn(al, bl), _corner_dn(al, bh)), _corner_dn(ah, bl)), _corner_dn(ah, bh))
+    if hi == 0.0:
+        hi = maxn(maxn(maxn(_corner_up(al, bl), _corner_up(al, bh)), _corner_up(ah, bl)), _corner_up(ah, bh))
     return lo, hi
 
 
@@ -148,10 +165,9 @@ def scale(c, al, ah):
 
 @jit
 def _quot_dn(x, y):
+    # a lower bound of x / y; exactly 0 for x = 0 or y infinite (x finite)
     if x == 0.0 or (math.isinf(y) and math.isfinite(x)):
         return 0.0
-    if y == 0.0:  # numpy gives +-inf (or NaN for 0/0, excluded above)
-        return dn(math.copysign(INF, x) * math.copysign(1.0, y))
     return dn(x / y)
 
 
@@ -159,13 +175,11 @@ def _quot_dn(x, y):
 def _quot_up(x, y):
     if x == 0.0 or (math.isinf(y) and math.isfinite(x)):
         return 0.0
-    if y == 0.0:
-        return up(math.copysign(INF, x) * math.copysign(1.0, y))
     return up(x / y)
 
 
 @jit
-def _nan_to(v, repl):
+def _nan_inf(v, repl):
     return repl if v != v else v
 
 
@@ -192,10 +206,33 @@ def div(al, ah, bl, bh):
             if a_nonpos:
                 lo = _quot_dn(ah, bl)
         return lo, hi
-    lo = _min4(_nan_to(_quot_dn(al, bl), INF), _nan_to(_quot_dn(al, bh), INF),
-               _nan_to(_quot_dn(ah, bl), INF), _nan_to(_quot_dn(ah, bh), INF))
-    hi = _max4(_nan_to(_quot_up(al, bl), -INF), _nan_to(_quot_up(al, bh), -INF),
-               _nan_to(_quot_up(ah, bl), -INF), _nan_to(_quot_up(ah, bh), -INF))
+    # 0 not in [b]: the corners bound the quotient; an inf/inf corner (NaN) is
+    # no extremum and is skipped; as in mul, only the extremes are rounded
+    lo = INF
+    hi = -INF
+    regular = False
+    zero = False
+    for x, y in ((al, bl), (al, bh), (ah, bl), (ah, bh)):
+        if x == 0.0 or (math.isinf(y) and math.isfinite(x)):
+            zero = True
+        else:
+            q = x / y
+            if q == q:
+                lo = min(lo, q)
+                hi = max(hi, q)
+                regular = True
+    if regular:
+        lo = dn(lo)
+        hi = up(hi)
+    if zero:
+        lo = min(lo, 0.0)
+        hi = max(hi, 0.0)
+    if lo == 0.0:  # the reference's sign of zero: corner by corner, in order
+        lo = minn(minn(minn(_nan_inf(_quot_dn(al, bl), INF), _nan_inf(_quot_dn(al, bh), INF)),
+                       _nan_inf(_quot_dn(ah, bl), INF)), _nan_inf(_quot_dn(ah, bh), INF))
+    if hi == 0.0:
+        hi = maxn(maxn(maxn(_nan_inf(_quot_up(al, bl), -INF), _nan_inf(_quot_up(al, bh), -INF)),
+                       _nan_inf(_quot_up(ah, bl), -INF)), _nan_inf(_quot_up(ah, bh), -INF))
     return lo, hi
 
 

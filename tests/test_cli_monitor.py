@@ -1,0 +1,160 @@
+"""``crosscert monitor``: samples tracked as they arrive, events, the summary line, exit codes."""
+
+import io
+import json
+import os
+import queue
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from problems import CATALOGUE, default_settings, interval_model, run_of
+from verifier.cli import main
+from verifier.tracker import track
+from verifier.trajfile import write_trajectory
+
+FLAGS = ["--initial-mode", "1", "--json"]
+
+
+@pytest.fixture(scope="module")
+def csv_text(tmp_path_factory):
+    """CSV text of each reference problem, by name (written by write_trajectory)."""
+    folder = tmp_path_factory.mktemp("monitor")
+
+    def text(name):
+        run = run_of(CATALOGUE[name])
+        path = folder / f"{name}.csv"
+        write_trajectory(path, run.t, run.q_meas)
+        return path.read_text()
+
+    return text
+
+
+def _monitor(monkeypatch, capsys, text, *args):
+    """Run ``main(["monitor", *args])`` on ``text`` as stdin: (exit code, JSON lines of stdout, stderr)."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO(text))
+    code = main(["monitor", *args])
+    out, err = capsys.readouterr()
+    return code, [json.loads(v) for v in out.splitlines()] if "--json" in args else out, err
+
+
+def _events(name):
+    """The events ``track`` implies on a problem: (k, event, mode) whenever the certified mode changes, and the result."""
+    res = track(interval_model(), run_of(CATALOGUE[name]).q_meas, default_settings(t_s=0.001), initial_mode=1)
+    out, prev = [], 0
+    for k, m in enumerate(res.mode):
+        if m != prev:
+            out.append((k, "mode-gained" if prev == 0 else "mode-lost" if m == 0 else "mode-changed", int(m)))
+        prev = m
+    return out, res
+
+
+@pytest.mark.parametrize("name", ["crossing_1458", "bounce_1458"])
+def test_verdict_and_events_equal_track(monkeypatch, capsys, csv_text, name):
+    code, lines, _ = _monitor(monkeypatch, capsys, csv_text(name), "-", *FLAGS)
+    run = run_of(CATALOGUE[name])
+    expected, res = _events(name)
+    *events, last = lines
+    assert code == 0
+    assert [(e["k"], e["event"], e["mode"]) for e in events] == expected
+    assert all(e["t"] == pytest.approx(run.t[e["k"]]) and e["line"] == e["k"] + 2 for e in events)
+    summary = res.summary()
+    for key in ("verdict", "initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
+        assert last[key] == summary[key], key
+    assert last["verdict"] in {v.value for v in CATALOGUE[name].expected}
+    assert last["interrupted"] is False and last["t_s"] == 0.001
+    assert 0 < last["latency_us_mean"] <= last["latency_us_p99"] <= last["latency_us_max"]
+
+
+def test_text_output_from_a_named_pipe(tmp_path, capsys, csv_text):
+    run = run_of(CATALOGUE["crossing_1458"])
+    x, y = run.x_true[0]
+    fifo = tmp_path / "samples"
+    os.mkfifo(fifo)
+    writer = threading.Thread(target=lambda: fifo.write_text(csv_text("crossing_1458")))
+    writer.start()
+    code = main(["monitor", str(fifo), f"--x0={x - 0.003},{x + 0.003},{y - 0.003},{y + 0.003}"])
+    writer.join()
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "mode-gained, mode -1" in out and "verdict: mode-changed" in out and "update latency: mean" in out
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ("0.1,abc,1.0", "'abc' in column q1 is not a number"),
+        ("0.1,1.0", "2 values for 3 columns"),
+        ("0.1,1.0,nan", "NaN and infinities"),
+        ("0.0995,1.0,1.0", "uneven sampling"),
+        ("0.099,1.0,1.0", "does not increase"),
+    ],
+)
+def test_bad_line_mid_stream(monkeypatch, capsys, csv_text, bad, message):
+    lines = csv_text("crossing_1458").splitlines()
+    lines[101] = bad  # sample 100, line 102 (the header is line 1)
+    code, out, err = _monitor(monkeypatch, capsys, "\n".join(lines) + "\n", "-", *FLAGS)
+    *events, last = out
+    assert code == 2
+    assert err.startswith("crosscert: error: <stdin>, line 102: ") and message in err and "\n" not in err.strip()
+    before = [(k, e, m) for k, e, m in _events("crossing_1458")[0] if k < 100]
+    assert before and [(e["k"], e["event"], e["mode"]) for e in events] == before  # decided before line 102
+    assert last["interrupted"] is True and message in last["error"]
+    assert last["steps"] == 100 and last["verdict"] == "unknown" and last["initial_mode"] == 1
+
+
+def test_inconsistent_exit_3(monkeypatch, capsys, csv_text):
+    code, lines, err = _monitor(monkeypatch, capsys, csv_text("crossing_1458"), "-", *FLAGS, "--a-max", "2")
+    assert code == 3
+    assert [e["event"] for e in lines[:-1]][-1] == "inconsistent"
+    assert lines[-1]["verdict"] == "inconsistent" and lines[-1]["inconsistent_at_step"] == lines[-2]["k"]
+    assert "a box became empty" in err
+
+
+@pytest.mark.parametrize(
+    "text, args, message",
+    [
+        ("", (), "empty"),
+        ("t,q1,q2\n0,{q}\n", (), "at least two samples"),
+        ("t,q1,q2\n0,{q}\n0.002,{q}\n", ("--t-s", "0.001"), "uneven sampling"),  # checks the first step too
+        ("t,q1\n0,1\n", (), "missing column"),
+    ],
+)
+def test_bad_input_exit_2(monkeypatch, capsys, text, args, message):
+    q = ",".join(repr(float(v)) for v in run_of(CATALOGUE["crossing_1458"]).q_meas[0])
+    code, lines, err = _monitor(monkeypatch, capsys, text.format(q=q), *FLAGS, *args)
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert lines[-1]["interrupted"] is True
+
+
+def test_piped_through_a_subprocess(csv_text):
+    """A real pipe: each event is read before the next sample is written; then the summary line."""
+    rows = csv_text("crossing_1458").splitlines(keepends=True)
+    expected = _events("crossing_1458")[0]
+    proc = subprocess.Popen([sys.executable, "-m", "verifier.cli", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parents[1])
+    out = queue.Queue()
+    threading.Thread(target=lambda: [out.put(v) for v in proc.stdout], daemon=True).start()
+    sent = 0
+    try:
+        for k, kind, mode in expected:
+            upto = max(k, 1) + 2  # header and samples 0..k (sample 0 is tracked once sample 1 fixes t_s)
+            for row in rows[sent:upto]:
+                proc.stdin.write(row)
+                proc.stdin.flush()
+            sent = upto
+            event = json.loads(out.get(timeout=120))  # arrives while the input is still open
+            assert (event["k"], event["event"], event["mode"]) == (k, kind, mode)
+        proc.stdin.writelines(rows[sent:])
+        proc.stdin.close()
+        assert proc.wait(timeout=120) == 0
+        last = json.loads(out.get(timeout=10))
+    finally:
+        proc.kill()
+    assert last["verdict"] == "mode-changed" and last["steps"] == 249 and last["certified_at_step"] == 109
+    print(f"\nlatency per update over a pipe: mean {last['latency_us_mean']} us, p99 {last['latency_us_p99']} us, "
+          f"max {last['latency_us_max']} us")
