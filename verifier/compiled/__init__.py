@@ -6,3 +6,37 @@ Nothing here names a robot: a robot's tapes reach the kernels as arrays
 and cached next to this package (``__pycache__``); the first call after an
 install pays the compilation (see benchmarks/README.md).
 """
+
+import hashlib
+from pathlib import Path
+
+
+def _drop_stale_cache() -> None:
+    """Delete cached kernels compiled from other sources than these.
+
+    numba re-validates a cached function against its own file only: a kernel
+    in ``step.py`` cached before an edit of ``ops.py`` would keep the old
+    arithmetic.  The stamp covers every source the kernels are built from.
+    A read-only install cannot be edited, so failing to write is harmless.
+    """
+    here = Path(__file__).resolve().parent
+    sources = sorted(here.glob("*.py")) + [here.parent / "interval.py", here.parent / "tape.py"]
+    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()[:20]
+    cache = here / "__pycache__"
+    stamp = cache / "kernels.stamp"
+    try:
+        if stamp.read_text() == digest:
+            return
+    except OSError:
+        pass
+    try:
+        cache.mkdir(exist_ok=True)
+        for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+            f.unlink(missing_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass
+
+
+_drop_stale_cache()
+

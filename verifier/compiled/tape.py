@@ -67,9 +67,33 @@ class Program(NamedTuple):
     n_nodes: int
 
 
+def _shared(a):
+    """``a`` with repeated instructions (same opcode, operands and constant)
+    evaluated once: CasADi's derivatives repeat subexpressions (the velocity
+    tape computes each sine twice).  Forward evaluation gives the same floats;
+    HC4Revise would not (a shared node collects both projections), so the
+    contracted tape ``f`` is kept as written."""
+    new_of = np.empty(len(a.code), np.int64)
+    seen = {}
+    code, value = [], []
+    for i, (op, x, y) in enumerate(a.code):
+        if op != _INPUT:
+            x = new_of[x]
+            y = new_of[y] if y >= 0 else y
+        key = (int(op), int(x), int(y), float(a.value[i]))
+        if key not in seen:
+            seen[key] = len(code)
+            code.append((op, x, y))
+            value.append(a.value[i])
+        new_of[i] = seen[key]
+    outs = np.where(a.out_nodes >= 0, new_of[np.maximum(a.out_nodes, 0)], -1)
+    return a._replace(code=np.array(code, np.int64).reshape(-1, 3), value=np.array(value), out_nodes=outs)
+
+
 def pack(model) -> Program:
     """Concatenate the tapes of an :class:`verifier.model.IntervalModel`."""
     arrs = [getattr(model, name).arrays() for name in TAPES]
+    arrs = [a if name == "tape_f" else _shared(a) for name, a in zip(TAPES, arrs)]
     meta = np.zeros((len(arrs), 3), np.int64)
     c0 = o0 = 0
     for t, a in enumerate(arrs):
