@@ -1,0 +1,139 @@
+"""The compiled tracker against the numpy reference (``backend="numpy"``).
+
+Both backends perform the same float operations in the same order, so on the
+reference problems and a seeded Monte Carlo batch their boxes must be equal
+bit for bit.  The one admitted difference: numpy may evaluate ``sin``/``cos``
+with its own SIMD kernels where the compiled code calls the C library; where
+the two disagree on this machine (checked below), boxes may differ by a few
+ulp, bounded here by ``TRIG_REL`` relative plus 1e-15 absolute, and verdicts
+must still agree.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from problems import CATALOGUE, default_settings, interval_model, run_of, simulate
+from verifier.step import Tracker, configure
+from verifier.tracker import VelocityModel, initial_box_from_mode, track, track_batch
+
+_probe = np.random.default_rng(5).uniform(-7.0, 7.0, 20000)
+TRIG_SAME = bool(np.all(np.sin(_probe) == [math.sin(v) for v in _probe])
+                 and np.all(np.cos(_probe) == [math.cos(v) for v in _probe]))
+TRIG_REL = 1e-9  # relative, where numpy's and libm's sin/cos differ
+FIELDS = ("x_lo", "x_hi", "xd_lo", "xd_hi")
+
+
+def _assert_same_boxes(a, b, what):
+    """Equal bit for bit (NaN where both NaN), or within the stated bound when trig differs."""
+    for f in FIELDS:
+        u, v = np.asarray(a[f]), np.asarray(b[f])
+        if TRIG_SAME:
+            assert np.array_equal(u, v, equal_nan=True), (what, f, np.nanmax(np.abs(u - v)))
+        else:
+            assert np.allclose(u, v, rtol=TRIG_REL, atol=1e-15, equal_nan=True), (what, f)
+
+
+def _boxes(res):
+    return {f: getattr(res, f) for f in FIELDS}
+
+
+@pytest.mark.parametrize("name", sorted(CATALOGUE))
+def test_catalogue_backends_agree(name):
+    run = run_of(CATALOGUE[name])
+    model, s = interval_model(), default_settings()
+    mode = int(run.mode_true[0])
+    ref = track(model, run.q_meas, s, initial_mode=mode, backend="numpy")
+    fast = track(model, run.q_meas, s, initial_mode=mode, backend="compiled")
+    assert fast.verdict is ref.verdict
+    assert (fast.certified_at_step, fast.inconsistent_at_step) == (ref.certified_at_step, ref.inconsistent_at_step)
+    assert np.array_equal(fast.mode, ref.mode)
+    _assert_same_boxes(_boxes(ref), _boxes(fast), name)
+    assert fast.max_width_pose == ref.max_width_pose and fast.max_width_velocity == ref.max_width_velocity
+
+
+@pytest.mark.parametrize("overrides", [
+    dict(velocity_model=VelocityModel.JOINT_FD),
+    dict(velocity_model=VelocityModel.PAPER),
+    dict(keep_xi=True, split_boxes=8),
+    dict(eps_q_fast=1e-5, drift_rate=0.01, baselines=(1, 3, 7)),
+], ids=["joint-fd", "paper", "keep-xi", "drift"])
+def test_options_backends_agree(overrides):
+    """Every velocity model and option runs the same maths in both backends."""
+    run = run_of(CATALOGUE["crossing_1458"])
+    model, s = interval_model(), default_settings(**overrides)
+    q = run.q_meas[:160]  # through the crossing (true singular instant at sample 100)
+    x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
+    ref = track(model, q, s, x0=x0, backend="numpy")
+    fast = track(model, q, s, x0=x0, backend="compiled")
+    assert fast.verdict is ref.verdict
+    assert np.array_equal(fast.mode, ref.mode)
+    _assert_same_boxes(_boxes(ref), _boxes(fast), overrides)
+    assert np.array_equal(fast.qdd_bound, ref.qdd_bound)
+
+
+def _monte_carlo_batch():
+    rng = np.random.default_rng(77)
+    runs = [simulate(round(float(rng.uniform(0.7, 1.7)), 3), i % 4 == 3, 300 + i, ("floor", "round", "uniform")[i % 3])
+            for i in range(8)]
+    K = max(r.n_samples for r in runs)
+    pad = lambda a: np.vstack([a, np.repeat(a[-1:], K - len(a), axis=0)])  # noqa: E731  (rest at the end)
+    q = np.stack([pad(r.q_meas) for r in runs])
+    model, s = interval_model(), default_settings()
+    boxes = [initial_box_from_mode(model, r.q_meas[0], int(r.mode_true[0]), s) for r in runs]
+    x0 = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
+    return model, s, q, x0
+
+
+def test_monte_carlo_batch_backends_agree():
+    """A seeded batch of crossings and bounces (random geometry, speed,
+    quantisation): same verdicts, steps and boxes in both backends."""
+    model, s, q, x0 = _monte_carlo_batch()
+    ref, rref = track_batch(model, q, s, x0, record=True, backend="numpy")
+    fast, rfast = track_batch(model, q, s, x0, record=True, backend="compiled")
+    assert list(fast.verdict) == list(ref.verdict)
+    for f in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step"):
+        assert np.array_equal(getattr(fast, f), getattr(ref, f)), f
+    assert np.array_equal(rfast["mode"], rref["mode"])
+    _assert_same_boxes(rref, rfast, "monte carlo")
+
+
+def test_batch_member_equals_single_run():
+    """Each row runs its own fixpoint: a scenario's boxes do not depend on the
+    other scenarios of its batch (so batching is only a matter of speed)."""
+    model, s, q, x0 = _monte_carlo_batch()
+    _, rec = track_batch(model, q, s, x0, record=True)
+    for b in (0, 3, 5):
+        _, one = track_batch(model, q[b:b + 1], s, (x0[0][b], x0[1][b]), record=True)
+        for f in FIELDS:
+            assert np.array_equal(rec[f][b], one[f][0], equal_nan=True), (b, f)
+
+
+@pytest.mark.parametrize("backend", ["compiled", "numpy"])
+def test_online_tracker_equals_track(backend):
+    """``Tracker.update`` one sample at a time gives the boxes and modes of ``track``."""
+    run = run_of(CATALOGUE["crossing_1458"])
+    model, s = interval_model(), default_settings()
+    q = run.q_meas[:130]
+    x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
+    ref = track(model, q, s, x0=x0, backend=backend)
+    tr = Tracker(model, s, x0, backend=backend)
+    events = []
+    for k, qk in enumerate(q):
+        r = tr.update(qk)
+        assert r.k == k and r.mode == ref.mode[k]
+        assert np.array_equal(r.x[0], ref.x_lo[k]) and np.array_equal(r.x[1], ref.x_hi[k])
+        assert np.array_equal(r.xd[0], ref.xd_lo[k]) and np.array_equal(r.xd[1], ref.xd_hi[k])
+        events += [(k, e.value) for e in r.events]
+    gained = [k for k, e in events if e == "mode-gained"]
+    assert gained and gained[-1] == ref.certified_at_step
+
+
+def test_unknown_backend_is_refused():
+    from verifier.errors import InputError
+
+    with pytest.raises(InputError, match="backend"):
+        configure(interval_model(), default_settings(), "fortran")
