@@ -137,3 +137,21 @@ def test_unknown_backend_is_refused():
 
     with pytest.raises(InputError, match="backend"):
         configure(interval_model(), default_settings(), "fortran")
+
+
+@pytest.mark.parametrize("name", ["crossing_1458", "bounce_0800"])
+def test_initial_box_backends_agree(name):
+    """The branch and prune of the first sample: same boxes, same modes."""
+    from verifier.step import pose_solutions
+
+    run = run_of(CATALOGUE[name])
+    model, s = interval_model(), default_settings()
+    eps = s.validated(model.n).eps_q
+    for q0 in (run.q_meas[0], run.q_meas[run.k_sing]):  # at rest, and on the locus (undecided boxes)
+        Q = (q0 - eps, q0 + eps)
+        X = tuple(np.asarray(v, dtype=float) for v in model.robot.x_bounds)
+        ref = pose_solutions(model, Q, model.xi_box(), X, tol=1e-5, backend="numpy")
+        fast = pose_solutions(model, Q, model.xi_box(), X, tol=1e-5, backend="compiled")
+        assert len(ref) == len(fast) > 0
+        for (rb, rm), (fb, fm) in zip(ref, fast):
+            assert rm == fm and np.array_equal(rb[0], fb[0]) and np.array_equal(rb[1], fb[1])

@@ -35,11 +35,12 @@ import numpy as np
 
 from . import interval as I
 from .contractors import hc4_pose, mode_of, newton, split_prune, velocity, velocity_displacement
+from .contractors import pose_solutions as _np_pose_solutions
 from .errors import InputError
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "step",
-           "Tracker"]
+           "advance", "Tracker", "pose_solutions"]
 
 
 class Backend(str, Enum):
@@ -471,6 +472,26 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, parall
         st.max_width_pose, st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull,
         config.fpar, ipar, config.vec, config.base, config.diff_err, config.h, *rec)
     st.k += q.shape[1]
+
+
+def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 5e-3, max_boxes: int = 20000,
+                   sweeps: int = 30, backend: str | Backend = Backend.COMPILED):
+    """Enclose every forward-kinematics solution in ``X_search``: the branch
+    and prune of :func:`verifier.contractors.pose_solutions` (same arguments
+    and result) run by ``backend``."""
+    if Backend(backend) is Backend.NUMPY:
+        return _np_pose_solutions(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps)
+    from .compiled.contractors import pose_solutions as kernel
+
+    prog = _program(model)
+    box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)]))  # noqa: E731
+    out = np.empty((max_boxes, 2, model.n))
+    modes = np.empty(max_boxes, np.int64)
+    count = kernel(prog.code, prog.value, prog.outs, prog.meta, prog.n_nodes, box(Q), box(XI), box(X_search),
+                   float(tol), float(small), int(max_boxes), int(sweeps), out, modes)
+    if count < 0:
+        return None
+    return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
 
 
 def _check_sample(config, st, q):

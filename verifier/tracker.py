@@ -47,9 +47,8 @@ from enum import Enum
 import numpy as np
 
 from . import interval as I
-from .contractors import pose_solutions
 from .errors import InputError
-from .step import Backend, advance, configure, init_state
+from .step import Backend, advance, configure, init_state, pose_solutions
 
 __all__ = [
     "Verdict",
@@ -305,12 +304,14 @@ class TrackResult:
         }
 
 
-def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_box=None, x_search=None):
+def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_box=None, x_search=None,
+                          backend: str = "compiled"):
     """Enclosure of the pose in assembly mode ``mode`` for the first sample.
 
     Encloses every solution of ``f(x, q, xi) = 0`` with ``q in q0 + [eps_q]``,
     ``xi in [xi]``, inside ``x_search`` (the robot's ``x_bounds``), and returns
-    the hull of the solution boxes of the requested mode.
+    the hull of the solution boxes of the requested mode.  ``backend``
+    (``"compiled"`` or ``"numpy"``) runs the branch and prune.
 
     Raises
     ------
@@ -326,7 +327,7 @@ def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_bo
     if x_search is None:
         lo, hi = model.robot.x_bounds
         x_search = (np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
-    sols = pose_solutions(model, Q, XI, x_search, tol=1e-5)
+    sols = pose_solutions(model, Q, XI, x_search, tol=1e-5, backend=backend)
     if sols is None:
         raise InputError("could not isolate the forward-kinematics solutions of the first sample; give --x0 instead")
     if not sols:
@@ -507,7 +508,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
     if initial_mode is not None:
         if initial_mode not in (1, -1):
             raise InputError(f"initial mode must be +1 or -1, got {initial_mode}")
-        x0 = initial_box_from_mode(model, q_meas[0], initial_mode, settings, xi_box)
+        x0 = initial_box_from_mode(model, q_meas[0], initial_mode, settings, xi_box, backend=backend)
     else:
         lo, hi = (np.asarray(v, dtype=np.float64) for v in x0)
         if lo.shape != (model.n,) or hi.shape != (model.n,) or np.any(~(lo <= hi)):

@@ -311,3 +311,79 @@ def hc4_pose_x(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
     for i in range(n):
         X[0, i] = il[i]
         X[1, i] = ih[i]
+
+
+@jit
+def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode):
+    """Enclose every solution of ``f(x, q, xi) = 0`` in ``X_search`` ``(2, n)``
+    (branch and prune of :func:`verifier.contractors.pose_solutions`, same
+    order: depth first, left half pushed first).
+
+    Writes the solution boxes to ``out`` ``(max_boxes, 2, n)`` and their
+    modes to ``out_mode``; returns their number, or -1 when the budget of
+    ``max_boxes`` boxes ran out.
+    """
+    n = X_search.shape[1]
+    m = XI.shape[1]
+    nl = np.empty(n_nodes)
+    nh = np.empty(n_nodes)
+    il = np.empty(5 * n + m)
+    ih = np.empty(5 * n + m)
+    ws = np.empty(workspace_size(n))
+    stack = np.empty((max_boxes + 2, 2, n))
+    stack[0] = X_search
+    top = 1
+    found = 0
+    seen = 0
+    X = np.empty((2, n))
+    w0 = np.empty(n)
+    while top > 0:
+        seen += 1
+        if seen > max_boxes:
+            return -1
+        top -= 1
+        X[:] = stack[top]
+        for _ in range(sweeps):
+            for i in range(n):
+                w0[i] = X[1, i] - X[0, i]
+            hc4_pose_x(code, value, outs, meta, X, Q, XI, nl, nh, il, ih)
+            if _strictly_empty(X):
+                break
+            newton(code, value, outs, meta, X, Q, XI, True, nl, nh, il, ih, ws)
+            if _strictly_empty(X):
+                break
+            stalled = True
+            for i in range(n):
+                stalled &= X[1, i] - X[0, i] >= 0.9 * w0[i]
+            if stalled:
+                break
+        if _strictly_empty(X):
+            continue
+        mode = mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih)
+        d = 0
+        wmax = X[1, 0] - X[0, 0]
+        for i in range(1, n):
+            if X[1, i] - X[0, i] > wmax:
+                wmax = X[1, i] - X[0, i]
+                d = i
+        if (mode != 0 and wmax < small) or wmax < tol:
+            out[found] = X
+            out_mode[found] = mode
+            found += 1
+            continue
+        mid = 0.5 * (X[0, d] + X[1, d])
+        stack[top] = X
+        stack[top, 1, d] = mid
+        stack[top + 1] = X
+        stack[top + 1, 0, d] = mid
+        top += 2
+    return found
+
+
+@jit
+def _strictly_empty(B):
+    # the reference's test here is lo > hi (a NaN bound does not count)
+    for i in range(B.shape[1]):
+        if B[0, i] > B[1, i]:
+            return True
+    return False
