@@ -155,3 +155,20 @@ def test_initial_box_backends_agree(name):
         assert len(ref) == len(fast) > 0
         for (rb, rm), (fb, fm) in zip(ref, fast):
             assert rm == fm and np.array_equal(rb[0], fb[0]) and np.array_equal(rb[1], fb[1])
+
+
+def test_hypotheses_in_parallel_change_nothing(monkeypatch):
+    """The kernel that spreads one scenario's hypotheses over threads gives the serial kernel's boxes."""
+    import verifier.step as step_mod
+
+    run = run_of(CATALOGUE["crossing_1458"])
+    model, s = interval_model(), default_settings()
+    q = run.q_meas[:140]
+    x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
+    monkeypatch.setattr(step_mod, "PARALLEL_HYPOTHESES", False)
+    serial = track(model, q, s, x0=x0)
+    monkeypatch.setattr(step_mod, "PARALLEL_HYPOTHESES", True)
+    threaded = track(model, q, s, x0=x0)
+    assert threaded.verdict is serial.verdict and np.array_equal(threaded.mode, serial.mode)
+    for f in FIELDS:
+        assert np.array_equal(getattr(threaded, f), getattr(serial, f)), f

@@ -453,8 +453,16 @@ def _empty_record(B, n):
     return np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64), np.zeros((B, 0, n))
 
 
+#: Spread the geometry hypotheses of a lone scenario over numba's threads
+#: (lower latency per sample online; results are the same either way).
+PARALLEL_HYPOTHESES = False
+
+
 def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, parallel=False):
-    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call."""
+    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call.
+
+    ``parallel``: spread scenarios over threads when there are several, else
+    the geometry hypotheses of each sample."""
     from .compiled import step as kernels
 
     prog = _program(config.model)
@@ -466,7 +474,12 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, parall
         ipar = ipar.copy()
         ipar[6] = 1
         rec = record
-    run = kernels.run_parallel if parallel else kernels.run_serial
+    if not parallel or st.batch * st.hypotheses == 1:
+        run = kernels.run_serial
+    elif st.batch >= kernels.numba.config.NUMBA_NUM_THREADS:
+        run = kernels.run_parallel
+    else:
+        run = kernels.run_hypotheses_parallel
     run(prog.code, prog.value, prog.outs, prog.meta, prog.n_nodes, st.k, q, st.x, st.xd, st.xi, st.q,
         st.past_x, st.past_q, st.past_r, st.row_bad, st.init_mode, st.mode, st.streak, st.bad_at,
         st.max_width_pose, st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull,
@@ -514,7 +527,7 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
             _numpy_step(config, state, q)
         state.k += 1
     else:
-        _compiled_steps(config, state, np.ascontiguousarray(q[:, None, :]))
+        _compiled_steps(config, state, np.ascontiguousarray(q[:, None, :]), parallel=PARALLEL_HYPOTHESES)
 
 
 def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
@@ -532,7 +545,7 @@ def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
         k = state.k + (int(bad[0]) if len(bad) else 0)
         raise InputError(f"sample {k}: expected {B}x{config.model.n} finite joint values, got shape {q.shape[::2]}")
     if config.backend is Backend.COMPILED:
-        _compiled_steps(config, state, np.ascontiguousarray(q), record, parallel=B > 1)
+        _compiled_steps(config, state, np.ascontiguousarray(q), record, parallel=B > 1 or PARALLEL_HYPOTHESES)
         return
     for kk in range(Kc):
         with I.quiet_fp():

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -249,82 +250,128 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
 
 
 @jit
+def _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, streak, bad_at, mwx, mwv,
+             x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd):
+    """Combine the geometry hypotheses of scenario ``b`` after sample ``k``:
+    hull of the consistent rows, their common mode, streaks, widths, record."""
+    n = X.shape[2]
+    live = 0
+    mn = 2
+    mx = -2
+    for i in range(n):
+        x_hull[b, 0, i] = np.inf
+        x_hull[b, 1, i] = -np.inf
+        xd_hull[b, 0, i] = np.inf
+        xd_hull[b, 1, i] = -np.inf
+        qdd_hull[b, i] = 0.0
+    for p in range(P):
+        r = b * P + p
+        if row_bad[r] >= 0:
+            continue
+        live += 1
+        mn = min(mn, modes[p])
+        mx = max(mx, modes[p])
+        for i in range(n):
+            x_hull[b, 0, i] = ops.minn(x_hull[b, 0, i], X[r, 0, i])
+            x_hull[b, 1, i] = ops.maxn(x_hull[b, 1, i], X[r, 1, i])
+            xd_hull[b, 0, i] = ops.minn(xd_hull[b, 0, i], XD[r, 0, i])
+            xd_hull[b, 1, i] = ops.maxn(xd_hull[b, 1, i], XD[r, 1, i])
+            qdd_hull[b, i] = max(qdd_hull[b, i], row_qdd[p, i])
+    if live == 0 and bad_at[b] < 0:
+        bad_at[b] = k
+    mode = mn if (live > 0 and mn == mx) else 0
+    if k == 0:
+        init_mode[b] = mode
+    if mode != cur_mode[b]:
+        streak[b] = k
+    cur_mode[b] = mode
+    if bad_at[b] < 0:
+        wx = ops.width(x_hull[b, 0, 0], x_hull[b, 1, 0])
+        wv = ops.width(xd_hull[b, 0, 0], xd_hull[b, 1, 0])
+        for i in range(1, n):
+            wx = ops.maxn(wx, ops.width(x_hull[b, 0, i], x_hull[b, 1, i]))
+            wv = ops.maxn(wv, ops.width(xd_hull[b, 0, i], xd_hull[b, 1, i]))
+        mwx[b] = ops.maxn(mwx[b], wx)
+        mwv[b] = ops.maxn(mwv[b], wv)
+    if record:
+        rec_x[b, kk] = x_hull[b]
+        rec_xd[b, kk] = xd_hull[b]
+        rec_mode[b, kk] = mode
+        rec_qdd[b, kk] = qdd_hull[b]
+
+
+@jit
+def _one_row(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad, fpar, ipar, vec,
+             base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p):
+    # one hypothesis of one sample; its mode and |qdd| bound land in modes[p], row_qdd[p]
+    n = qk.shape[0]
+    modes[p] = _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
+                         min(k, past_x.shape[1]), fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws)
+    for i in range(n):
+        row_qdd[p, i] = max(abs(QDD[0, i]), abs(QDD[1, i]))
+
+
+@jit
 def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
                    init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
                    fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd):
     """Advance scenario ``b`` over the readings ``q[b]`` ``(Kc, n)``, samples
-    ``k0 .. k0 + Kc - 1``."""
+    ``k0 .. k0 + Kc - 1``, its hypotheses one after the other."""
     P = ipar[I_P]
     n = q.shape[2]
-    D = past_x.shape[1]
+    m = XI.shape[2]
     nl = np.empty(n_nodes)
     nh = np.empty(n_nodes)
-    m = XI.shape[2]
     il = np.empty(5 * n + m)
     ih = np.empty(5 * n + m)
     QDD = np.empty((2, n))
     ws = np.empty(workspace_size(n))
     modes = np.empty(P, np.int64)
+    row_qdd = np.empty((P, n))
     record = ipar[I_RECORD] != 0
     for kk in range(q.shape[1]):
         k = k0 + kk
-        n_past = min(k, D)
-        qk = q[b, kk]
-        for i in range(n):
-            qdd_hull[b, i] = 0.0
         for p in range(P):
             r = b * P + p
-            if row_bad[r] >= 0:
-                continue
-            modes[p] = _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r,
-                                 row_bad, n_past, fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws)
             if row_bad[r] < 0:
-                for i in range(n):
-                    qdd_hull[b, i] = max(qdd_hull[b, i], max(abs(QDD[0, i]), abs(QDD[1, i])))
-        # combine the geometry hypotheses
-        live = 0
-        mn = 2
-        mx = -2
-        for i in range(n):
-            x_hull[b, 0, i] = np.inf
-            x_hull[b, 1, i] = -np.inf
-            xd_hull[b, 0, i] = np.inf
-            xd_hull[b, 1, i] = -np.inf
-        for p in range(P):
-            r = b * P + p
-            if row_bad[r] >= 0:
-                continue
-            live += 1
-            mn = min(mn, modes[p])
-            mx = max(mx, modes[p])
-            for i in range(n):
-                x_hull[b, 0, i] = ops.minn(x_hull[b, 0, i], X[r, 0, i])
-                x_hull[b, 1, i] = ops.maxn(x_hull[b, 1, i], X[r, 1, i])
-                xd_hull[b, 0, i] = ops.minn(xd_hull[b, 0, i], XD[r, 0, i])
-                xd_hull[b, 1, i] = ops.maxn(xd_hull[b, 1, i], XD[r, 1, i])
-        if live == 0 and bad_at[b] < 0:
-            bad_at[b] = k
-        mode = mn if (live > 0 and mn == mx) else 0
-        if k == 0:
-            init_mode[b] = mode
-        if mode != cur_mode[b]:
-            streak[b] = k
-        cur_mode[b] = mode
-        if bad_at[b] < 0:
-            wx = 0.0
-            wv = 0.0
-            for i in range(n):
-                wx = ops.maxn(wx, ops.width(x_hull[b, 0, i], x_hull[b, 1, i])) if i else \
-                    ops.width(x_hull[b, 0, i], x_hull[b, 1, i])
-                wv = ops.maxn(wv, ops.width(xd_hull[b, 0, i], xd_hull[b, 1, i])) if i else \
-                    ops.width(xd_hull[b, 0, i], xd_hull[b, 1, i])
-            mwx[b] = ops.maxn(mwx[b], wx)
-            mwv[b] = ops.maxn(mwv[b], wv)
-        if record:
-            rec_x[b, kk] = x_hull[b]
-            rec_xd[b, kk] = xd_hull[b]
-            rec_mode[b, kk] = mode
-            rec_qdd[b, kk] = qdd_hull[b]
+                _one_row(code, value, outs, meta, r, k, q[b, kk], X, XD, XI, Q, past_x, past_q, past_r, row_bad,
+                         fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p)
+        _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, streak, bad_at, mwx, mwv,
+                 x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd)
+
+
+def run_hypotheses_parallel(code, value, outs, meta, n_nodes, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
+                            init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
+                            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd):
+    """As :func:`run_serial`, the geometry hypotheses of each sample spread
+    over numba's threads (one scenario online: its latency, not throughput)."""
+    B = q.shape[0]
+    P = ipar[I_P]
+    n = q.shape[2]
+    m = XI.shape[2]
+    NL = np.empty((P, n_nodes))
+    NH = np.empty((P, n_nodes))
+    IL = np.empty((P, 5 * n + m))
+    IH = np.empty((P, 5 * n + m))
+    QDD = np.empty((P, 2, n))
+    WS = np.empty((P, workspace_size(n)))
+    modes = np.empty((B, P), np.int64)
+    row_qdd = np.empty((B, P, n))
+    record = ipar[I_RECORD] != 0
+    for kk in range(q.shape[1]):
+        k = k0 + kk
+        for b in range(B):
+            for p in prange(P):
+                r = b * P + p
+                if row_bad[r] < 0:
+                    _one_row(code, value, outs, meta, r, k, q[b, kk], X, XD, XI, Q, past_x, past_q, past_r,
+                             row_bad, fpar, ipar, vec, base, diff_err, h, QDD[p], NL[p], NH[p], IL[p], IH[p], WS[p],
+                             modes[b], row_qdd[b], p)
+            _combine(b, k, kk, P, X, XD, row_bad, modes[b], row_qdd[b], init_mode, cur_mode, streak, bad_at, mwx,
+                     mwv, x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd)
+
+
+run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True)(run_hypotheses_parallel)
 
 
 def _make_driver(parallel: bool):
