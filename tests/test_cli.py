@@ -131,3 +131,15 @@ def test_simulate_errors(tmp_path, capsys):
     assert not (tmp_path / "x.csv").exists()
     assert main(["simulate", "--v-sing", "-1", "-o", str(tmp_path / "x.csv")]) == 2
     _one_line_error(capsys)
+
+
+def test_check_backends_give_the_same_report(crossing_csv, capsys):
+    """``--backend numpy`` runs the reference tracker: the same verdict, steps and widths."""
+    out = {}
+    for backend in ("compiled", "numpy"):
+        assert main(["check", str(crossing_csv), "--initial-mode", "1", "--json", "--backend", backend]) == 0
+        rep = json.loads(capsys.readouterr().out)
+        rep.pop("elapsed_s")
+        out[backend] = rep
+    assert out["compiled"] == out["numpy"]
+    assert out["compiled"]["verdict"] == "mode-changed"

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CrosscertError, InputError, TrajectoryFileError
+from .step import Backend
 from .tracker import TrackerSettings, VelocityModel, Verdict, track, verdict_of
 from .trajfile import TrajectoryReader, read_trajectory, write_trajectory
 
@@ -140,6 +141,8 @@ def _tracker_options(p):
     p.add_argument("--xd0", type=float, help="initial velocity bound, m/s (all components)")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
                    help="joint-data error model (paper = quantisation only, NOT sound)")
+    p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
+                   help="tracker implementation: compiled kernels (default) or the numpy reference (same results)")
 
 
 def _tracker_setup(a):
@@ -280,7 +283,7 @@ def _check(a):
     settings = make_settings(traj.t_s)
     bar, cb = _progress(len(traj.t), not a.no_progress and not a.json, "tracking")
     try:
-        res = track(model, traj.q, settings, x0=x0, initial_mode=a.initial_mode, progress=cb)
+        res = track(model, traj.q, settings, x0=x0, initial_mode=a.initial_mode, progress=cb, backend=a.backend)
     finally:
         if bar is not None:
             bar.close()
@@ -344,8 +347,9 @@ class _Monitor:
             settings = self.make_settings(t_s)
             x0 = self.x0
             if x0 is None:
-                x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings)
-            self.tracker = Tracker(self.model, settings, x0)
+                x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
+                                           backend=self.a.backend)
+            self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend)
         for line, t, q in self.pending:
             t0 = time.perf_counter_ns()
             r = self.tracker.update(q)
@@ -418,7 +422,8 @@ def _monitor(a):
     robot, model, make_settings, x0 = _tracker_setup(a)
     settings = make_settings(robot.t_s if a.t_s is None else a.t_s)
     settings.validated(robot.n)  # bad bounds fail before any input is read
-    _load_kernels(robot, model, settings)
+    if a.backend == Backend.COMPILED.value:
+        _load_kernels(robot, model, settings)
     mon = _Monitor(a, model, make_settings, x0)
     stdin = a.trajectory == "-"
     with contextlib.nullcontext(sys.stdin) if stdin else open(a.trajectory, newline="") as src:
