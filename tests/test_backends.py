@@ -157,18 +157,17 @@ def test_initial_box_backends_agree(name):
             assert rm == fm and np.array_equal(rb[0], fb[0]) and np.array_equal(rb[1], fb[1])
 
 
-def test_hypotheses_in_parallel_change_nothing(monkeypatch):
-    """The kernel that spreads one scenario's hypotheses over threads gives the serial kernel's boxes."""
-    import verifier.step as step_mod
-
-    run = run_of(CATALOGUE["crossing_1458"])
-    model, s = interval_model(), default_settings()
-    q = run.q_meas[:140]
-    x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
-    monkeypatch.setattr(step_mod, "PARALLEL_HYPOTHESES", False)
-    serial = track(model, q, s, x0=x0)
-    monkeypatch.setattr(step_mod, "PARALLEL_HYPOTHESES", True)
-    threaded = track(model, q, s, x0=x0)
-    assert threaded.verdict is serial.verdict and np.array_equal(threaded.mode, serial.mode)
-    for f in FIELDS:
-        assert np.array_equal(getattr(threaded, f), getattr(serial, f)), f
+def test_threads_change_nothing():
+    """Scenarios or hypotheses spread over threads: the serial kernel's boxes."""
+    model, s, q, x0 = _monte_carlo_batch()
+    q = q[:3, :300]
+    x0 = (x0[0][:3], x0[1][:3])
+    for b in range(3):  # a lone scenario: its hypotheses in parallel
+        one = (x0[0][b], x0[1][b])
+        serial = track(model, q[b], s, x0=one, parallel=False)
+        threaded = track(model, q[b], s, x0=one, parallel=True)
+        assert threaded.verdict is serial.verdict and np.array_equal(threaded.mode, serial.mode)
+        _assert_same_boxes(_boxes(serial), _boxes(threaded), ("hypotheses", b))
+    _, serial = track_batch(model, q, s, x0, record=True, parallel=False)  # scenarios in parallel
+    _, threaded = track_batch(model, q, s, x0, record=True, parallel=True)
+    _assert_same_boxes(serial, threaded, "scenarios")

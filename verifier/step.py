@@ -74,6 +74,12 @@ class StepConfig:
         outward.
     depth : int
         Samples kept in the window of past boxes.
+    parallel : bool
+        Compiled backend: spread the work over numba's threads (scenarios of
+        a batch, or the geometry hypotheses of a lone scenario).  Results are
+        the same either way; turn it off where the cores are already busy
+        (process pools, Dask workers): threads that wait for a busy core make
+        the time per sample erratic.  ``NUMBA_NUM_THREADS=1`` has the same effect.
     """
 
     model: object
@@ -86,6 +92,7 @@ class StepConfig:
     diff_err: np.ndarray
     h: np.ndarray
     depth: int
+    parallel: bool = True
 
 
 def _difference_error(s, j: int, two_eps):
@@ -99,8 +106,9 @@ def _difference_error(s, j: int, two_eps):
     return -bound, bound
 
 
-def configure(model, settings, backend: str | Backend = Backend.COMPILED) -> StepConfig:
-    """Validate ``settings`` for ``model`` and derive the step's constants once."""
+def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, parallel: bool = True) -> StepConfig:
+    """Validate ``settings`` for ``model`` and derive the step's constants once
+    (``parallel``: see :class:`StepConfig`)."""
     from .tracker import VelocityModel  # settings live there; no cycle at import time
 
     try:
@@ -129,7 +137,7 @@ def configure(model, settings, backend: str | Backend = Backend.COMPILED) -> Ste
                      P, int(s.qdd_bound is not None), 0], np.int64)
     return StepConfig(model=model, settings=s, backend=backend, fpar=fpar, ipar=ipar, vec=vec,
                       base=np.array(s.baselines, np.int64), diff_err=np.ascontiguousarray(diff), h=h,
-                      depth=max(s.baselines) if sound else 1)
+                      depth=max(s.baselines) if sound else 1, parallel=bool(parallel))
 
 
 @dataclass(eq=False)
@@ -453,16 +461,10 @@ def _empty_record(B, n):
     return np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64), np.zeros((B, 0, n))
 
 
-#: Spread the geometry hypotheses of a lone scenario over numba's threads
-#: (lower latency per sample online; results are the same either way).
-PARALLEL_HYPOTHESES = False
-
-
-def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, parallel=False):
-    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call.
-
-    ``parallel``: spread scenarios over threads when there are several, else
-    the geometry hypotheses of each sample."""
+def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
+    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call:
+    scenarios over the threads when there are enough of them, else the
+    geometry hypotheses of each sample (``config.parallel``)."""
     from .compiled import step as kernels
 
     prog = _program(config.model)
@@ -474,9 +476,10 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, parall
         ipar = ipar.copy()
         ipar[6] = 1
         rec = record
-    if not parallel or st.batch * st.hypotheses == 1:
+    threads = kernels.numba.config.NUMBA_NUM_THREADS
+    if not config.parallel or threads == 1 or st.batch * st.hypotheses == 1:
         run = kernels.run_serial
-    elif st.batch >= kernels.numba.config.NUMBA_NUM_THREADS:
+    elif st.batch >= threads:
         run = kernels.run_parallel
     else:
         run = kernels.run_hypotheses_parallel
@@ -527,7 +530,7 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
             _numpy_step(config, state, q)
         state.k += 1
     else:
-        _compiled_steps(config, state, np.ascontiguousarray(q[:, None, :]), parallel=PARALLEL_HYPOTHESES)
+        _compiled_steps(config, state, np.ascontiguousarray(q[:, None, :]))
 
 
 def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
@@ -545,7 +548,7 @@ def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
         k = state.k + (int(bad[0]) if len(bad) else 0)
         raise InputError(f"sample {k}: expected {B}x{config.model.n} finite joint values, got shape {q.shape[::2]}")
     if config.backend is Backend.COMPILED:
-        _compiled_steps(config, state, np.ascontiguousarray(q), record, parallel=B > 1 or PARALLEL_HYPOTHESES)
+        _compiled_steps(config, state, np.ascontiguousarray(q), record)
         return
     for kk in range(Kc):
         with I.quiet_fp():
@@ -570,6 +573,9 @@ class Tracker:
     xi_box : (lo, hi), optional
         Calibration box, the robot's by default.
     backend : {"compiled", "numpy"}
+    parallel : bool
+        Spread the hypotheses of each sample over numba's threads (see
+        :class:`StepConfig`).
 
     Examples
     --------
@@ -578,8 +584,9 @@ class Tracker:
     >>> r.mode, r.x, r.events                       # doctest: +SKIP
     """
 
-    def __init__(self, model, settings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED):
-        self.config = configure(model, settings, backend)
+    def __init__(self, model, settings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
+                 parallel: bool = True):
+        self.config = configure(model, settings, backend, parallel=parallel)
         self.state = init_state(self.config, x0, batch=1, xi_box=xi_box)
         self._mode = 0
         self._consistent = True

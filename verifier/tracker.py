@@ -361,7 +361,7 @@ def verdict_of(initial_mode: int, final_mode: int, inconsistent: bool) -> Verdic
 
 
 def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None,
-                backend: str = "compiled"):
+                backend: str = "compiled", parallel: bool = True):
     """Run the tracker on ``B`` scenarios at once.
 
     Parameters
@@ -382,8 +382,12 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         Called as ``progress(k)`` after each sample (after each block of
         samples with the compiled backend).
     backend : {"compiled", "numpy"}
-        The compiled kernels (default; scenarios in parallel) or the numpy
-        reference (:mod:`verifier.step`).
+        The compiled kernels (default) or the numpy reference
+        (:mod:`verifier.step`).
+    parallel : bool
+        Compiled backend: spread scenarios (or, for a lone scenario, its
+        geometry hypotheses) over numba's threads; the same results either
+        way.  Turn it off inside process pools or Dask workers.
 
     Returns
     -------
@@ -391,7 +395,7 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     xd_hi`` ``(B, K, n)``, ``mode`` ``(B, K)``, ``qdd_hi`` ``(B, K, n)``.
     """
     t0 = time.perf_counter()
-    config = configure(model, settings, backend)
+    config = configure(model, settings, backend, parallel=parallel)
     if not isinstance(q_meas, SampleStream):
         q_meas = np.asarray(q_meas, dtype=np.float64)
         if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
@@ -471,7 +475,7 @@ class SampleStream:
 
 
 def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None, progress=None,
-          backend: str = "compiled") -> TrackResult:
+          backend: str = "compiled", parallel: bool = True) -> TrackResult:
     """Track one recorded joint trajectory and give a verdict.
 
     Parameters
@@ -489,6 +493,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
     xi_box : (lo, hi), optional
         Calibration box, the robot's by default.
     backend : {"compiled", "numpy"}
+    parallel : bool
         See :func:`track_batch`.
 
     Returns
@@ -515,7 +520,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
             raise InputError(f"initial pose box must be {model.n} intervals with lo <= hi, got {x0}")
         x0 = (lo, hi)
     res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress,
-                           backend=backend)
+                           backend=backend, parallel=parallel)
     s = settings.validated(model.n)
     verdict = res.verdict[0]
     if initial_mode is not None and verdict is not Verdict.INCONSISTENT and res.initial_mode[0] != initial_mode:
