@@ -164,8 +164,8 @@ def test_threads_change_nothing():
     x0 = (x0[0][:3], x0[1][:3])
     for b in range(3):  # a lone scenario: its hypotheses in parallel
         one = (x0[0][b], x0[1][b])
-        serial = track(model, q[b], s, x0=one, parallel=False)
-        threaded = track(model, q[b], s, x0=one, parallel=True)
+        serial = track(model, q[b], s, x0=one)
+        threaded = track(model, q[b], s, x0=one, spread_hypotheses=True)
         assert threaded.verdict is serial.verdict and np.array_equal(threaded.mode, serial.mode)
         _assert_same_boxes(_boxes(serial), _boxes(threaded), ("hypotheses", b))
     _, serial = track_batch(model, q, s, x0, record=True, parallel=False)  # scenarios in parallel

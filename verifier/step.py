@@ -75,11 +75,17 @@ class StepConfig:
     depth : int
         Samples kept in the window of past boxes.
     parallel : bool
-        Compiled backend: spread the work over numba's threads (scenarios of
-        a batch, or the geometry hypotheses of a lone scenario).  Results are
-        the same either way; turn it off where the cores are already busy
-        (process pools, Dask workers): threads that wait for a busy core make
-        the time per sample erratic.  ``NUMBA_NUM_THREADS=1`` has the same effect.
+        Compiled backend: spread the scenarios of a batch over numba's
+        threads (one parallel region per block of samples).  Turn it off
+        inside process pools or Dask workers; ``NUMBA_NUM_THREADS=1`` has the
+        same effect.
+    spread_hypotheses : bool
+        Compiled backend, fewer scenarios than threads: spread the geometry
+        hypotheses of every sample over the threads instead (one parallel
+        region per sample).  Halves the time per sample on idle cores
+        (benchmarks/README.md), but a thread that waits for a busy core costs
+        a scheduler slice (milliseconds) at every sample: only for dedicated
+        cores.  Results are the same in every case.
     """
 
     model: object
@@ -93,6 +99,7 @@ class StepConfig:
     h: np.ndarray
     depth: int
     parallel: bool = True
+    spread_hypotheses: bool = False
 
 
 def _difference_error(s, j: int, two_eps):
@@ -106,9 +113,10 @@ def _difference_error(s, j: int, two_eps):
     return -bound, bound
 
 
-def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, parallel: bool = True) -> StepConfig:
+def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, parallel: bool = True,
+              spread_hypotheses: bool = False) -> StepConfig:
     """Validate ``settings`` for ``model`` and derive the step's constants once
-    (``parallel``: see :class:`StepConfig`)."""
+    (``parallel``, ``spread_hypotheses``: see :class:`StepConfig`)."""
     from .tracker import VelocityModel  # settings live there; no cycle at import time
 
     try:
@@ -137,7 +145,8 @@ def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, par
                      P, int(s.qdd_bound is not None), 0], np.int64)
     return StepConfig(model=model, settings=s, backend=backend, fpar=fpar, ipar=ipar, vec=vec,
                       base=np.array(s.baselines, np.int64), diff_err=np.ascontiguousarray(diff), h=h,
-                      depth=max(s.baselines) if sound else 1, parallel=bool(parallel))
+                      depth=max(s.baselines) if sound else 1, parallel=bool(parallel),
+                      spread_hypotheses=bool(spread_hypotheses))
 
 
 @dataclass(eq=False)
@@ -462,9 +471,8 @@ def _empty_record(B, n):
 
 
 def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
-    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call:
-    scenarios over the threads when there are enough of them, else the
-    geometry hypotheses of each sample (``config.parallel``)."""
+    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call,
+    threaded as ``config`` says."""
     from .compiled import step as kernels
 
     prog = _program(config.model)
@@ -477,12 +485,12 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
         ipar[6] = 1
         rec = record
     threads = kernels.numba.config.NUMBA_NUM_THREADS
-    if not config.parallel or threads == 1 or st.batch * st.hypotheses == 1:
-        run = kernels.run_serial
-    elif st.batch >= threads:
+    if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
+        run = kernels.run_hypotheses_parallel
+    elif threads > 1 and config.parallel and st.batch > 1:
         run = kernels.run_parallel
     else:
-        run = kernels.run_hypotheses_parallel
+        run = kernels.run_serial
     run(prog.code, prog.value, prog.outs, prog.meta, prog.n_nodes, st.k, q, st.x, st.xd, st.xi, st.q,
         st.past_x, st.past_q, st.past_r, st.row_bad, st.init_mode, st.mode, st.streak, st.bad_at,
         st.max_width_pose, st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull,
@@ -573,9 +581,9 @@ class Tracker:
     xi_box : (lo, hi), optional
         Calibration box, the robot's by default.
     backend : {"compiled", "numpy"}
-    parallel : bool
-        Spread the hypotheses of each sample over numba's threads (see
-        :class:`StepConfig`).
+    spread_hypotheses : bool
+        Spread the hypotheses of each sample over numba's threads: lower
+        latency on dedicated cores, erratic on busy ones (see :class:`StepConfig`).
 
     Examples
     --------
@@ -585,8 +593,8 @@ class Tracker:
     """
 
     def __init__(self, model, settings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
-                 parallel: bool = True):
-        self.config = configure(model, settings, backend, parallel=parallel)
+                 spread_hypotheses: bool = False):
+        self.config = configure(model, settings, backend, spread_hypotheses=spread_hypotheses)
         self.state = init_state(self.config, x0, batch=1, xi_box=xi_box)
         self._mode = 0
         self._consistent = True

@@ -361,7 +361,7 @@ def verdict_of(initial_mode: int, final_mode: int, inconsistent: bool) -> Verdic
 
 
 def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None,
-                backend: str = "compiled", parallel: bool = True):
+                backend: str = "compiled", parallel: bool = True, spread_hypotheses: bool = False):
     """Run the tracker on ``B`` scenarios at once.
 
     Parameters
@@ -384,10 +384,10 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     backend : {"compiled", "numpy"}
         The compiled kernels (default) or the numpy reference
         (:mod:`verifier.step`).
-    parallel : bool
-        Compiled backend: spread scenarios (or, for a lone scenario, its
-        geometry hypotheses) over numba's threads; the same results either
-        way.  Turn it off inside process pools or Dask workers.
+    parallel, spread_hypotheses : bool
+        Compiled backend: spread the scenarios, or the geometry hypotheses of
+        each sample, over numba's threads; the same results either way (see
+        :class:`verifier.step.StepConfig`).
 
     Returns
     -------
@@ -395,7 +395,7 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     xd_hi`` ``(B, K, n)``, ``mode`` ``(B, K)``, ``qdd_hi`` ``(B, K, n)``.
     """
     t0 = time.perf_counter()
-    config = configure(model, settings, backend, parallel=parallel)
+    config = configure(model, settings, backend, parallel=parallel, spread_hypotheses=spread_hypotheses)
     if not isinstance(q_meas, SampleStream):
         q_meas = np.asarray(q_meas, dtype=np.float64)
         if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
@@ -475,7 +475,7 @@ class SampleStream:
 
 
 def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None, progress=None,
-          backend: str = "compiled", parallel: bool = True) -> TrackResult:
+          backend: str = "compiled", spread_hypotheses: bool = False) -> TrackResult:
     """Track one recorded joint trajectory and give a verdict.
 
     Parameters
@@ -493,7 +493,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
     xi_box : (lo, hi), optional
         Calibration box, the robot's by default.
     backend : {"compiled", "numpy"}
-    parallel : bool
+    spread_hypotheses : bool
         See :func:`track_batch`.
 
     Returns
@@ -520,7 +520,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
             raise InputError(f"initial pose box must be {model.n} intervals with lo <= hi, got {x0}")
         x0 = (lo, hi)
     res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress,
-                           backend=backend, parallel=parallel)
+                           backend=backend, spread_hypotheses=spread_hypotheses)
     s = settings.validated(model.n)
     verdict = res.verdict[0]
     if initial_mode is not None and verdict is not Verdict.INCONSISTENT and res.initial_mode[0] != initial_mode:
