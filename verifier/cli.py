@@ -83,6 +83,9 @@ def build_parser() -> argparse.ArgumentParser:
     _tracker_options(mo)
     mo.add_argument("--t-s", type=float, help="sampling period, s (default: fixed by the first two samples)")
     mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
+    mo.add_argument("--spread-hypotheses", action="store_true",
+                    help="track the geometry hypotheses of each sample on several threads: lower latency on "
+                         "dedicated cores, erratic on busy ones")
 
     s = sub.add_parser("simulate", help="simulate encoder readings of a crossing (or a bounce)")
     s.add_argument("--robot", default=DEFAULT_ROBOT)
@@ -349,7 +352,8 @@ class _Monitor:
             if x0 is None:
                 x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
                                            backend=self.a.backend)
-            self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend)
+            self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
+                                   spread_hypotheses=self.a.spread_hypotheses)
         for line, t, q in self.pending:
             t0 = time.perf_counter_ns()
             r = self.tracker.update(q)
@@ -404,13 +408,13 @@ class _Monitor:
         return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
 
 
-def _load_kernels(robot, model, settings):
+def _load_kernels(robot, model, settings, spread_hypotheses):
     """Load the compiled kernels (about 0.4 s from the on-disk cache) on a throw-away tracker, before the
     first sample is read, so that the latencies measured are those of the tracking alone."""
     from .step import Tracker
 
     box = tuple(np.asarray(v, dtype=np.float64) for v in robot.x_bounds)
-    Tracker(model, settings, box).update(np.zeros(robot.n))
+    Tracker(model, settings, box, spread_hypotheses=spread_hypotheses).update(np.zeros(robot.n))
 
 
 def _monitor(a):
@@ -423,7 +427,7 @@ def _monitor(a):
     settings = make_settings(robot.t_s if a.t_s is None else a.t_s)
     settings.validated(robot.n)  # bad bounds fail before any input is read
     if a.backend == Backend.COMPILED.value:
-        _load_kernels(robot, model, settings)
+        _load_kernels(robot, model, settings, a.spread_hypotheses)
     mon = _Monitor(a, model, make_settings, x0)
     stdin = a.trajectory == "-"
     with contextlib.nullcontext(sys.stdin) if stdin else open(a.trajectory, newline="") as src:
