@@ -279,3 +279,18 @@ def test_no_fastmath_in_compiled():
                  for p in files for n, line in enumerate(p.read_text().splitlines(), 1)
                  if re.search(r"fastmath\s*=\s*(?!False\b)", line)]
     assert not offending, offending
+
+
+def test_outward_steps_equal_nextafter():
+    """The bit-pattern steps ``ops.up``/``ops.dn`` are ``np.nextafter`` toward
+    ``+-inf``, bit for bit (signed zeros, subnormals, the largest floats,
+    infinities, NaN, and seeded random floats of every magnitude)."""
+    rng = np.random.default_rng(11)
+    values = SPECIAL + [math.nan, 2 * SUB, -2 * SUB, math.nextafter(TINY, 0.0), -math.nextafter(TINY, 0.0)]
+    values += list(rng.standard_normal(2000) * 10.0 ** rng.integers(-320, 308, 2000))
+    with np.errstate(over="ignore"):
+        for v in values:
+            for step, toward in ((ops.up, INF), (ops.dn, -INF)):
+                got = np.float64(step(v))
+                want = np.nextafter(np.float64(v), toward)
+                assert got.tobytes() == want.tobytes() or (math.isnan(got) and math.isnan(want)), (v, got, want)
