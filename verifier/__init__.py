@@ -1,6 +1,7 @@
 """Sound interval tracking of a parallel robot's pose and velocity.
 
-Explicit re-exports of the public API (no star imports).
+Explicit re-exports of the public API (no star imports).  The one-sample
+function is ``verifier.step.step`` (not re-exported: the name is its module's).
 """
 
 from .errors import (
@@ -12,6 +13,7 @@ from .errors import (
     UnknownRobotError,
 )
 from .model import IntervalModel
+from .step import Backend, Event, StepConfig, StepResult, Tracker, TrackerState, advance, configure, init_state
 from .tape import Tape
 from .tracker import (
     BatchResult,
@@ -34,6 +36,15 @@ __all__ = [
     "TrajectoryFileError",
     "UnknownRobotError",
     "IntervalModel",
+    "Backend",
+    "Event",
+    "StepConfig",
+    "StepResult",
+    "Tracker",
+    "TrackerState",
+    "advance",
+    "configure",
+    "init_state",
     "Tape",
     "BatchResult",
     "SampleStream",
