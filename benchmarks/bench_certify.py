@@ -1,11 +1,22 @@
-"""Wall time of `certify_crossing` on the DexTAR benchmark task, phase by phase.
+"""Wall and CPU time of `certify_crossing` (what `crosscert certify` runs) on the DexTAR task, phase by phase.
 
 Prints numbers, asserts nothing.  Usage::
 
-    python benchmarks/bench_certify.py [--repeat 2] [--method smoothstep] [--foreground] [--json out.json]
+    python benchmarks/bench_certify.py [--repeat 2] [--method smoothstep] [--foreground] [--no-cold] [--json out.json]
+
+Each measurement runs in a fresh child process (this script with ``--child``):
+
+* **cache on disk**: ``--repeat`` runs (default 2) in one process with the
+  numba cache of the source tree: run 1 is the first call after an install
+  (kernels loaded from disk), run 2 and later are warm (report these);
+* **cold cache** (skip with ``--no-cold``): one run with ``NUMBA_CACHE_DIR``
+  set to an empty temporary directory, so every kernel is compiled (the
+  cache in the source tree is left alone).
 
 ``--foreground`` runs the counterexample searches in the calling process
-(``refute_in_background=False``) instead of the background worker.
+(``refute_in_background=False``) instead of the background worker.  CPU time
+is that of the certifying process (all its threads) plus that of the worker
+process, which is waited for when the certificate is returned.
 """
 
 from __future__ import annotations
@@ -13,46 +24,101 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
+import resource
+import shutil
+import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+PHASES = ("setup", "search", "certificate", "monte_carlo", "refutation")
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--repeat", type=int, default=1)
-    p.add_argument("--method", default="smoothstep", choices=("smoothstep", "time-optimal", "dynamic"))
-    p.add_argument("--foreground", action="store_true")
-    p.add_argument("--json")
-    a = p.parse_args(argv)
+def children_cpu_s() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
+
+def child(repeat: int, method: str, foreground: bool) -> list:
+    """``repeat`` runs of certify_crossing in this process; one dict per run."""
     from planner import CrossingTask, PlanningBounds, certify_crossing
     from robots import DEXTAR, DEXTAR_DYNAMICS, KinematicModel, benchmark_crossing
     from verifier.model import IntervalModel
 
     b = benchmark_crossing()
     task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
-    bounds = PlanningBounds(method=a.method, dynamics=DEXTAR_DYNAMICS if a.method == "dynamic" else None)
+    bounds = PlanningBounds(method=method, dynamics=DEXTAR_DYNAMICS if method == "dynamic" else None)
     kin, imodel = KinematicModel(DEXTAR), IntervalModel(DEXTAR)
-    print(f"machine: {os.cpu_count()} CPUs; method {a.method}; "
-          f"refutation {'in the calling process' if a.foreground else 'in the background worker'}")
     runs = []
-    for r in range(a.repeat):
-        cert = certify_crossing(DEXTAR, task, bounds, kin=kin, imodel=imodel,
-                                refute_in_background=not a.foreground)
-        row = {"total_s": cert.elapsed_s, **{f"{k}_s": v for k, v in cert.timings_s.items()},
-               "v_min": cert.v_min, "refutation_bound": cert.refutation_bound,
-               "tracked_speeds": len(cert.trials), "refuted_speeds_searched": len(cert.refutation),
-               "mc_detected": None if cert.monte_carlo is None else cert.monte_carlo["detected_in_class"]}
-        runs.append(row)
-        print(f"run {r + 1}: " + ", ".join(f"{k} {v:.2f}" if isinstance(v, float) else f"{k} {v}"
-                                          for k, v in row.items()))
-    if a.repeat > 1:
-        print(f"median total {statistics.median(r['total_s'] for r in runs):.2f} s over {a.repeat} runs")
+    for _ in range(repeat):
+        c0, w0, t0 = time.process_time(), children_cpu_s(), time.perf_counter()
+        cert = certify_crossing(DEXTAR, task, bounds, kin=kin, imodel=imodel, refute_in_background=not foreground)
+        wall = time.perf_counter() - t0
+        cpu, worker = time.process_time() - c0, children_cpu_s() - w0
+        runs.append({"wall_s": wall, "elapsed_s": cert.elapsed_s, "cpu_s": cpu + worker, "cpu_main_s": cpu,
+                     "cpu_worker_s": worker, **{f"{k}_s": cert.timings_s.get(k) for k in PHASES},
+                     "v_min": cert.v_min, "refutation_bound": cert.refutation_bound,
+                     "tracked_speeds": len(cert.trials), "refuted_speeds_searched": len(cert.refutation),
+                     "mc_detected": None if cert.monte_carlo is None else cert.monte_carlo["detected_in_class"]})
+    return runs
+
+
+def measure(args: argparse.Namespace, repeat: int, cache_dir: str | None) -> list | None:
+    """Run the child process; ``cache_dir`` None = the numba cache of the source tree."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    if cache_dir is not None:
+        env["NUMBA_CACHE_DIR"] = cache_dir
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--repeat", str(repeat), "--method", args.method]
+    cmd += ["--foreground"] if args.foreground else []
+    p = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        print(f"!! child failed:\n{p.stderr}", flush=True)
+        return None
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--repeat", type=int, default=2, help="runs in the process with the cache on disk (default 2)")
+    p.add_argument("--method", default="smoothstep", choices=("smoothstep", "time-optimal", "dynamic"))
+    p.add_argument("--foreground", action="store_true")
+    p.add_argument("--no-cold", action="store_true", help="skip the run with an empty numba cache")
+    p.add_argument("--json")
+    p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    if a.child:
+        print(json.dumps(child(a.repeat, a.method, a.foreground)))
+        return 0
+
+    load = " / ".join(f"{v:.2f}" for v in os.getloadavg())
+    print(f"machine: {os.cpu_count()} CPUs; load average {load} (1 / 5 / 15 min); method {a.method}; "
+          f"refutation {'in the calling process' if a.foreground else 'in the background worker'}", flush=True)
+    rows = []
+    for i, r in enumerate(measure(a, a.repeat, None) or []):
+        rows.append({"case": "cache on disk, run 1 (first call)" if i == 0 else f"warm, run {i + 1}", **r})
+    if not a.no_cold:
+        tmp = tempfile.mkdtemp(prefix="crosscert-numba-cold-")
+        try:
+            rows += [{"case": "cold (empty numba cache)", **r} for r in measure(a, 1, tmp) or []]
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+    print(f"{'case':<36}" + "".join(f"{k + ' s':>15}" for k in PHASES)
+          + f"{'total wall s':>14}{'CPU s':>8}{'(main':>8}{'+ worker)':>10}{'v_min':>8}{'refuted':>9}{'MC':>5}")
+    for r in rows:
+        phases = "".join(f"{r[k + '_s']:>15.2f}" if r[k + "_s"] is not None else f"{'-':>15}" for k in PHASES)
+        ref = "-" if r["refutation_bound"] is None else f"{r['refutation_bound']:.3f}"
+        vmin = "-" if r["v_min"] is None else f"{r['v_min']:.3f}"
+        print(f"{r['case']:<36}{phases}{r['elapsed_s']:>14.2f}{r['cpu_s']:>8.1f}{r['cpu_main_s']:>8.1f}"
+              f"{r['cpu_worker_s']:>10.1f}{vmin:>8}{ref:>9}{str(r['mc_detected']):>5}")
+    print(f"(total wall = certify_crossing's elapsed_s; {rows[0]['tracked_speeds'] if rows else '?'} tracked speeds, "
+          f"{rows[0]['refuted_speeds_searched'] if rows else '?'} speeds searched for counterexamples; "
+          f"load average at the end {' / '.join(f'{v:.2f}' for v in os.getloadavg())})")
     if a.json:
-        Path(a.json).write_text(json.dumps(runs, indent=1))
+        Path(a.json).write_text(json.dumps(rows, indent=1))
     return 0
 
 

@@ -173,3 +173,24 @@ def test_threads_change_nothing():
     _, serial = track_batch(model, q, s, x0, record=True, parallel=False)  # scenarios in parallel
     _, threaded = track_batch(model, q, s, x0, record=True, parallel=True)
     _assert_same_boxes(serial, threaded, "scenarios")
+
+
+def test_read_only_readings_use_the_same_kernel():
+    """A read-only recording (a frozen plan's joints) runs the kernel compiled
+    for writable arrays: no second compilation, the same boxes."""
+    from verifier.compiled.step import run_serial
+
+    run = run_of(CATALOGUE["crossing_1458"])
+    model, s = interval_model(), default_settings()
+    q = np.array(run.q_meas[:40])
+    x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
+    ref = track(model, q, s, x0=x0)
+    q.setflags(write=False)
+    tr = Tracker(model, s, x0)
+    for k in range(len(q)):
+        r = tr.update(q[k])
+        assert np.array_equal(r.x[0], ref.x_lo[k]) and np.array_equal(r.x[1], ref.x_hi[k])
+    frozen = track(model, q, s, x0=x0)
+    assert np.array_equal(frozen.x_lo, ref.x_lo)
+    assert all(not any(getattr(t, "readonly", False) for t in sig if hasattr(t, "readonly"))
+               for sig in run_serial.signatures)

@@ -518,6 +518,13 @@ def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 
     return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
 
 
+def _kernel_array(a):
+    """A writable C-contiguous float64 copy: numba compiles a separate kernel for
+    each array layout and for read-only arrays (a row of a frozen recording
+    would cost a second compilation)."""
+    return np.array(a, dtype=np.float64, order="C", copy=True)
+
+
 def _check_sample(config, st, q):
     q = np.asarray(q, dtype=np.float64)
     if q.shape != (st.batch, config.model.n) or not np.all(np.isfinite(q)):
@@ -538,7 +545,7 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
             _numpy_step(config, state, q)
         state.k += 1
     else:
-        _compiled_steps(config, state, np.ascontiguousarray(q[:, None, :]))
+        _compiled_steps(config, state, _kernel_array(q[:, None, :]))
 
 
 def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
@@ -556,7 +563,7 @@ def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
         k = state.k + (int(bad[0]) if len(bad) else 0)
         raise InputError(f"sample {k}: expected {B}x{config.model.n} finite joint values, got shape {q.shape[::2]}")
     if config.backend is Backend.COMPILED:
-        _compiled_steps(config, state, np.ascontiguousarray(q), record)
+        _compiled_steps(config, state, _kernel_array(q), record)
         return
     for kk in range(Kc):
         with I.quiet_fp():

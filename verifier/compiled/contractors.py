@@ -209,9 +209,20 @@ def velocity_displacement(code, value, outs, meta, X, Q, XI, XD, past_x, past_q,
 
 
 @jit
-def _empty(B):
+def empty_box(B):
+    """Whether the box ``(2, n)`` is empty: some ``not (lo <= hi)`` (a NaN bound counts)."""
     for i in range(B.shape[1]):
         if not (B[0, i] <= B[1, i]):
+            return True
+    return False
+
+
+@jit
+def inverted_box(B):
+    """Whether some ``lo > hi``: the branch and prunes' test (as the
+    reference's ``np.any(lo > hi)``, a NaN bound does not count)."""
+    for i in range(B.shape[1]):
+        if B[0, i] > B[1, i]:
             return True
     return False
 
@@ -270,11 +281,11 @@ def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, 
                 alive = True
                 for _ in range(sweeps):
                     hc4_pose_x(code, value, outs, meta, box, Q, XI, nl, nh, il, ih)
-                    if _empty(box):
+                    if inverted_box(box):
                         alive = False
                         break
                     newton(code, value, outs, meta, box, Q, XI, True, nl, nh, il, ih, ws)
-                    if _empty(box):
+                    if inverted_box(box):
                         alive = False
                         break
                 if alive:
@@ -347,17 +358,17 @@ def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small
             for i in range(n):
                 w0[i] = X[1, i] - X[0, i]
             hc4_pose_x(code, value, outs, meta, X, Q, XI, nl, nh, il, ih)
-            if _strictly_empty(X):
+            if inverted_box(X):
                 break
             newton(code, value, outs, meta, X, Q, XI, True, nl, nh, il, ih, ws)
-            if _strictly_empty(X):
+            if inverted_box(X):
                 break
             stalled = True
             for i in range(n):
                 stalled &= X[1, i] - X[0, i] >= 0.9 * w0[i]
             if stalled:
                 break
-        if _strictly_empty(X):
+        if inverted_box(X):
             continue
         mode = mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih)
         d = 0
@@ -378,12 +389,3 @@ def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small
         stack[top + 1, 0, d] = mid
         top += 2
     return found
-
-
-@jit
-def _strictly_empty(B):
-    # the reference's test here is lo > hi (a NaN bound does not count)
-    for i in range(B.shape[1]):
-        if B[0, i] > B[1, i]:
-            return True
-    return False

@@ -20,6 +20,7 @@ from numba import njit, prange
 
 from . import ops
 from .contractors import (
+    empty_box,
     hc4_pose,
     mode_of,
     newton,
@@ -45,14 +46,6 @@ def _wsum(B):
     for i in range(B.shape[1]):
         s += ops.width(B[0, i], B[1, i])
     return s
-
-
-@jit
-def _empty(B):
-    for i in range(B.shape[1]):
-        if not (B[0, i] <= B[1, i]):
-            return True
-    return False
 
 
 @jit
@@ -218,7 +211,7 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
                                   n_base, vec[V_AMAX], nl, nh, il, ih, ws)
         elif has_qd:
             velocity_gs(code, value, outs, meta, Xr, Qr, XIr, XDr, QD, nl, nh, il, ih, ws)
-        if _empty(Xr) or _empty(XDr) or _empty(XIr) or _empty(Qr):
+        if empty_box(Xr) or empty_box(XDr) or empty_box(XIr) or empty_box(Qr):
             dead = True
             break
         wx1 = _wsum(Xr)
@@ -237,7 +230,7 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
             if narrow:
                 mode = split_prune(code, value, outs, meta, Xr, Qr, XIr, ipar[I_SPLIT_BOXES],
                                    fpar[F_SPLIT_TOL], 2, nl, nh, il, ih, ws)
-                dead = _empty(Xr)
+                dead = empty_box(Xr)
     if dead:
         row_bad[r] = k
         mode = 0
