@@ -35,8 +35,17 @@ def set_input(in_lo, in_hi, slot, box):
 
 
 @jit
-def hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
-    """HC4Revise on ``f(x, q, xi) = 0``: contracts ``X``, ``Q`` and ``XI`` in place."""
+def scratch(n_nodes, n, m):
+    """The scratch vectors of one thread: node bounds ``nl, nh``, tape inputs
+    ``il, ih`` (every tape's inputs, at most ``5 n + m``) and temporaries ``ws``."""
+    return (np.empty(n_nodes), np.empty(n_nodes), np.empty(5 * n + m), np.empty(5 * n + m),
+            np.empty(workspace_size(n)))
+
+
+@jit
+def hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih, joints_too):
+    """HC4Revise on ``f(x, q, xi) = 0``: contracts ``X`` in place, and ``Q``
+    and ``XI`` too when ``joints_too`` (else they are kept as given)."""
     n = X.shape[1]
     m = XI.shape[1]
     set_input(il, ih, 0, X)
@@ -46,11 +55,13 @@ def hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
     for i in range(n):
         X[0, i] = il[i]
         X[1, i] = ih[i]
-        Q[0, i] = il[n + i]
-        Q[1, i] = ih[n + i]
-    for i in range(m):
-        XI[0, i] = il[2 * n + i]
-        XI[1, i] = ih[2 * n + i]
+    if joints_too:
+        for i in range(n):
+            Q[0, i] = il[n + i]
+            Q[1, i] = ih[n + i]
+        for i in range(m):
+            XI[0, i] = il[2 * n + i]
+            XI[1, i] = ih[2 * n + i]
 
 
 @jit
@@ -280,7 +291,7 @@ def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, 
                     box[0, d] = mid
                 alive = True
                 for _ in range(sweeps):
-                    hc4_pose_x(code, value, outs, meta, box, Q, XI, nl, nh, il, ih)
+                    hc4_pose(code, value, outs, meta, box, Q, XI, nl, nh, il, ih, False)
                     if inverted_box(box):
                         alive = False
                         break
@@ -312,19 +323,6 @@ def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, 
 
 
 @jit
-def hc4_pose_x(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
-    """HC4Revise on ``f = 0`` contracting ``X`` only (``Q``, ``XI`` kept)."""
-    n = X.shape[1]
-    set_input(il, ih, 0, X)
-    set_input(il, ih, n, Q)
-    set_input(il, ih, 2 * n, XI)
-    hc4(code, value, outs, meta, T_F, n, il, ih, nl, nh)
-    for i in range(n):
-        X[0, i] = il[i]
-        X[1, i] = ih[i]
-
-
-@jit
 def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode):
     """Enclose every solution of ``f(x, q, xi) = 0`` in ``X_search`` ``(2, n)``
     (branch and prune of :func:`verifier.contractors.pose_solutions`, same
@@ -335,12 +333,7 @@ def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small
     ``max_boxes`` boxes ran out.
     """
     n = X_search.shape[1]
-    m = XI.shape[1]
-    nl = np.empty(n_nodes)
-    nh = np.empty(n_nodes)
-    il = np.empty(5 * n + m)
-    ih = np.empty(5 * n + m)
-    ws = np.empty(workspace_size(n))
+    nl, nh, il, ih, ws = scratch(n_nodes, n, XI.shape[1])
     stack = np.empty((max_boxes + 2, 2, n))
     stack[0] = X_search
     top = 1
@@ -357,7 +350,7 @@ def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small
         for _ in range(sweeps):
             for i in range(n):
                 w0[i] = X[1, i] - X[0, i]
-            hc4_pose_x(code, value, outs, meta, X, Q, XI, nl, nh, il, ih)
+            hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih, False)
             if inverted_box(X):
                 break
             newton(code, value, outs, meta, X, Q, XI, True, nl, nh, il, ih, ws)

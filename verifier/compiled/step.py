@@ -27,6 +27,7 @@ from .contractors import (
     split_prune,
     velocity_displacement,
     velocity_gs,
+    scratch,
     workspace_size,
 )
 from .linalg import linear_enclosure
@@ -202,7 +203,7 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
         wv0 = _wsum(XDr)
         if not keep_xi:
             XIw[:] = XIr
-        hc4_pose(code, value, outs, meta, Xr, Qr, XIw, nl, nh, il, ih)
+        hc4_pose(code, value, outs, meta, Xr, Qr, XIw, nl, nh, il, ih, True)
         if keep_xi:
             XIr[:] = XIw
         newton(code, value, outs, meta, Xr, Qr, XIr, True, nl, nh, il, ih, ws)
@@ -312,13 +313,8 @@ def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, pas
     ``k0 .. k0 + Kc - 1``, its hypotheses one after the other."""
     P = ipar[I_P]
     n = q.shape[2]
-    m = XI.shape[2]
-    nl = np.empty(n_nodes)
-    nh = np.empty(n_nodes)
-    il = np.empty(5 * n + m)
-    ih = np.empty(5 * n + m)
+    nl, nh, il, ih, ws = scratch(n_nodes, n, XI.shape[2])
     QDD = np.empty((2, n))
-    ws = np.empty(workspace_size(n))
     modes = np.empty(P, np.int64)
     row_qdd = np.empty((P, n))
     record = ipar[I_RECORD] != 0
