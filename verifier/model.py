@@ -68,6 +68,14 @@ class IntervalModel:
         self.tape_det = Tape(fun("det", [x, q, xi], [det]))
 
     @cached_property
+    def program(self):
+        """Every tape packed as flat arrays for the compiled kernels
+        (:func:`verifier.compiled.tape.pack`), built once per model."""
+        from .compiled.tape import pack
+
+        return pack(self)
+
+    @cached_property
     def numeric(self) -> dict[str, ca.Function]:
         """Float CasADi functions of the same expressions (for tests and simulation)."""
         s = self.sx

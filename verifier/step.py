@@ -456,16 +456,6 @@ def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
 # ---------------------------------------------------------------------------- compiled
 
 
-def _program(model):
-    prog = getattr(model, "_compiled_program", None)
-    if prog is None:
-        from .compiled.tape import pack
-
-        prog = pack(model)
-        model._compiled_program = prog
-    return prog
-
-
 def _empty_record(B, n):
     return np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64), np.zeros((B, 0, n))
 
@@ -475,7 +465,7 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
     threaded as ``config`` says."""
     from .compiled import step as kernels
 
-    prog = _program(config.model)
+    prog = config.model.program
     B, n = st.batch, config.model.n
     ipar = config.ipar
     if record is None:
@@ -507,7 +497,7 @@ def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 
         return _np_pose_solutions(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps)
     from .compiled.contractors import pose_solutions as kernel
 
-    prog = _program(model)
+    prog = model.program
     box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)]))  # noqa: E731
     out = np.empty((max_boxes, 2, model.n))
     modes = np.empty(max_boxes, np.int64)
