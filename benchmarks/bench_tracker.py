@@ -243,8 +243,8 @@ def latency_stats(lat: np.ndarray, mode: np.ndarray) -> dict:
 
 def bench_latency(model, kin, backends, quick: bool) -> dict:
     rows, readonly = [], None
-    say(f"  Tracker.update on one scenario, time.perf_counter_ns around each call; mean, p50, p99 and 'max' over "
-        f"samples 1..K-1 (after warm-up: sample 0 excluded), 'max incl. 0' includes sample 0; RTF = 1 ms / mean")
+    say("  Tracker.update on one scenario, time.perf_counter_ns around each call; mean, p50, p99 and 'max' over "
+        "samples 1..K-1 (after warm-up: sample 0 excluded), 'max incl. 0' includes sample 0; RTF = 1 ms / mean")
     say(f"  {'recording':<22}{'backend':<10}{'runs':>5}{'K':>6}{'mean us':>10}{'p50 us':>9}{'p99 us':>10}"
         f"{'max us':>10}{'sample 0':>10}{'max incl. 0':>13}{'RTF':>8}{'far us':>9}{'near us':>10}  verdict")
     for label, t_rest in (("crossing", T_REST), (f"{T_REST_LONG:g} s rest + crossing", T_REST_LONG)):

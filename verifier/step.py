@@ -27,7 +27,6 @@ not depend on the other scenarios of its batch.
 from __future__ import annotations
 
 import itertools
-import time
 from dataclasses import dataclass, field
 from enum import Enum
 
@@ -474,7 +473,9 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
         ipar = ipar.copy()
         ipar[6] = 1
         rec = record
-    threads = kernels.numba.config.NUMBA_NUM_THREADS
+    import numba
+
+    threads = numba.config.NUMBA_NUM_THREADS
     if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
         run = kernels.run_hypotheses_parallel
     elif threads > 1 and config.parallel and st.batch > 1:
