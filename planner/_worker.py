@@ -16,7 +16,7 @@ import subprocess
 import sys
 import threading
 
-from verifier.errors import CrosscertError
+from robots.errors import CrosscertError
 
 
 class WorkerStopped(CrosscertError):

@@ -49,19 +49,19 @@ on executions checked to be admissible.
 from __future__ import annotations
 
 import importlib.metadata as md
-import importlib.util
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from verifier.errors import InputError, SimulationError
+from robots.errors import InputError, SimulationError
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, TrackResult, Verdict, initial_box_from_mode, track, track_batch
 
 from . import execution as ex_
 from .simulate import TimeLaw, ramp_length
+from .task import CrossingTask, Method, PlannedTrajectory, PlanningBounds, crossing_on_segment
 
 __all__ = [
     "CrossingTask",
@@ -77,144 +77,6 @@ __all__ = [
     "monte_carlo_confirmation",
     "certify_crossing",
 ]
-
-
-@dataclass(frozen=True)
-class CrossingTask:
-    """Go from ``start`` (at rest, one assembly mode) to ``goal`` (at rest, the other).
-
-    Parameters
-    ----------
-    start, goal : array (n,)
-        Poses, SI.
-    working_guess : array (n,)
-        Joints (rad) on the working branch near ``start``.
-    """
-
-    start: np.ndarray
-    goal: np.ndarray
-    working_guess: np.ndarray
-
-    def __post_init__(self):
-        for name in ("start", "goal", "working_guess"):
-            v = np.asarray(getattr(self, name), dtype=float)
-            if v.ndim != 1 or not np.all(np.isfinite(v)):
-                raise InputError(f"task {name} must be a finite vector, got {getattr(self, name)!r}")
-            object.__setattr__(self, name, v)
-        if self.start.shape != self.goal.shape:
-            raise InputError("task start and goal must have the same dimension")
-        if np.linalg.norm(self.goal - self.start) == 0.0:
-            raise InputError("task start and goal coincide")
-
-
-@dataclass(frozen=True)
-class PlanningBounds:
-    """Bounds of the planning-time certification (SI).
-
-    Parameters
-    ----------
-    eps_q : float, optional
-        Encoder error bound, rad (robot default).
-    tracking_error : float
-        Allowed deviation of the readings from the planned joints, rad.
-    a_max : array (n,), optional
-        End-effector acceleration bound, m/s^2.  ``None``: derived from each
-        plan as ``max |xdd_plan| (1 + a_margin)`` componentwise.
-    a_margin : float
-        Relative margin of the derived ``a_max``.
-    a_peak : float
-        Peak acceleration of the planned speed ramps, m/s^2.
-    t_s : float, optional
-        Sampling period, s (robot default).
-    t_rest : float
-        Rest before and after the motion, s (20 samples at 1 kHz: the
-        velocity box contracts from ``xd0`` long before the motion starts;
-        longer rests only add tracked samples).
-    xi_splits : tuple, optional
-        Geometry hypotheses of the tracker (robot default).
-    method : str
-        Time law of the plans: ``"smoothstep"``, ``"time-optimal"`` or
-        ``"dynamic"`` (see :func:`plan_crossing`).
-    dynamics : robots.dynamics.LumpedMassModel, optional
-        Dynamic model for ``method="dynamic"`` (torque limits, criterion).
-    qd_max, qdd_max : float, optional
-        Joint speed (rad/s) and acceleration (rad/s^2) limits of the
-        ``time-optimal`` and ``dynamic`` plans (30 and 3000 by default for
-        ``dynamic``; none for ``time-optimal``).
-    execution : str
-        Class of admissible executions the certificate covers
-        (:mod:`planner.execution`): ``"cartesian"`` (default; the end-effector
-        follows the planned path, any geometry in ``[xi]``) or ``"joint"``
-        (joints within ``eps_q + tracking_error`` of the planned joints).
-    """
-
-    eps_q: float | None = None
-    tracking_error: float = 0.0
-    a_max: tuple | None = None
-    a_margin: float = 0.1
-    a_peak: float = 60.0
-    t_s: float | None = None
-    t_rest: float = 0.02
-    xi_splits: tuple | None = None
-    method: str = "smoothstep"
-    dynamics: object = field(default=None, repr=False)
-    qd_max: float | None = None
-    qdd_max: float | None = None
-    execution: str = "cartesian"
-
-    def resolved(self, robot) -> "PlanningBounds":
-        eps = robot.eps_q if self.eps_q is None else float(self.eps_q)
-        ts = robot.t_s if self.t_s is None else float(self.t_s)
-        for name, v in (("eps_q", eps), ("t_s", ts), ("a_peak", self.a_peak)):
-            if not (np.isfinite(v) and v > 0):
-                raise InputError(f"{name} must be positive, got {v}")
-        if not (self.tracking_error >= 0 and self.a_margin >= 0 and self.t_rest >= 0):
-            raise InputError("tracking_error, a_margin and t_rest must be non-negative")
-        amax = None if self.a_max is None else tuple(np.broadcast_to(np.asarray(self.a_max, float), (robot.n,)))
-        splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
-        if self.method not in ("smoothstep", "time-optimal", "dynamic"):
-            raise InputError(f"unknown planning method {self.method!r}; use 'smoothstep', 'time-optimal' or 'dynamic'")
-        if self.execution not in ex_.KINDS:
-            raise InputError(f"unknown execution class {self.execution!r}; use 'cartesian' or 'joint'")
-        if self.method == "time-optimal":
-            _require_plan_extra()
-        if self.method == "dynamic" and self.dynamics is None:
-            raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
-        return PlanningBounds(eps, float(self.tracking_error), amax, float(self.a_margin), float(self.a_peak), ts,
-                              float(self.t_rest), splits, self.method, self.dynamics, self.qd_max, self.qdd_max,
-                              self.execution)
-
-
-def _require_plan_extra():
-    """The ``time-optimal`` law needs the ``plan`` extra: say so before anything runs."""
-    missing = [m for m in ("cvxpy", "toppra") if importlib.util.find_spec(m) is None]
-    if missing:
-        raise InputError(f"method 'time-optimal' needs {' and '.join(missing)} (optional dependencies): "
-                         "pip install 'crosscert[plan]'")
-
-
-@dataclass(frozen=True)
-class PlannedTrajectory:
-    """A planned crossing sampled at ``t_s``.
-
-    Attributes
-    ----------
-    t : (K,) s; q, qd, qdd : (K, n) rad, rad/s, rad/s^2; x, xd, xdd : (K, n) SI.
-    k_sing : int — sample of the nominal crossing; v_sing : float, m/s.
-    crossing_point : (n,) m; xi_plan : (m,) — planning geometry.
-    """
-
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    x: np.ndarray
-    xd: np.ndarray
-    xdd: np.ndarray
-    k_sing: int
-    v_sing: float
-    crossing_point: np.ndarray
-    xi_plan: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -305,45 +167,6 @@ class CrossingCertificate:
 
 
 # ------------------------------------------------------------------ planning
-def _crossing_on_segment(kin, task, xi):
-    """Arc length (m) where the segment meets the Type 2 locus, and the IK there.
-
-    IK continuation on a grid of 0.5 mm, then bisection of the sign change of
-    ``det J_x``.  Raises if the start or goal is unreachable, or if both lie in
-    the same assembly mode.
-    """
-    L = float(np.linalg.norm(task.goal - task.start))
-    u = (task.goal - task.start) / L
-    N = max(8, int(np.ceil(L / 5e-4)))
-    s = np.linspace(0.0, L, N + 1)
-    X = task.start[None] + s[:, None] * u[None]
-    try:
-        Q = kin.ik_path(X, xi, task.working_guess)
-    except SimulationError as exc:
-        raise InputError(f"the straight path from start to goal is not reachable in the working mode: {exc}") from None
-    modes = kin.mode_batch(X, Q, xi)
-    m0, m1 = modes[0], modes[-1]
-    if m0 == 0 or m1 == 0:
-        raise InputError("start or goal lies on the Type 2 locus; move it off the locus")
-    if m0 == m1:
-        raise InputError(f"goal is in the same assembly mode ({m0:+d}) as the start: there is nothing to cross")
-    change = np.nonzero(modes[:-1] != modes[1:])[0]
-    if np.count_nonzero(modes[:-1] * modes[1:] < 0) > 1:
-        raise InputError("the straight path crosses the Type 2 locus more than once; choose another start/goal")
-    k = int(change[0])
-    lo, hi = s[k], s[k + 1]
-    qg = Q[k]
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        qm = kin.ik(task.start + mid * u, xi, qg)
-        if kin.det_batch((task.start + mid * u)[None], qm[None], xi)[0] * kin.robot.mode_sign * m0 > 0:
-            lo = mid
-            qg = qm
-        else:
-            hi = mid
-    return 0.5 * (lo + hi), u, L, int(m0)
-
-
 def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds,
                   method: str | None = None, limits=None) -> PlannedTrajectory:
     """Plan a rest-to-rest straight crossing at ``v_sing`` (m/s).
@@ -377,10 +200,10 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     if not (np.isfinite(v_sing) and v_sing > 0):
         raise InputError(f"v_sing must be positive, got {v_sing}")
     xi = robot.xi_center
-    s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
+    c = crossing_on_segment(kin, task, xi)
+    s_star, u, L = c.s_star, c.u, c.length
     method = b.method if method is None else method
     if method == "time-optimal":
-        _require_plan_extra()
         return _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits)
     if method == "dynamic":
         return _plan_dynamic(kin, task, v_sing, b, xi)
@@ -421,7 +244,8 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     k_sing = int(round((t_cross + shift) / b.t_s))
     for arr in (t, Q, QD, QDD, X, XD, XDD):
         arr.setflags(write=False)
-    return PlannedTrajectory(t, Q, QD, QDD, X, XD, XDD, k_sing, float(v_sing), task.start + s_star * u, xi.copy())
+    return PlannedTrajectory(t=t, q=Q, qd=QD, qdd=QDD, x=X, xd=XD, xdd=XDD, t_s=b.t_s, k_sing=k_sing, v_sing=v_sing,
+                             crossing_point=task.start + s_star * u, xi_plan=xi)
 
 
 def _time_optimal_setup(kin, task, b, xi, s_star, u, L, limits):
@@ -458,7 +282,8 @@ def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
     robot = kin.robot
     b = bounds.resolved(robot)
     xi = robot.xi_center
-    s_star, u, L, _ = _crossing_on_segment(kin, task, xi)
+    c = crossing_on_segment(kin, task, xi)
+    s_star, u, L = c.s_star, c.u, c.length
     if b.method == "time-optimal":
         ts_, samples, lim = _time_optimal_setup(kin, task, b, xi, s_star, u, L, None)
         try:
@@ -474,10 +299,8 @@ def _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits):
     ts_, samples, lim = _time_optimal_setup(kin, task, b, xi, s_star, u, L, limits)
     scaling = ts_.time_optimal_scaling(samples, lim, v_sing=v_sing, s_star=s_star)
     tt = ts_.resample(scaling, samples, b.t_s, t_rest=b.t_rest, t_rest_end=b.t_rest)
-    arrays = [np.array(a) for a in (tt.t, tt.q, tt.qd, tt.qdd, tt.x, tt.xd, tt.xdd)]
-    for arr in arrays:
-        arr.setflags(write=False)
-    return PlannedTrajectory(*arrays, int(tt.k_star), float(v_sing), task.start + s_star * u, xi.copy())
+    return PlannedTrajectory(t=tt.t, q=tt.q, qd=tt.qd, qdd=tt.qdd, x=tt.x, xd=tt.xd, xdd=tt.xdd, t_s=b.t_s,
+                             k_sing=tt.k_star, v_sing=v_sing, crossing_point=task.start + s_star * u, xi_plan=xi)
 
 
 def _plan_dynamic(kin, task, v_sing, b, xi):
@@ -748,7 +571,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
     b = (bounds or PlanningBounds()).resolved(robot)
-    *_, m0 = _crossing_on_segment(kin, task, robot.xi_center)
+    m0 = crossing_on_segment(kin, task, robot.xi_center).m0
     v_feasible = speed_ceiling(kin, task, b)
     v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)
     if v_high <= v_low:

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from verifier.errors import InputError, SimulationError
+from robots.errors import InputError, SimulationError
 
 __all__ = ["ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
 

@@ -48,7 +48,7 @@ joints recomputed by IK continuation along the sampled poses (not taken from
 the NLP), and every requirement re-checked with numpy on the samples: loop
 closure, modes, branch, speed and position at the crossing sample, the
 criterion residual (<= ``criterion_tol`` N), every limit (relative tolerance
-:data:`LIMIT_RTOL`).  Any failure raises :class:`~verifier.errors.SimulationError`;
+:data:`LIMIT_RTOL`).  Any failure raises :class:`~robots.errors.SimulationError`;
 an unconverged or unverified solution is never returned.
 
 SI units throughout (m, rad, s, N, N m).  ``planner`` never names a robot:
@@ -66,9 +66,9 @@ import numpy as np
 
 from robots.dynamics import LumpedDynamics, LumpedMassModel, uncontrolled_direction
 from robots.kinematics import KinematicModel
-from verifier.errors import InputError, ModelError, SimulationError
+from robots.errors import InputError, ModelError, SimulationError
 
-from .certify import CrossingTask, PlannedTrajectory, _crossing_on_segment
+from .task import CrossingTask, PlannedTrajectory, crossing_on_segment
 
 __all__ = [
     "LIMIT_RTOL",
@@ -239,8 +239,9 @@ class GeneratedTrajectory:
 
     def to_planned_trajectory(self) -> PlannedTrajectory:
         """The trajectory as a :class:`~planner.certify.PlannedTrajectory` (for :func:`~planner.certify.certify_plan`)."""
-        return PlannedTrajectory(self.t, self.q, self.qd, self.qdd, self.x, self.xd, self.xdd, int(self.k_sing),
-                                 float(self.v_sing), self.crossing_point, self.xi_plan)
+        return PlannedTrajectory(t=self.t, q=self.q, qd=self.qd, qdd=self.qdd, x=self.x, xd=self.xd, xdd=self.xdd,
+                                 k_sing=self.k_sing, v_sing=self.v_sing, crossing_point=self.crossing_point,
+                                 xi_plan=self.xi_plan)
 
 
 # ------------------------------------------------------------------ set-up
@@ -257,15 +258,11 @@ def _dynamics(kin: KinematicModel, dynamics) -> LumpedDynamics:
     raise InputError(f"dynamics must be a LumpedMassModel or LumpedDynamics, got {type(dynamics).__name__}")
 
 
-def _normalised_mode(kin: KinematicModel, X, Q, xi) -> np.ndarray:
-    jx = kin.jac_x_batch(X, Q, xi)
-    return kin.robot.mode_sign * kin.det_batch(X, Q, xi) / np.prod(np.linalg.norm(jx, axis=2), axis=1)
-
-
 def _crossing(kin: KinematicModel, task: CrossingTask, xi, crossing_point):
     """Crossing point, joints there, start mode; InputError on a bad request."""
     if crossing_point is None:
-        s_star, u, _L, m0 = _crossing_on_segment(kin, task, xi)
+        c = crossing_on_segment(kin, task, xi)
+        s_star, u, m0 = c.s_star, c.u, c.m0
         point = task.start + s_star * u
         q_point = kin.ik(point, xi, kin.ik_path(task.start[None] + np.linspace(0, s_star, 200)[:, None] * u[None],
                                                 xi, task.working_guess)[-1])
@@ -284,7 +281,7 @@ def _crossing(kin: KinematicModel, task: CrossingTask, xi, crossing_point):
     except SimulationError as exc:
         raise InputError(f"start -> crossing point -> goal is not reachable in the working mode: {exc}") from None
     q_point = Qa[-1]
-    mv = _normalised_mode(kin, point[None], q_point[None], xi)[0]
+    mv = kin.normalised_mode_batch(point[None], q_point[None], xi)[0]
     if abs(mv) > _LOCUS_RTOL:
         raise InputError(f"crossing_point {point.tolist()} is not on the Type 2 locus (normalised det J_x = {mv:.3g})")
     m0 = kin.mode(task.start, Qa[0], xi)

@@ -53,7 +53,7 @@ import casadi as ca
 import numpy as np
 
 from robots.kinematics import KinematicModel
-from verifier.errors import InputError, SimulationError
+from robots.errors import InputError, SimulationError
 
 __all__ = [
     "RecordingBounds",
@@ -419,13 +419,6 @@ def _integrate(x0, v0, u, t_s) -> tuple[np.ndarray, np.ndarray]:
     return x, v
 
 
-def _normalised_mode(kin: KinematicModel, X, Q, xi) -> np.ndarray:
-    """``mode_sign * det J_x / prod_i |row_i J_x|`` at N points (dimensionless, in [-1, 1])."""
-    jx = kin.jac_x_batch(X, Q, xi)
-    det = kin.det_batch(X, Q, xi)
-    return kin.robot.mode_sign * det / np.prod(np.linalg.norm(jx, axis=2), axis=1)
-
-
 def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, np.ndarray]:
     """The forward kinematics of every sample in assembly mode ``m0``, by continuation.
 
@@ -512,12 +505,8 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     U = ca.repmat(ca.DM(amax), 1, K - 1) * Ws
     Q = ca.DM(qm.T) + ca.repmat(ca.DM(eps), 1, K) * Ds
 
-    jx = kin.sx_jx
-    hadamard = 1
-    for i in range(n):
-        hadamard = hadamard * ca.norm_2(jx[i, :])
     point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi],
-                        [kin.sx_f / ca.DM(fscale), rb.m0 * kin.sx_mode / hadamard])
+                        [kin.sx_f / ca.DM(fscale), rb.m0 * kin.sx_mode / kin.sx_hadamard])
     F, M = point.map(K)(Xs, Q, ca.repmat(xi, 1, K))
     dyn_x = (Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U) / ca.repmat(ca.DM(0.5 * ts * ts * amax), 1, K - 1)
     dyn_v = (Vs[:, 1:] - Vs[:, :-1] - ts * U) / ca.repmat(ca.DM(ts * amax), 1, K - 1)
@@ -731,7 +720,7 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
 
     # 3. mode at the samples.
     modes = kin.mode_batch(xs, q_ik, xi)
-    mode_margin = float(np.min(rb.m0 * _normalised_mode(kin, xs, q_ik, xi)))
+    mode_margin = float(np.min(rb.m0 * kin.normalised_mode_batch(xs, q_ik, xi)))
     if np.any(modes != rb.m0):
         fails.append(f"mode differs from {rb.m0:+d} at {int(np.count_nonzero(modes != rb.m0))} samples")
 

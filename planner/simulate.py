@@ -30,7 +30,7 @@ from scipy.optimize import brentq
 
 from robots.base import Robot
 from robots.kinematics import KinematicModel
-from verifier.errors import InputError, SimulationError
+from robots.errors import InputError, SimulationError
 
 __all__ = [
     "RAMP_PEAK",

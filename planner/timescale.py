@@ -66,7 +66,7 @@ from toppra.constraint import (
 
 from robots.kinematics import KinematicModel
 from .simulate import _vec  # one validator of numeric vectors for planner/
-from verifier.errors import InputError, SimulationError
+from robots.errors import InputError, SimulationError
 
 __all__ = [
     "FEAS_RTOL",

@@ -1,17 +1,21 @@
-"""Robot descriptions and their kinematic models.
+"""Robot descriptions, their kinematic and dynamic models, and the registry.
 
-``ROBOTS`` maps a registry name to its :class:`Robot`; :func:`get_robot`
-looks one up by name and :func:`available_robots` lists the names.
+The bottom layer of crosscert: it imports neither :mod:`verifier` nor
+:mod:`planner`.  The project's error hierarchy (:mod:`robots.errors`) and its
+argument checks (:mod:`robots.validators`) live here so every layer above can
+use them.
 """
 
 from __future__ import annotations
 
-from verifier.errors import UnknownRobotError
+import logging
 
-from .base import LoopClosure, Robot
-from .dextar import DEXTAR, BenchmarkCrossing, benchmark_crossing, elbows_out_ik, singular_y
+from .base import BenchmarkCrossing, LoopClosure, Robot
+from .dextar import DEXTAR, benchmark_crossing, elbows_out_ik, singular_y
 from .dynamics import DEXTAR_DYNAMICS, LumpedDynamics, LumpedMassModel
+from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
 from .kinematics import KinematicModel
+from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot
 
 __all__ = [
     "Robot",
@@ -19,38 +23,24 @@ __all__ = [
     "KinematicModel",
     "LumpedMassModel",
     "LumpedDynamics",
-    "DEXTAR_DYNAMICS",
-    "DEXTAR",
     "BenchmarkCrossing",
+    "RobotEntry",
+    "ROBOTS",
+    "DEFAULT_ROBOT",
+    "get_entry",
+    "get_robot",
+    "available_robots",
+    "DEXTAR",
+    "DEXTAR_DYNAMICS",
     "benchmark_crossing",
     "elbows_out_ik",
     "singular_y",
-    "ROBOTS",
-    "get_robot",
-    "available_robots",
+    "CrosscertError",
+    "InputError",
+    "ModelError",
+    "SimulationError",
+    "TrajectoryFileError",
+    "UnknownRobotError",
 ]
 
-#: Registry of the robots the CLI knows, by name.
-ROBOTS: dict[str, Robot] = {"dextar": DEXTAR}
-
-
-def available_robots() -> list[str]:
-    """Sorted names of the registered robots."""
-    return sorted(ROBOTS)
-
-
-def get_robot(name: str) -> Robot:
-    """The registered robot called ``name`` (case and surrounding blanks ignored).
-
-    Raises
-    ------
-    UnknownRobotError
-        If no robot has that name; the message lists the known names.
-    """
-    key = name.strip().lower() if isinstance(name, str) else name
-    try:
-        return ROBOTS[key]
-    except (KeyError, TypeError):
-        raise UnknownRobotError(
-            f"unknown robot {name!r}; known robots: {', '.join(available_robots())}"
-        ) from None
+logging.getLogger(__name__).addHandler(logging.NullHandler())

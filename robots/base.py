@@ -17,26 +17,14 @@ from typing import Callable
 
 import numpy as np
 
-from verifier.errors import ModelError
+from .errors import ModelError
+from .validators import floats, vector
 
 __all__ = ["Robot", "LoopClosure"]
 
 #: Signature of a loop-closure definition: ``(x, q, xi) -> f`` on CasADi SX
 #: column vectors of shapes ``(n,)``, ``(n,)``, ``(m,)``, returning ``(n,)``.
 LoopClosure = Callable[..., object]
-
-
-def _floats(name: str, value, length: int | None = None) -> tuple[float, ...]:
-    """Coerce a sequence to a tuple of finite floats, checking its length."""
-    try:
-        out = tuple(float(v) for v in value)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{name} must be a sequence of numbers, got {value!r}") from exc
-    if length is not None and len(out) != length:
-        raise ModelError(f"{name} must have {length} entries, got {len(out)}")
-    if not all(math.isfinite(v) for v in out):
-        raise ModelError(f"{name} must be finite, got {out}")
-    return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -135,9 +123,9 @@ class Robot:
             raise ModelError(f"Robot {self.name}: duplicate parameter names {names}")
         m = len(names)
         set_(self, "param_names", names)
-        nom = _floats("xi_nominal", self.xi_nominal, m)
-        lo = _floats("xi_lo", self.xi_lo, m)
-        hi = _floats("xi_hi", self.xi_hi, m)
+        nom = floats("xi_nominal", self.xi_nominal, m, error=ModelError)
+        lo = floats("xi_lo", self.xi_lo, m, error=ModelError)
+        hi = floats("xi_hi", self.xi_hi, m, error=ModelError)
         for i, nm in enumerate(names):
             if lo[i] > hi[i]:
                 raise ModelError(f"Robot {self.name}: interval of {nm} is empty: [{lo[i]}, {hi[i]}]")
@@ -150,8 +138,8 @@ class Robot:
         set_(self, "xi_nominal", nom)
         set_(self, "xi_lo", lo)
         set_(self, "xi_hi", hi)
-        qlo = _floats("q_lo", self.q_lo, n)
-        qhi = _floats("q_hi", self.q_hi, n)
+        qlo = floats("q_lo", self.q_lo, n, error=ModelError)
+        qhi = floats("q_hi", self.q_hi, n, error=ModelError)
         if any(a >= b for a, b in zip(qlo, qhi)):
             raise ModelError(f"Robot {self.name}: need q_lo < q_hi, got {qlo}, {qhi}")
         set_(self, "q_lo", qlo)
@@ -160,18 +148,18 @@ class Robot:
             xb_lo, xb_hi = self.x_bounds
         except (TypeError, ValueError) as exc:
             raise ModelError(f"Robot {self.name}: x_bounds must be a pair (lo, hi)") from exc
-        xb_lo = _floats("x_bounds[0]", xb_lo, n)
-        xb_hi = _floats("x_bounds[1]", xb_hi, n)
+        xb_lo = floats("x_bounds[0]", xb_lo, n, error=ModelError)
+        xb_hi = floats("x_bounds[1]", xb_hi, n, error=ModelError)
         if any(a >= b for a, b in zip(xb_lo, xb_hi)):
             raise ModelError(f"Robot {self.name}: x_bounds lo must be < hi, got {xb_lo}, {xb_hi}")
         set_(self, "x_bounds", (xb_lo, xb_hi))
         if not callable(self.loop_closure):
             raise ModelError(f"Robot {self.name}: loop_closure must be callable")
-        amax = _floats("a_max", self.a_max, n)
+        amax = floats("a_max", self.a_max, n, error=ModelError)
         if any(a <= 0 for a in amax):
             raise ModelError(f"Robot {self.name}: a_max must be positive, got {amax}")
         set_(self, "a_max", amax)
-        xd0 = _floats("xd0", self.xd0, n)
+        xd0 = floats("xd0", self.xd0, n, error=ModelError)
         if any(v <= 0 for v in xd0):
             raise ModelError(f"Robot {self.name}: xd0 must be positive, got {xd0}")
         set_(self, "xd0", xd0)
@@ -263,3 +251,29 @@ class Robot:
             and np.all(xi >= self.xi_lo_array - tol)
             and np.all(xi <= self.xi_hi_array + tol)
         )
+
+
+@dataclass(frozen=True, eq=False)
+class BenchmarkCrossing:
+    """A robot's reference crossing of its Type 2 locus, for one geometry.
+
+    Attributes
+    ----------
+    point : ndarray, shape (n,)
+        A point of the Type 2 locus, m (SI pose units).
+    direction : ndarray, shape (n,)
+        Unit direction of motion through it.
+    q_point : ndarray, shape (n,)
+        Joints at ``point`` on the working branch, rad (a valid ``working_guess``).
+    xi : ndarray, shape (m,)
+        Geometry ``point`` was computed for.
+    """
+
+    point: np.ndarray
+    direction: np.ndarray
+    q_point: np.ndarray
+    xi: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("point", "direction", "q_point", "xi"):
+            object.__setattr__(self, name, vector(name, getattr(self, name), error=ModelError))

@@ -27,9 +27,9 @@ import casadi as ca
 import numpy as np
 from scipy.optimize import brentq
 
-from verifier.errors import ModelError
+from .errors import ModelError
 
-from .base import Robot
+from .base import BenchmarkCrossing, Robot
 from .kinematics import KinematicModel
 
 __all__ = [
@@ -224,31 +224,6 @@ def singular_y(xi=None, *, y_range: tuple[float, float] = (0.02, 0.16), samples:
     return float(brentq(lambda y: float(_det_on_axis(y, xi)[0]), ys[k + 1], ys[k], xtol=1e-16, rtol=1e-15, maxiter=200))
 
 
-@dataclass(frozen=True)
-class BenchmarkCrossing:
-    """The benchmark crossing of Section IV: going down the ``Y`` axis through the locus.
-
-    Attributes
-    ----------
-    point : ndarray, shape (2,)
-        Singular point ``(0, y_s)`` of the geometry it was computed for, m.
-    direction : ndarray, shape (2,)
-        Unit direction of motion ``(0, -1)``.
-    q_point : ndarray, shape (2,)
-        Elbows-out joints at ``point``, rad (a valid ``working_guess``).
-    y_s : float
-        ``point[1]``, m.
-    xi : ndarray, shape (7,)
-        Geometry used.
-    """
-
-    point: np.ndarray
-    direction: np.ndarray
-    q_point: np.ndarray
-    y_s: float
-    xi: np.ndarray
-
-
 def benchmark_crossing(xi=None) -> BenchmarkCrossing:
     """The benchmark crossing geometry for ``xi`` (default: nominal, the planner's view)."""
     xi = _xi_or_nominal(xi)
@@ -258,6 +233,5 @@ def benchmark_crossing(xi=None) -> BenchmarkCrossing:
         point=point,
         direction=np.array([0.0, -1.0]),
         q_point=elbows_out_ik(point, xi),
-        y_s=y_s,
         xi=xi.copy(),
     )

@@ -52,14 +52,14 @@ Units: SI (kg, m, rad, s, N, N m).  Shapes: ``x, q`` ``(n,)``; ``xi``
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from verifier.errors import InputError, ModelError
+from .errors import InputError, ModelError
+from .validators import floats
 
 from .kinematics import KinematicModel
 
@@ -75,23 +75,6 @@ __all__ = [
 #: ``|det J_x|`` below this fraction of Hadamard's bound (product of the row
 #: norms of ``J_x``): eq. (1) is not evaluated (torques reported as NaN).
 SINGULAR_RTOL = 1e-12
-
-
-def _floats(owner: str, name: str, value, length: int | None = None, *, positive=False,
-            nonneg=False) -> tuple[float, ...]:
-    try:
-        out = tuple(float(v) for v in value)
-    except (TypeError, ValueError) as exc:
-        raise ModelError(f"{owner}: {name} must be a sequence of numbers, got {value!r}") from exc
-    if length is not None and len(out) != length:
-        raise ModelError(f"{owner}: {name} must have {length} entries, got {len(out)}")
-    if not all(math.isfinite(v) for v in out):
-        raise ModelError(f"{owner}: {name} must be finite, got {out}")
-    if positive and not all(v > 0 for v in out):
-        raise ModelError(f"{owner}: {name} must be positive, got {out}")
-    if nonneg and not all(v >= 0 for v in out):
-        raise ModelError(f"{owner}: {name} must be non-negative, got {out}")
-    return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -145,15 +128,15 @@ class LumpedMassModel:
         if not names or not all(isinstance(s, str) and s for s in names) or len(set(names)) != len(names):
             raise ModelError(f"{owner}: point_names must be distinct non-empty strings, got {names}")
         set_(self, "point_names", names)
-        set_(self, "masses", _floats(owner, "masses", self.masses, len(names), positive=True))
+        set_(self, "masses", floats(f"{owner}: masses", self.masses, len(names), positive=True, error=ModelError))
         if not callable(self.positions):
             raise ModelError(f"{owner}: positions must be callable (x, q, xi) -> casadi.SX (d, P)")
-        inertia = _floats(owner, "motor_inertia", self.motor_inertia, nonneg=True)
+        inertia = floats(f"{owner}: motor_inertia", self.motor_inertia, nonneg=True, error=ModelError)
         if not inertia:
             raise ModelError(f"{owner}: motor_inertia needs one entry per actuated joint")
         set_(self, "motor_inertia", inertia)
-        set_(self, "tau_max", _floats(owner, "tau_max", self.tau_max, len(inertia), positive=True))
-        grav = _floats(owner, "gravity", self.gravity)
+        set_(self, "tau_max", floats(f"{owner}: tau_max", self.tau_max, len(inertia), positive=True, error=ModelError))
+        grav = floats(f"{owner}: gravity", self.gravity, error=ModelError)
         if not grav:
             raise ModelError(f"{owner}: gravity needs one entry per spatial dimension")
         set_(self, "gravity", grav)
@@ -404,7 +387,6 @@ class LumpedDynamics:
         names = ["x", "q", "xd", "xdd", "xi"]
         dct = self.__dict__
         dct["kin"], dct["model"] = kin, model
-        dct["_hadamard"] = ca.Function("had", [x, q, xi], [kin.sx_det, _row_norm_product(jx)])
         dct["wrench_fun"] = ca.Function("wrench", [x, q, xd, qd, xdd, qdd, xi], [w_x, w_q],
                                         ["x", "q", "xd", "qd", "xdd", "qdd", "xi"], ["w_x", "w_q"])
         dct["rates_fun"] = ca.Function("rates", [x, q, xd, xdd, xi], [qd_e, qdd_e], names, ["qd", "qdd"])
@@ -501,8 +483,7 @@ class LumpedDynamics:
     def is_singular(self, x, q, xi=None, *, rtol: float = SINGULAR_RTOL) -> np.ndarray:
         """Mask ``(N,)``: ``|det J_x|`` below ``rtol`` times the product of its row norms."""
         (X, Q), _ = self._rows(x, q)
-        det, had = self._eval(self._hadamard, (X, Q), self._xi(xi))
-        return np.abs(det[:, 0]) <= rtol * had[:, 0]
+        return ~(np.abs(self.kin.normalised_mode_batch(X, Q, self._xi(xi))) > rtol)
 
     def torques(self, x, q, xd, xdd, xi=None) -> np.ndarray:
         """Actuator torques ``tau = w_q - J_q^T J_x^{-T} w_x``, ``(N, n)``, N m (eq. (1)).
@@ -546,13 +527,6 @@ class LumpedDynamics:
         if not np.all(np.isfinite(tau)):
             raise InputError("singular_torques: the motion does not cross the Type 2 locus transversally here")
         return tau[0]
-
-
-def _row_norm_product(jx) -> ca.SX:
-    out = 1
-    for i in range(jx.shape[0]):
-        out = out * ca.norm_2(jx[i, :])
-    return out
 
 
 def criterion_residual(dynamics: LumpedDynamics, x, q, xd, xdd, xi=None, *, direction=None) -> np.ndarray:

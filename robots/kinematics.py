@@ -16,7 +16,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from verifier.errors import ModelError, SimulationError
+from .errors import ModelError, SimulationError
 
 from .base import Robot
 
@@ -60,6 +60,9 @@ class KinematicModel:
         ``det J_x`` ``(1, 1)``.
     sx_mode : casadi.SX
         ``mode_sign * det J_x`` ``(1, 1)``: positive in assembly mode +1.
+    sx_hadamard : casadi.SX
+        ``prod_i ||row_i J_x||`` ``(1, 1)``, Hadamard's bound on ``|det J_x|``;
+        ``sx_mode / sx_hadamard`` is the normalised mode, dimensionless in [-1, 1].
     sx_xd, sx_qd : casadi.SX
         Velocity symbols ``(n, 1)`` used by :attr:`jdot_term`.
     sx_jdot : casadi.SX
@@ -112,6 +115,9 @@ class KinematicModel:
                 raise ModelError(f"Robot {robot.name}: {nm} is structurally singular")
         det = ca.det(jx)
         mode_expr = robot.mode_sign * det
+        hadamard = 1
+        for i in range(n):
+            hadamard = hadamard * ca.norm_2(jx[i, :])
         xd = ca.SX.sym("xd", n)
         qd = ca.SX.sym("qd", n)
         # d/dt(J_x xd + J_q qd) with xd, qd frozen = directional derivative along (xd, qd).
@@ -124,10 +130,12 @@ class KinematicModel:
         d["sx_x"], d["sx_q"], d["sx_xi"] = x, q, xi
         d["sx_f"], d["sx_jx"], d["sx_jq"], d["sx_det"] = f, jx, jq, det
         d["sx_mode"], d["sx_xd"], d["sx_qd"], d["sx_jdot"] = mode_expr, xd, qd, jdot
+        d["sx_hadamard"] = hadamard
         d["f"] = f_fun
         d["jac_x"] = ca.Function("jac_x", ins, [jx], names, ["jx"])
         d["jac_q"] = ca.Function("jac_q", ins, [jq], names, ["jq"])
         d["det_jx"] = ca.Function("det_jx", ins, [det], names, ["det"])
+        d["normalised_mode"] = ca.Function("normalised_mode", ins, [mode_expr / hadamard], names, ["mode"])
         d["mode_value"] = ca.Function("mode_value", ins, [mode_expr], names, ["mode"])
         d["jdot_term"] = ca.Function("jdot_term", ins + [xd, qd], [jdot], names + ["xd", "qd"], ["jdot"])
         # Fused evaluations for the Newton loops (one CasADi call per iteration).
@@ -197,19 +205,25 @@ class KinematicModel:
         """``det J_x`` at N points. X, Q: (N, n); xi: (m,). Returns (N,)."""
         return self._call(self.det_jx, self._rows(X, "X"), self._rows(Q, "Q"), self._xi(xi))[0][:, 0]
 
+    def normalised_mode_batch(self, X, Q, xi) -> np.ndarray:
+        """``mode_sign * det J_x / prod_i ||row_i J_x||`` at N points, (N,).
+
+        Dimensionless and in [-1, 1] by Hadamard's inequality; 0 on the Type 2
+        locus, NaN where a row of ``J_x`` vanishes.  X, Q: (N, n); xi: (m,).
+        """
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self._call(self.normalised_mode, self._rows(X, "X"), self._rows(Q, "Q"), self._xi(xi))[0][:, 0]
+
     def mode_batch(self, X, Q, xi, *, rtol: float = MODE_RTOL) -> np.ndarray:
         """Assembly modes at N points, int array (N,) of +1, -1 or 0.
 
-        0 is returned where ``|det J_x|`` is below ``rtol`` times the product of
-        the row norms of ``J_x`` (Hadamard's bound), i.e. on the singular locus
-        up to rounding.
+        0 is returned where the normalised mode (:meth:`normalised_mode_batch`,
+        ``|det J_x|`` over Hadamard's bound) is at most ``rtol``, i.e. on the
+        singular locus up to rounding.
         """
-        X, Q, xi = self._rows(X, "X"), self._rows(Q, "Q"), self._xi(xi)
-        jx = self.jac_x_batch(X, Q, xi)
-        det = self.det_batch(X, Q, xi)
-        scale = np.prod(np.linalg.norm(jx, axis=2), axis=1)
-        sgn = np.sign(det) * self.robot.mode_sign
-        sgn[np.abs(det) <= rtol * scale] = 0.0
+        nm = self.normalised_mode_batch(X, Q, xi)
+        sgn = np.sign(nm)
+        sgn[~(np.abs(nm) > rtol)] = 0.0
         return sgn.astype(int)
 
     def mode(self, x, q, xi, *, rtol: float = MODE_RTOL) -> int:

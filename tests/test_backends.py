@@ -133,7 +133,7 @@ def test_online_tracker_equals_track(backend):
 
 
 def test_unknown_backend_is_refused():
-    from verifier.errors import InputError
+    from robots.errors import InputError
 
     with pytest.raises(InputError, match="backend"):
         configure(interval_model(), default_settings(), "fortran")

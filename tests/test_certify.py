@@ -17,7 +17,7 @@ from planner.certify import (
 from problems import interval_model, kinematics
 from robots import benchmark_crossing
 from verifier.cli import main
-from verifier.errors import InputError
+from robots.errors import InputError
 from verifier.tracker import Verdict
 
 
@@ -137,21 +137,6 @@ def test_speed_ceiling_is_the_fastest_feasible_plan(task):
         plan_crossing(kin, task, smooth * 1.01, PlanningBounds())
     with pytest.raises(Exception):
         plan_crossing(kin, task, fast * 1.02, PlanningBounds(method="time-optimal"))
-
-
-def test_time_optimal_without_the_plan_extra_says_what_to_install(tmp_path, capsys, monkeypatch, task):
-    import importlib.util
-
-    real = importlib.util.find_spec
-    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "cvxpy" else real(name, *a))
-    with pytest.raises(InputError, match=r"crosscert\[plan\]"):
-        PlanningBounds(method="time-optimal").resolved(kinematics().robot)
-    with pytest.raises(InputError, match="cvxpy"):
-        plan_crossing(kinematics(), task, 1.3, PlanningBounds(), method="time-optimal")
-    assert main(["certify", "--method", "time-optimal", "--out", str(tmp_path / "o")]) == 2
-    err = capsys.readouterr().err.strip()
-    assert "pip install 'crosscert[plan]'" in err and "\n" not in err
-    assert not (tmp_path / "o").exists()
 
 
 def test_cli_certify_bad_input(tmp_path, capsys):

@@ -8,7 +8,7 @@ from planner.execution import cartesian_class, effective_deviation, in_class, jo
 from planner.simulate import random_geometry
 from problems import interval_model, kinematics
 from robots import DEXTAR, benchmark_crossing
-from verifier.errors import InputError
+from robots.errors import InputError
 from verifier.tracker import Verdict
 
 

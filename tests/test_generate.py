@@ -17,7 +17,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from planner.certify import CrossingTask, PlannedTrajectory, PlanningBounds, _crossing_on_segment, certify_plan
+from planner.certify import certify_plan
+from planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
 from planner.generate import GeneratedTrajectory, GenerationLimits, generate_crossing
 from problems import interval_model, kinematics
 from robots import DEXTAR, benchmark_crossing
@@ -28,7 +29,7 @@ from robots.dynamics import (
     dextar_mass_points,
     uncontrolled_direction,
 )
-from verifier.errors import InputError, ModelError, SimulationError
+from robots.errors import InputError, ModelError, SimulationError
 from verifier.tracker import Verdict
 
 V_SING = 1.3  # m/s
@@ -230,7 +231,8 @@ def test_free_path_through_another_point_of_the_locus(task, dyn):
     kin = kinematics()
     shift = np.array([0.01, 0.0])
     aside = CrossingTask(task.start + shift, task.goal + shift, task.working_guess)
-    s_star, u, _L, _m = _crossing_on_segment(kin, aside, DEXTAR.xi_center)
+    c = crossing_on_segment(kin, aside, DEXTAR.xi_center)
+    s_star, u = c.s_star, c.u
     point = aside.start + s_star * u
     g = generate_crossing(kin, DEXTAR_DYNAMICS, task, V_SING, LIMITS, crossing_point=point)
     _check_trajectory(g, task, dyn)

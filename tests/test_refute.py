@@ -25,7 +25,7 @@ from planner.refute import (
 )
 from problems import kinematics, simulate
 from robots import DEXTAR
-from verifier.errors import InputError
+from robots.errors import InputError
 
 SLOW, FAST = 0.6, 1.458  # m/s: refuted (notes: up to ~0.8) / certified by the tracker
 

@@ -21,7 +21,7 @@ from robots import (
     singular_y,
 )
 from robots.dextar import distal_joints, mode_by_cross_product
-from verifier.errors import InputError, ModelError, SimulationError, UnknownRobotError
+from robots.errors import InputError, ModelError, SimulationError, UnknownRobotError
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +53,7 @@ def random_elbows_out_pose(rng, xi):
 # ------------------------------------------------------------------ registry
 def test_registry():
     assert available_robots() == ["dextar"]
-    assert ROBOTS["dextar"] is DEXTAR
+    assert ROBOTS["dextar"].robot is DEXTAR
     assert get_robot("dextar") is DEXTAR
     assert get_robot("  DexTAR ") is DEXTAR
     with pytest.raises(UnknownRobotError, match="dextar") as err:
@@ -321,12 +321,12 @@ def test_det_changes_sign_across_the_benchmark_singularity(model):
 def test_nominal_singular_point(model):
     b = benchmark_crossing()
     # Distal links aligned along X: |B1 A1| = 90 mm with B1 = (-90 mm, y_s).
-    assert b.y_s == pytest.approx(math.sqrt(0.09**2 - 0.031**2), abs=1e-13)
-    assert b.y_s == pytest.approx(0.0845, abs=1e-4)
+    assert b.point[1] == pytest.approx(math.sqrt(0.09**2 - 0.031**2), abs=1e-13)
+    assert b.point[1] == pytest.approx(0.0845, abs=1e-4)
     np.testing.assert_array_equal(b.direction, [0.0, -1.0])
     b1, b2 = distal_joints(b.q_point, b.xi)
-    np.testing.assert_allclose(b1[0], [-0.09, b.y_s], atol=1e-12)
-    np.testing.assert_allclose(b2[0], [0.09, b.y_s], atol=1e-12)
+    np.testing.assert_allclose(b1[0], [-0.09, b.point[1]], atol=1e-12)
+    np.testing.assert_allclose(b2[0], [0.09, b.point[1]], atol=1e-12)
     assert b1[0, 0] < -DEXTAR.xi_nominal[4] / 2 and b2[0, 0] > DEXTAR.xi_nominal[4] / 2  # elbows out
     assert model.mode(b.point, model.ik(b.point, b.xi, b.q_point), b.xi) == 0
 

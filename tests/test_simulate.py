@@ -21,7 +21,7 @@ from planner.simulate import (
 )
 from robots import DEXTAR, KinematicModel, benchmark_crossing, singular_y
 from robots.dextar import mode_by_cross_product
-from verifier.errors import InputError, SimulationError
+from robots.errors import InputError, SimulationError
 
 V_SING = 1.458  # fastest crossing of Table II, m/s
 
@@ -187,7 +187,7 @@ def test_true_singular_point(crossing, bench, xi_true, model):
     # The generic line search agrees with the DexTAR-specific solver.
     assert crossing.x_sing[0] == 0.0
     assert crossing.x_sing[1] == pytest.approx(singular_y(xi_true), abs=1e-13)
-    assert crossing.s_sing == pytest.approx(bench.y_s - crossing.x_sing[1], abs=1e-15)
+    assert crossing.s_sing == pytest.approx(bench.point[1] - crossing.x_sing[1], abs=1e-15)
     assert abs(crossing.s_sing) < 1e-3
     np.testing.assert_allclose(crossing.x_true[crossing.k_sing], crossing.x_sing, atol=1e-16)
 

@@ -7,7 +7,7 @@ import pytest
 from robots import DEXTAR
 from verifier import interval as I
 from verifier.contractors import hc4_pose, newton
-from verifier.errors import ModelError
+from robots.errors import ModelError
 from verifier.linalg import linear_enclosure
 from verifier.model import IntervalModel
 from verifier.tape import Tape

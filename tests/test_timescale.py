@@ -41,7 +41,7 @@ from planner.timescale import (  # noqa: E402
     time_optimal_scaling,
 )
 from robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
-from verifier.errors import InputError, SimulationError  # noqa: E402
+from robots.errors import InputError, SimulationError  # noqa: E402
 
 V_SING = 1.458  # fastest crossing of Table II, m/s
 HALF = 35e-3  # path extent on each side of the crossing point, m

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from problems import CATALOGUE, default_settings, interval_model, run_of, simulate
-from verifier.errors import InputError
+from robots.errors import InputError
 from verifier.tracker import VelocityModel, Verdict, initial_box_from_mode, track, track_batch
 
 

@@ -4,7 +4,7 @@ Explicit re-exports of the public API (no star imports).  The one-sample
 function is ``verifier.step.step`` (not re-exported: the name is its module's).
 """
 
-from .errors import (
+from robots.errors import (
     CrosscertError,
     InputError,
     ModelError,
@@ -26,7 +26,8 @@ from .tracker import (
     track,
     track_batch,
 )
-from .trajfile import Trajectory, read_trajectory, write_trajectory
+from .trajectory import Trajectory
+from .trajfile import read_trajectory, write_trajectory
 
 __all__ = [
     "CrosscertError",

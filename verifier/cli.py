@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CrosscertError, InputError, TrajectoryFileError
+from robots.errors import CrosscertError, InputError, TrajectoryFileError
 from .step import Backend
 from .tracker import TrackerSettings, VelocityModel, Verdict, track, verdict_of
 from .trajfile import TrajectoryReader, read_trajectory, write_trajectory

@@ -47,7 +47,7 @@ from enum import Enum
 import numpy as np
 
 from . import interval as I
-from .errors import InputError
+from robots.errors import InputError
 from .step import Backend, advance, configure, init_state, pose_solutions
 
 __all__ = [

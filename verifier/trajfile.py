@@ -12,7 +12,7 @@ Format (CSV, comma-separated, one header row):
   ``crosscert plan``; accepted, checked, used only for plots).
 
 Any other column, a missing column, a non-numeric, NaN or infinite value is
-an error (:class:`~verifier.errors.TrajectoryFileError`).
+an error (:class:`~robots.errors.TrajectoryFileError`).
 :func:`read_trajectory` reads a whole file (the period is the mean step);
 :class:`TrajectoryReader` reads a stream line by line (``crosscert monitor``;
 the period is given or fixed by the first step).
@@ -21,44 +21,19 @@ the period is given or fixed by the first step).
 from __future__ import annotations
 
 import csv
-import os
-import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .errors import TrajectoryFileError
+from robots.errors import TrajectoryFileError
+
+from .files import atomic_write
+from .trajectory import Trajectory
 
 __all__ = ["Trajectory", "TrajectoryReader", "read_trajectory", "write_trajectory", "TIME_STEP_RTOL"]
 
 #: Relative tolerance on the sampling step (time stamps written in decimal).
 TIME_STEP_RTOL = 1e-6
-
-
-@dataclass(frozen=True)
-class Trajectory:
-    """A recorded joint trajectory.
-
-    Attributes
-    ----------
-    t : array (K,)
-        Sample times, s.
-    q : array (K, n)
-        Encoder readings, rad.
-    qd : array (K, n) or None
-        Joint velocities, rad/s, when the file has them.
-    x : array (K, n) or None
-        Planned poses, SI, when the file has them.
-    t_s : float
-        Sampling period, s.
-    """
-
-    t: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray | None
-    t_s: float
-    x: np.ndarray | None = None
 
 
 class TrajectoryReader:
@@ -219,7 +194,7 @@ def read_trajectory(path, n: int) -> Trajectory:
 
 
 def write_trajectory(path, t, q, qd=None, x=None) -> None:
-    """Write a trajectory file atomically (a partial file is never left behind).
+    """Write a trajectory file with :func:`verifier.files.atomic_write` (never a partial file).
 
     ``t`` (K,) s, ``q`` (K, n) rad, optional ``qd`` (K, n) rad/s and planned
     poses ``x`` (K, n) SI.
@@ -237,14 +212,10 @@ def write_trajectory(path, t, q, qd=None, x=None) -> None:
         cols += [f"x{i + 1}" for i in range(n)]
         data.append(np.asarray(x, dtype=float))
     arr = np.hstack(data)
-    directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=directory)
-    try:
-        with os.fdopen(fd, "w", newline="") as fh:
-            fh.write(",".join(cols) + "\n")
-            for row in arr:
-                fh.write(",".join(repr(float(v)) for v in row) + "\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+
+    def fill(fh):
+        fh.write(",".join(cols) + "\n")
+        for row in arr:
+            fh.write(",".join(repr(float(v)) for v in row) + "\n")
+
+    atomic_write(path, fill)

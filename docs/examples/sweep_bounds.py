@@ -46,7 +46,7 @@ if importlib.util.find_spec("planner") is None:  # not installed: run from a che
 
 from planner import CrossingTask, PlanningBounds, certify_crossing
 from robots import DEXTAR, benchmark_crossing
-from verifier.errors import ModelError
+from robots.errors import ModelError
 
 #: Default peak acceleration of the planned speed ramps (PlanningBounds.a_peak), m/s^2.
 A_PEAK = PlanningBounds().a_peak

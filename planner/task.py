@@ -1,0 +1,284 @@
+"""What a crossing plan is asked to do and under which bounds: the planner's domain types.
+
+* :class:`CrossingTask` — go from a start at rest in one assembly mode to a
+  goal at rest in the other;
+* :class:`PlanningBounds` — encoder error, acceleration, sampling and time-law
+  choices of the certification;
+* :class:`PlannedTrajectory` — a planned crossing: a :class:`~verifier.Trajectory`
+  with its crossing sample;
+* :func:`crossing_on_segment` — where the straight segment of a task meets
+  the Type 2 locus (the one crossing finder of the planner);
+* :func:`benchmark_task` — the task of a registered robot's benchmark crossing.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from enum import Enum, StrEnum
+
+import numpy as np
+
+from robots import validators as V
+from robots.errors import InputError, SimulationError
+from robots.registry import RobotEntry
+from verifier.trajectory import Trajectory
+
+__all__ = [
+    "Method",
+    "ExecutionKind",
+    "CrossingTask",
+    "PlanningBounds",
+    "PlannedTrajectory",
+    "SegmentCrossing",
+    "crossing_on_segment",
+    "benchmark_task",
+    "BENCHMARK_HALF_LENGTH",
+]
+
+log = logging.getLogger(__name__)
+
+#: Start and goal of a benchmark task lie this far either side of the crossing
+#: point, m: room for the speed ramps up to ~2 m/s at 60 m/s^2.
+BENCHMARK_HALF_LENGTH = 0.06
+
+#: IK continuation step along the segment, m: small enough for Newton to stay
+#: on the working branch at the DexTAR's scale.
+_SEGMENT_STEP = 5e-4
+
+#: Bisection steps of the sign change of ``det J_x``: 60 halvings of a 0.5 mm
+#: bracket reach the spacing of doubles.
+_BISECTIONS = 60
+
+
+class Method(StrEnum):
+    """Time law of a plan (see :func:`planner.plan.plan_crossing`)."""
+
+    SMOOTHSTEP = "smoothstep"
+    TIME_OPTIMAL = "time-optimal"
+    DYNAMIC = "dynamic"
+
+
+class ExecutionKind(StrEnum):
+    """Class of admissible executions a certificate covers (:mod:`planner.execution`)."""
+
+    CARTESIAN = "cartesian"
+    JOINT = "joint"
+
+
+def _enum(kind: type[Enum], name: str, value):
+    try:
+        return kind(value)
+    except ValueError:
+        choices = ", ".join(repr(m.value) for m in kind)
+        raise InputError(f"unknown {name} {value!r}; use one of {choices}") from None
+
+
+@dataclass(frozen=True, eq=False)
+class CrossingTask:
+    """Go from ``start`` (at rest, one assembly mode) to ``goal`` (at rest, the other).
+
+    Parameters
+    ----------
+    start, goal : array (n,)
+        Poses, SI (stored read-only).
+    working_guess : array (n,)
+        Joints (rad) on the working branch near ``start``.
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    working_guess: np.ndarray
+
+    def __post_init__(self):
+        for name in ("start", "goal", "working_guess"):
+            object.__setattr__(self, name, V.vector(f"task {name}", getattr(self, name)))
+        if self.start.shape != self.goal.shape:
+            raise InputError("task start and goal must have the same dimension")
+        if np.linalg.norm(self.goal - self.start) == 0.0:
+            raise InputError("task start and goal coincide")
+
+
+def benchmark_task(entry: RobotEntry, xi=None, *, half_length: float = BENCHMARK_HALF_LENGTH) -> CrossingTask:
+    """The robot's benchmark crossing as a task: start and goal ``half_length`` (m) either side of it.
+
+    Raises
+    ------
+    InputError
+        If the robot ships no benchmark crossing.
+    """
+    b = entry.benchmark_crossing(xi)
+    return CrossingTask(b.point - half_length * b.direction, b.point + half_length * b.direction, b.q_point)
+
+
+@dataclass(frozen=True)
+class PlanningBounds:
+    """Bounds of the planning-time certification (SI).
+
+    Parameters
+    ----------
+    eps_q : float, optional
+        Encoder error bound, rad (robot default).
+    tracking_error : float
+        Allowed deviation of the readings from the planned joints, rad.
+    a_max : array (n,), optional
+        End-effector acceleration bound, m/s^2.  ``None``: derived from each
+        plan as ``max |xdd_plan| (1 + a_margin)`` componentwise.
+    a_margin : float
+        Relative margin of the derived ``a_max``.
+    a_peak : float
+        Peak acceleration of the planned speed ramps, m/s^2.
+    t_s : float, optional
+        Sampling period, s (robot default).
+    t_rest : float
+        Rest before and after the motion, s (20 samples at 1 kHz: the
+        velocity box contracts from ``xd0`` long before the motion starts;
+        longer rests only add tracked samples).
+    xi_splits : tuple, optional
+        Geometry hypotheses of the tracker (robot default).
+    method : Method or str
+        Time law of the plans (see :func:`planner.plan.plan_crossing`).
+    dynamics : robots.dynamics.LumpedMassModel, optional
+        Dynamic model for ``Method.DYNAMIC`` (torque limits, criterion).
+    qd_max, qdd_max : float, optional
+        Joint speed (rad/s) and acceleration (rad/s^2) limits of the
+        ``time-optimal`` and ``dynamic`` plans (30 and 3000 by default for
+        ``dynamic``; none for ``time-optimal``).
+    execution : ExecutionKind or str
+        Class of admissible executions the certificate covers
+        (:mod:`planner.execution`): ``cartesian`` (default; the end-effector
+        follows the planned path, any geometry in ``[xi]``) or ``joint``
+        (joints within ``eps_q + tracking_error`` of the planned joints).
+    """
+
+    eps_q: float | None = None
+    tracking_error: float = 0.0
+    a_max: tuple | None = None
+    a_margin: float = 0.1
+    a_peak: float = 60.0
+    t_s: float | None = None
+    t_rest: float = 0.02
+    xi_splits: tuple | None = None
+    method: Method = Method.SMOOTHSTEP
+    dynamics: object = field(default=None, repr=False)
+    qd_max: float | None = None
+    qdd_max: float | None = None
+    execution: ExecutionKind = ExecutionKind.CARTESIAN
+
+    def resolved(self, robot) -> PlanningBounds:
+        """These bounds with the robot's defaults filled in and every value checked."""
+        eps = V.positive("eps_q", robot.eps_q if self.eps_q is None else self.eps_q)
+        ts = V.positive("t_s", robot.t_s if self.t_s is None else self.t_s)
+        a_peak = V.positive("a_peak", self.a_peak)
+        tracking = V.positive("tracking_error", self.tracking_error, allow_zero=True)
+        margin = V.positive("a_margin", self.a_margin, allow_zero=True)
+        rest = V.positive("t_rest", self.t_rest, allow_zero=True)
+        amax = None if self.a_max is None else V.floats("a_max", np.broadcast_to(
+            np.asarray(self.a_max, float), (robot.n,)), robot.n, positive=True)
+        splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
+        method = _enum(Method, "planning method", self.method)
+        execution = _enum(ExecutionKind, "execution class", self.execution)
+        if method is Method.DYNAMIC and self.dynamics is None:
+            raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
+        return PlanningBounds(eps, tracking, amax, margin, a_peak, ts, rest, splits, method, self.dynamics,
+                              self.qd_max, self.qdd_max, execution)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PlannedTrajectory(Trajectory):
+    """A planned crossing sampled at ``t_s``: a :class:`~verifier.Trajectory` with every field set.
+
+    Attributes
+    ----------
+    t : (K,) s; q, qd, qdd : (K, n) rad, rad/s, rad/s^2; x, xd, xdd : (K, n) SI.
+    k_sing : int
+        Sample of the nominal crossing.
+    v_sing : float
+        Speed there, m/s.
+    crossing_point : ndarray, shape (n,)
+        Where the plan meets the nominal locus, m.
+    xi_plan : ndarray, shape (m,)
+        Planning geometry.
+    """
+
+    k_sing: int
+    v_sing: float
+    crossing_point: np.ndarray
+    xi_plan: np.ndarray
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("qd", "qdd", "x", "xd", "xdd"):
+            if getattr(self, name) is None:
+                raise InputError(f"a planned trajectory needs {name}")
+        object.__setattr__(self, "k_sing", int(self.k_sing))
+        object.__setattr__(self, "v_sing", float(self.v_sing))
+        object.__setattr__(self, "crossing_point", V.vector("crossing_point", self.crossing_point, self.n))
+        object.__setattr__(self, "xi_plan", V.vector("xi_plan", self.xi_plan))
+
+
+@dataclass(frozen=True)
+class SegmentCrossing:
+    """Where the straight segment start -> goal meets the Type 2 locus.
+
+    Attributes
+    ----------
+    s_star : float
+        Arc length of the crossing point from the start, m.
+    u : ndarray, shape (n,)
+        Unit direction start -> goal.
+    length : float
+        Segment length, m.
+    m0 : int
+        Assembly mode at the start (+1 or -1); the goal is in ``-m0``.
+    """
+
+    s_star: float
+    u: np.ndarray
+    length: float
+    m0: int
+
+
+def crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
+    """Where ``task``'s straight segment meets the Type 2 locus for geometry ``xi``.
+
+    IK continuation on a grid of ``_SEGMENT_STEP``, then bisection of the sign
+    change of ``det J_x``.
+
+    Raises
+    ------
+    InputError
+        If the start or goal is unreachable or on the locus, if both lie in the
+        same assembly mode, or if the segment crosses the locus more than once.
+    """
+    L = float(np.linalg.norm(task.goal - task.start))
+    u = (task.goal - task.start) / L
+    N = max(8, int(np.ceil(L / _SEGMENT_STEP)))
+    s = np.linspace(0.0, L, N + 1)
+    X = task.start[None] + s[:, None] * u[None]
+    try:
+        Q = kin.ik_path(X, xi, task.working_guess)
+    except SimulationError as exc:
+        raise InputError(f"the straight path from start to goal is not reachable in the working mode: {exc}") from None
+    modes = kin.mode_batch(X, Q, xi)
+    m0, m1 = modes[0], modes[-1]
+    if m0 == 0 or m1 == 0:
+        raise InputError("start or goal lies on the Type 2 locus; move it off the locus")
+    if m0 == m1:
+        raise InputError(f"goal is in the same assembly mode ({m0:+d}) as the start: there is nothing to cross")
+    change = np.nonzero(modes[:-1] != modes[1:])[0]
+    if np.count_nonzero(modes[:-1] * modes[1:] < 0) > 1:
+        raise InputError("the straight path crosses the Type 2 locus more than once; choose another start/goal")
+    k = int(change[0])
+    lo, hi = s[k], s[k + 1]
+    qg = Q[k]
+    for _ in range(_BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        qm = kin.ik(task.start + mid * u, xi, qg)
+        if kin.det_batch((task.start + mid * u)[None], qm[None], xi)[0] * kin.robot.mode_sign * m0 > 0:
+            lo = mid
+            qg = qm
+        else:
+            hi = mid
+    u.setflags(write=False)
+    return SegmentCrossing(0.5 * (lo + hi), u, L, int(m0))
