@@ -45,13 +45,14 @@ def children_cpu_s() -> float:
 
 def child(repeat: int, method: str, foreground: bool) -> list:
     """``repeat`` runs of certify_crossing in this process; one dict per run."""
-    from planner import CrossingTask, PlanningBounds, certify_crossing
-    from robots import DEXTAR, DEXTAR_DYNAMICS, KinematicModel, benchmark_crossing
+    from planner import PlanningBounds, benchmark_task, certify_crossing
+    from robots import DEFAULT_ROBOT, KinematicModel, get_entry
     from verifier.model import IntervalModel
 
-    b = benchmark_crossing()
-    task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
-    bounds = PlanningBounds(method=method, dynamics=DEXTAR_DYNAMICS if method == "dynamic" else None)
+    entry = get_entry(DEFAULT_ROBOT)
+    DEXTAR = entry.robot
+    task = benchmark_task(entry)
+    bounds = PlanningBounds(method=method, dynamics=entry.dynamics if method == "dynamic" else None)
     kin, imodel = KinematicModel(DEXTAR), IntervalModel(DEXTAR)
     runs = []
     for _ in range(repeat):
@@ -63,7 +64,7 @@ def child(repeat: int, method: str, foreground: bool) -> list:
                      "cpu_worker_s": worker, **{f"{k}_s": cert.timings_s.get(k) for k in PHASES},
                      "v_min": cert.v_min, "refutation_bound": cert.refutation_bound,
                      "tracked_speeds": len(cert.trials), "refuted_speeds_searched": len(cert.refutation),
-                     "mc_detected": None if cert.monte_carlo is None else cert.monte_carlo["detected_in_class"]})
+                     "mc_detected": None if cert.monte_carlo is None else cert.monte_carlo.detected_in_class})
     return runs
 
 

@@ -577,9 +577,9 @@ def extrapolate(rows: list, batch: list) -> dict:
 
 # --- part 5: the command line on a 6.42 s recording ---------------------------------
 def crosscert_cmd() -> list:
-    """The ``crosscert`` script of this interpreter's environment, else ``python -m verifier.cli``."""
+    """The ``crosscert`` script of this interpreter's environment, else ``python -m planner.cli``."""
     script = Path(sys.executable).parent / "crosscert"
-    return [str(script)] if script.exists() else [sys.executable, "-m", "verifier.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "planner.cli"]
 
 
 def run_command(cmd, shell: bool = False):

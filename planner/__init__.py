@@ -1,45 +1,55 @@
-"""Planning side: planning-time certification, refutation bound, simulated crossings, sweeps.
+"""Planning side: plans of a crossing, their certification, refutation bound, simulations, sweeps.
+
+Layout, along the method:
+
+* :mod:`planner.task` — what is asked (task, bounds, options) and where the
+  segment meets the locus; :mod:`planner.locus` — the line scans behind it;
+* :mod:`planner.plan` — the three time laws, built on :mod:`planner.timescale`
+  (time-optimal) and :mod:`planner.generate` (dynamic);
+* :mod:`planner.certify` — certification of plans and the speed search;
+* :mod:`planner.montecarlo` — simulated executions tracked at run time;
+* :mod:`planner.refute` — verified counterexamples (the refutation floor);
+* :mod:`planner.pipeline` — all of it, on an executor;
+* :mod:`planner.simulate`, :mod:`planner.sweep` — simulated runs and the
+  paper's speed sweep; :mod:`planner.cli` — the ``crosscert`` command.
 
 Explicit re-exports (no star imports).
 """
 
-from .certify import (
-    CrossingCertificate,
-    CrossingTask,
-    PlannedTrajectory,
-    PlanningBounds,
-    SpeedTrial,
-    certify_crossing,
-    certify_plan,
-    execution_class,
-    minimal_v_sing,
-    monte_carlo_confirmation,
-    plan_crossing,
-    speed_ceiling,
-)
+import logging
+
+from .certify import SpeedTrial, certify_plan, execution_class, minimal_v_sing
 from .execution import ExecutionClass, cartesian_class, in_class, joint_class
 from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
+from .montecarlo import MonteCarloResult, monte_carlo_confirmation
+from .pipeline import CrossingCertificate, certify_crossing
+from .plan import plan_crossing, speed_ceiling
 from .refute import RecordingBounds, RefutationBound, refutation_bound, search_bounce, verify_bounce
-from .simulate import SimulatedRun, max_v_sing, random_geometry, simulate_bounce, simulate_crossing
+from .simulate import Quantisation, SimulatedRun, max_v_sing, quantise, random_geometry, simulate_bounce, simulate_crossing
 from .sweep import SweepRow, cruise_for, sweep
+from .task import CrossingTask, ExecutionKind, Method, PlannedTrajectory, PlanningBounds, benchmark_task
 
 __all__ = [
-    "CrossingCertificate",
     "CrossingTask",
-    "PlannedTrajectory",
     "PlanningBounds",
+    "PlannedTrajectory",
+    "Method",
+    "ExecutionKind",
+    "benchmark_task",
+    "plan_crossing",
+    "speed_ceiling",
     "SpeedTrial",
-    "certify_crossing",
     "certify_plan",
     "execution_class",
     "minimal_v_sing",
+    "MonteCarloResult",
+    "monte_carlo_confirmation",
+    "CrossingCertificate",
+    "certify_crossing",
     "ExecutionClass",
     "cartesian_class",
     "in_class",
     "joint_class",
-    "monte_carlo_confirmation",
-    "plan_crossing",
-    "speed_ceiling",
     "GeneratedTrajectory",
     "GenerationLimits",
     "generate_crossing",
@@ -48,6 +58,8 @@ __all__ = [
     "refutation_bound",
     "search_bounce",
     "verify_bounce",
+    "Quantisation",
+    "quantise",
     "SimulatedRun",
     "max_v_sing",
     "random_geometry",
@@ -57,3 +69,5 @@ __all__ = [
     "cruise_for",
     "sweep",
 ]
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())

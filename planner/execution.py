@@ -41,24 +41,29 @@ from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
 from robots.errors import InputError, SimulationError
 
-__all__ = ["ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
-
-KINDS = ("cartesian", "joint")
+__all__ = ["ExecutionKind", "ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
 
 
-@dataclass(frozen=True)
+class ExecutionKind(StrEnum):
+    """Class of admissible executions a certificate covers."""
+
+    CARTESIAN = "cartesian"  #: the end-effector follows the planned path, any geometry in [xi]
+    JOINT = "joint"  #: joints within eps_q + tracking_error of the planned joints
+
+
+@dataclass(frozen=True, eq=False)
 class ExecutionClass:
     """The admissible executions of a plan, as tracker inputs.
 
     Attributes
     ----------
-    kind : str
-        ``"cartesian"`` or ``"joint"``.
+    kind : ExecutionKind
     reading_error : float
         Half-width of the tracker's reading intervals around ``q_plan(t_k)``,
         rad: ``eps_q + tracking_error`` (+ the drift bound ``e`` for
@@ -79,7 +84,7 @@ class ExecutionClass:
         constant part measured, safety factor).
     """
 
-    kind: str
+    kind: ExecutionKind
     reading_error: float
     drift: float
     xi_lo: np.ndarray
@@ -94,7 +99,7 @@ class ExecutionClass:
 
     def summary(self) -> dict:
         return {
-            "kind": self.kind,
+            "kind": self.kind.value,
             "reading_error_rad": self.reading_error,
             "drift_rad": self.drift,
             "fast_error_rad": self.fast_error,
@@ -107,7 +112,7 @@ class ExecutionClass:
 
 def joint_class(robot, eps_q: float, tracking_error: float = 0.0) -> ExecutionClass:
     """Joints within ``eps_q + tracking_error`` (rad) of the plan, geometry in ``[xi]``."""
-    return ExecutionClass("joint", float(eps_q + tracking_error), 0.0, robot.xi_lo_array.copy(),
+    return ExecutionClass(ExecutionKind.JOINT, float(eps_q + tracking_error), 0.0, robot.xi_lo_array.copy(),
                           robot.xi_hi_array.copy(), {"source": "robot calibration box"},
                           float(eps_q + tracking_error), None)
 
@@ -251,7 +256,7 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
         "seed": int(seed),
     }
     fast = float(eps_q + tracking_error)
-    return ExecutionClass("cartesian", fast + float(drift), float(drift), lo, hi, derivation, fast, float(step))
+    return ExecutionClass(ExecutionKind.CARTESIAN, fast + float(drift), float(drift), lo, hi, derivation, fast, float(step))
 
 
 def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: float, tracking_error: float = 0.0) -> bool:
@@ -265,7 +270,7 @@ def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: flo
     """
     q_true, q_plan, xi = (np.asarray(a, float) for a in (q_true, q_plan, xi))
     lo, hi = cls.xi_lo, cls.xi_hi
-    if cls.kind == "joint":
+    if cls.kind is ExecutionKind.JOINT:
         return bool(np.all(np.abs(q_true - q_plan) <= eps_q + tracking_error) and np.all((lo <= xi) & (xi <= hi)))
     offs = dict(_offsets(robot))
     others = [k for k in range(xi.size) if k not in offs.values()]

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field
 from enum import Enum, StrEnum
 
@@ -24,8 +25,12 @@ from robots.errors import InputError, SimulationError
 from robots.registry import RobotEntry
 from verifier.trajectory import Trajectory
 
+from .execution import ExecutionKind
+from .locus import LineScan, locate_crossing, sign_changes
+
 __all__ = [
     "Method",
+    "parse_option",
     "ExecutionKind",
     "CrossingTask",
     "PlanningBounds",
@@ -43,12 +48,9 @@ log = logging.getLogger(__name__)
 BENCHMARK_HALF_LENGTH = 0.06
 
 #: IK continuation step along the segment, m: small enough for Newton to stay
-#: on the working branch at the DexTAR's scale.
+#: on the working branch at the scale of a desktop robot (links of ~0.1 m).
 _SEGMENT_STEP = 5e-4
 
-#: Bisection steps of the sign change of ``det J_x``: 60 halvings of a 0.5 mm
-#: bracket reach the spacing of doubles.
-_BISECTIONS = 60
 
 
 class Method(StrEnum):
@@ -59,14 +61,8 @@ class Method(StrEnum):
     DYNAMIC = "dynamic"
 
 
-class ExecutionKind(StrEnum):
-    """Class of admissible executions a certificate covers (:mod:`planner.execution`)."""
-
-    CARTESIAN = "cartesian"
-    JOINT = "joint"
-
-
-def _enum(kind: type[Enum], name: str, value):
+def parse_option(kind: type[Enum], name: str, value):
+    """``kind(value)``, or InputError listing the choices (``name`` is the option's name)."""
     try:
         return kind(value)
     except ValueError:
@@ -176,8 +172,8 @@ class PlanningBounds:
         amax = None if self.a_max is None else V.floats("a_max", np.broadcast_to(
             np.asarray(self.a_max, float), (robot.n,)), robot.n, positive=True)
         splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
-        method = _enum(Method, "planning method", self.method)
-        execution = _enum(ExecutionKind, "execution class", self.execution)
+        method = parse_option(Method, "planning method", self.method)
+        execution = parse_option(ExecutionKind, "execution class", self.execution)
         if method is Method.DYNAMIC and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
         return PlanningBounds(eps, tracking, amax, margin, a_peak, ts, rest, splits, method, self.dynamics,
@@ -217,7 +213,7 @@ class PlannedTrajectory(Trajectory):
         object.__setattr__(self, "xi_plan", V.vector("xi_plan", self.xi_plan))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class SegmentCrossing:
     """Where the straight segment start -> goal meets the Type 2 locus.
 
@@ -242,8 +238,8 @@ class SegmentCrossing:
 def crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
     """Where ``task``'s straight segment meets the Type 2 locus for geometry ``xi``.
 
-    IK continuation on a grid of ``_SEGMENT_STEP``, then bisection of the sign
-    change of ``det J_x``.
+    IK continuation on a grid of ``_SEGMENT_STEP``, then the crossing in the
+    grid interval where ``det J_x`` changes sign (:func:`planner.locus.locate_crossing`).
 
     Raises
     ------
@@ -266,19 +262,10 @@ def crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
         raise InputError("start or goal lies on the Type 2 locus; move it off the locus")
     if m0 == m1:
         raise InputError(f"goal is in the same assembly mode ({m0:+d}) as the start: there is nothing to cross")
-    change = np.nonzero(modes[:-1] != modes[1:])[0]
     if np.count_nonzero(modes[:-1] * modes[1:] < 0) > 1:
         raise InputError("the straight path crosses the Type 2 locus more than once; choose another start/goal")
-    k = int(change[0])
-    lo, hi = s[k], s[k + 1]
-    qg = Q[k]
-    for _ in range(_BISECTIONS):
-        mid = 0.5 * (lo + hi)
-        qm = kin.ik(task.start + mid * u, xi, qg)
-        if kin.det_batch((task.start + mid * u)[None], qm[None], xi)[0] * kin.robot.mode_sign * m0 > 0:
-            lo = mid
-            qg = qm
-        else:
-            hi = mid
+    scan = LineScan(s, Q, kin.det_batch(X, Q, xi), True, True, math.nan, math.nan)
+    ka, kb = sign_changes(scan.det)
+    s_star = locate_crossing(kin, task.start, u, xi, scan, int(ka[0]), int(kb[0]))
     u.setflags(write=False)
-    return SegmentCrossing(0.5 * (lo + hi), u, L, int(m0))
+    return SegmentCrossing(s_star, u, L, int(m0))

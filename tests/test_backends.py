@@ -42,9 +42,9 @@ def _boxes(res):
 
 
 @pytest.mark.parametrize("name", sorted(CATALOGUE))
-def test_catalogue_backends_agree(name):
+def test_catalogue_backends_agree(name, imodel, settings):
     run = run_of(CATALOGUE[name])
-    model, s = interval_model(), default_settings()
+    model, s = imodel, settings
     mode = int(run.mode_true[0])
     ref = track(model, run.q_meas, s, initial_mode=mode, backend="numpy")
     fast = track(model, run.q_meas, s, initial_mode=mode, backend="compiled")
@@ -61,10 +61,10 @@ def test_catalogue_backends_agree(name):
     dict(keep_xi=True, split_boxes=8),
     dict(eps_q_fast=1e-5, drift_rate=0.01, baselines=(1, 3, 7)),
 ], ids=["joint-fd", "paper", "keep-xi", "drift"])
-def test_options_backends_agree(overrides):
+def test_options_backends_agree(overrides, imodel):
     """Every velocity model and option runs the same maths in both backends."""
     run = run_of(CATALOGUE["crossing_1458"])
-    model, s = interval_model(), default_settings(**overrides)
+    model, s = imodel, default_settings(**overrides)
     q = run.q_meas[:160]  # through the crossing (true singular instant at sample 100)
     x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
     ref = track(model, q, s, x0=x0, backend="numpy")
@@ -113,10 +113,10 @@ def test_batch_member_equals_single_run():
 
 
 @pytest.mark.parametrize("backend", ["compiled", "numpy"])
-def test_online_tracker_equals_track(backend):
+def test_online_tracker_equals_track(backend, imodel, settings):
     """``Tracker.update`` one sample at a time gives the boxes and modes of ``track``."""
     run = run_of(CATALOGUE["crossing_1458"])
-    model, s = interval_model(), default_settings()
+    model, s = imodel, settings
     q = run.q_meas[:130]
     x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
     ref = track(model, q, s, x0=x0, backend=backend)
@@ -132,20 +132,20 @@ def test_online_tracker_equals_track(backend):
     assert gained and gained[-1] == ref.certified_at_step
 
 
-def test_unknown_backend_is_refused():
+def test_unknown_backend_is_refused(imodel, settings):
     from robots.errors import InputError
 
     with pytest.raises(InputError, match="backend"):
-        configure(interval_model(), default_settings(), "fortran")
+        configure(imodel, settings, "fortran")
 
 
 @pytest.mark.parametrize("name", ["crossing_1458", "bounce_0800"])
-def test_initial_box_backends_agree(name):
+def test_initial_box_backends_agree(name, imodel, settings):
     """The branch and prune of the first sample: same boxes, same modes."""
     from verifier.step import pose_solutions
 
     run = run_of(CATALOGUE[name])
-    model, s = interval_model(), default_settings()
+    model, s = imodel, settings
     eps = s.validated(model.n).eps_q
     # at rest, and 30 samples before the locus (several boxes; next to the locus
     # the numpy reference needs about a minute for its 8 000 boxes)
@@ -175,13 +175,13 @@ def test_threads_change_nothing():
     _assert_same_boxes(serial, threaded, "scenarios")
 
 
-def test_read_only_readings_use_the_same_kernel():
+def test_read_only_readings_use_the_same_kernel(imodel, settings):
     """A read-only recording (a frozen plan's joints) runs the kernel compiled
     for writable arrays: no second compilation, the same boxes."""
     from verifier.compiled.step import run_serial
 
     run = run_of(CATALOGUE["crossing_1458"])
-    model, s = interval_model(), default_settings()
+    model, s = imodel, settings
     q = np.array(run.q_meas[:40])
     x0 = initial_box_from_mode(model, q[0], int(run.mode_true[0]), s)
     ref = track(model, q, s, x0=x0)

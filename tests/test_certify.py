@@ -5,71 +5,55 @@ import json
 import numpy as np
 import pytest
 
-from planner.certify import (
-    CrossingTask,
-    PlanningBounds,
+from planner import (
+    certify_crossing,
     certify_plan,
     minimal_v_sing,
     monte_carlo_confirmation,
     plan_crossing,
     speed_ceiling,
 )
-from problems import interval_model, kinematics
-from robots import benchmark_crossing
-from verifier.cli import main
-from robots.errors import InputError
+from planner.cli import main
+from planner.task import CrossingTask, PlanningBounds
+from problems import PLANNING, check_certified_speed, check_contains, check_plan_limits
+from robots import DEXTAR, DEXTAR_DYNAMICS
+from robots.errors import InputError, SimulationError
 from verifier.tracker import Verdict
 
-
-@pytest.fixture(scope="module")
-def task():
-    b = benchmark_crossing()
-    return CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
+BENCHMARK = PLANNING["dextar_benchmark"]
 
 
-def test_plan_meets_the_criterion_and_the_limits(task):
-    p = plan_crossing(kinematics(), task, 1.3, PlanningBounds())
-    kin = kinematics()
-    # crossing criterion: acceleration along the uncontrolled direction vanishes at the crossing
-    u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
-    assert abs(p.xdd[p.k_sing] @ u) <= 1e-8
-    assert abs(np.linalg.norm(p.xd[p.k_sing]) - 1.3) <= 1e-9
+def test_plan_meets_the_criterion_and_the_limits(task, kin):
+    """A smoothstep plan: speed and crossing criterion at the crossing sample, a_peak, rest to rest, f = 0."""
+    p = plan_crossing(kin, task, 1.3, PlanningBounds())
+    check_plan_limits(p, task, 1.3)
     # the crossing sample is on the nominal locus to within one sample of motion
     assert np.linalg.norm(p.x[p.k_sing] - p.crossing_point) <= 1.3 * 1e-3
-    # limits: ramps peak at a_peak; rest to rest; loop closure holds
-    assert np.abs(p.xdd).max() <= 60.0 * (1 + 1e-9)
-    assert np.all(p.xd[0] == 0) and np.all(p.xd[-1] == 0)
+    # loop closure holds
     assert np.abs(kin.f_batch(p.x, p.q, p.xi_plan)).max() <= 1e-12
     modes = kin.mode_batch(p.x, p.q, p.xi_plan)
     assert modes[0] == 1 and modes[-1] == -1
 
 
-def test_time_optimal_plan_is_certified_and_meets_the_criterion(task):
-    kin = kinematics()
+def test_time_optimal_plan_is_certified_and_meets_the_criterion(task, kin, imodel):
     b = PlanningBounds(method="time-optimal")
     p = plan_crossing(kin, task, 1.3, b)
-    assert abs(np.linalg.norm(p.xd[p.k_sing]) - 1.3) <= 1e-6
-    u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
-    assert abs(p.xdd[p.k_sing] @ u) <= 1e-8
-    assert np.abs(p.xdd).max() <= 60.0 * (1 + 1e-6)
-    res = certify_plan(interval_model(), p, b, 1)
+    check_plan_limits(p, task, 1.3, v_rtol=1e-6, a_rtol=1e-6)
+    res = certify_plan(imodel, p, b, 1)
     assert res.verdict is Verdict.MODE_CHANGED
 
 
-def test_dynamic_plan_is_certified(task):
-    from robots import DEXTAR_DYNAMICS
-
+def test_dynamic_plan_is_certified(task, kin, imodel):
     b = PlanningBounds(method="dynamic", dynamics=DEXTAR_DYNAMICS)
-    p = plan_crossing(kinematics(), task, 1.3, b)
+    p = plan_crossing(kin, task, 1.3, b)
     assert abs(np.linalg.norm(p.xd[p.k_sing]) - 1.3) <= 1e-6
     assert np.abs(p.xdd).max() <= 60.0 * (1 + 1e-6)
-    assert certify_plan(interval_model(), p, b, 1).verdict is Verdict.MODE_CHANGED
+    assert certify_plan(imodel, p, b, 1).verdict is Verdict.MODE_CHANGED
     with pytest.raises(InputError, match="dynamic model"):
-        plan_crossing(kinematics(), task, 1.3, PlanningBounds(method="dynamic"))
+        plan_crossing(kin, task, 1.3, PlanningBounds(method="dynamic"))
 
 
-def test_infeasible_and_contradictory_requests(task):
-    kin = kinematics()
+def test_infeasible_and_contradictory_requests(task, kin, imodel):
     with pytest.raises(InputError, match="no feasible crossing"):
         plan_crossing(kin, task, 5.0, PlanningBounds())
     same = CrossingTask(task.start, task.start + np.array([0.0, 0.01]), task.working_guess)
@@ -80,10 +64,10 @@ def test_infeasible_and_contradictory_requests(task):
         plan_crossing(kin, far, 1.0, PlanningBounds())
     p = plan_crossing(kin, task, 1.3, PlanningBounds())
     with pytest.raises(InputError, match="contradict the plan"):
-        certify_plan(interval_model(), p, PlanningBounds(a_max=(10.0, 10.0)), 1)
+        certify_plan(imodel, p, PlanningBounds(a_max=(10.0, 10.0)), 1)
 
 
-def test_minimal_speed_and_monte_carlo_confirmation(task):
+def test_minimal_speed_and_monte_carlo_confirmation(task, kin, imodel):
     """The search brackets v_min; 50 admissible executions at v_min are all detected.
 
     The executions follow the planned Cartesian path with random geometries
@@ -93,7 +77,7 @@ def test_minimal_speed_and_monte_carlo_confirmation(task):
     one and contain the truth at every step.  Under the literal joint class
     the same executions leave the tube around the planned joints.
     """
-    kin, im = kinematics(), interval_model()
+    im = imodel
     b = PlanningBounds()
     v_min, trials = minimal_v_sing(kin, im, task, b, 0.9, 1.6, tol=0.05, grid=4)
     assert v_min is not None and 0.9 < v_min <= 1.6
@@ -102,14 +86,32 @@ def test_minimal_speed_and_monte_carlo_confirmation(task):
     assert all(v is Verdict.MODE_CHANGED for s, v in by_v.items() if s >= v_min)
     below = [s for s in by_v if s < v_min]
     assert below and by_v[max(below)] is not Verdict.MODE_CHANGED and v_min - max(below) <= 0.05
+    # the coarse search lands within its resolution of the default certification's v_min (1.198 m/s),
+    # and never at or below the refutation bound
+    check_certified_speed(v_min, BENCHMARK.expected, tol=0.05 + BENCHMARK.expected.v_min_tol)
+    assert all(s > BENCHMARK.expected.refutation_bound for s, v in by_v.items() if v is Verdict.MODE_CHANGED)
     plan = plan_crossing(kin, task, v_min, b)
     assert certify_plan(im, plan, b, 1).verdict is Verdict.MODE_CHANGED
     mc = monte_carlo_confirmation(kin, im, plan, b, runs=50, seed=7)
-    assert mc["runs"] == 50 and mc["in_class"] == 50 and mc["outside_class"] == []
-    assert mc["containment_failures"] == [] and mc["wrong_verdicts"] == [] and mc["not_detected"] == []
-    assert mc["detected_in_class"] == 50
+    assert mc.runs == 50 and mc.in_class == 50 and mc.outside_class == ()
+    assert mc.containment_failures == () and mc.wrong_verdicts == () and mc.not_detected == ()
+    assert mc.detected_in_class == 50
     joint = monte_carlo_confirmation(kin, im, plan, PlanningBounds(execution="joint"), runs=10, seed=7)
-    assert joint["in_class"] < 10 and joint["containment_failures"] == [] and joint["wrong_verdicts"] == []
+    assert joint.in_class < 10 and joint.containment_failures == () and joint.wrong_verdicts == ()
+
+
+@pytest.mark.slow
+def test_default_certification_of_the_benchmark_task(task, kin, imodel):
+    """The main job with every default (``crosscert certify``, 15-25 s): the catalogue's v_min
+    within 0.01 m/s, its refutation bound, a clean Monte Carlo confirmation."""
+    expected = BENCHMARK.expected
+    cert = certify_crossing(DEXTAR, task, kin=kin, imodel=imodel)
+    assert cert.verdict is Verdict.MODE_CHANGED
+    check_certified_speed(cert.v_min, expected)
+    assert cert.refutation_bound == pytest.approx(expected.refutation_bound, abs=1e-3), cert.refutation_bound
+    mc = cert.monte_carlo
+    assert mc.containment_failures == () and mc.wrong_verdicts == () and mc.not_detected == ()
+    check_contains(cert.enclosures.x_lo, cert.enclosures.x_hi, cert.trajectory.x, "certificate: planned pose")
 
 
 def test_cli_plan_writes_a_file_check_reads(tmp_path, capsys):
@@ -121,10 +123,9 @@ def test_cli_plan_writes_a_file_check_reads(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["verdict"] == "mode-changed"
 
 
-def test_speed_ceiling_is_the_fastest_feasible_plan(task):
+def test_speed_ceiling_is_the_fastest_feasible_plan(task, kin, bench):
     """Smoothstep: both ramps fit; time-optimal: toppra's sets, close to sqrt(2 a_peak s*) (bang-bang from rest)."""
-    kin = kinematics()
-    s_star = float(np.linalg.norm(benchmark_crossing().point - task.start))
+    s_star = float(np.linalg.norm(bench.point - task.start))
     smooth = speed_ceiling(kin, task, PlanningBounds())
     # s_star of the nominal geometry; the planner uses the centre of [xi] (0.3 mm apart)
     assert smooth == pytest.approx(np.sqrt(2 * 60.0 * s_star / 1.875), rel=3e-3)
@@ -133,9 +134,10 @@ def test_speed_ceiling_is_the_fastest_feasible_plan(task):
     for method, v in (("smoothstep", smooth), ("time-optimal", fast)):
         p = plan_crossing(kin, task, v, PlanningBounds(method=method))
         assert abs(np.linalg.norm(p.xd[p.k_sing]) - v) <= 1e-6 and np.abs(p.xdd).max() <= 60.0 * (1 + 1e-6)
-    with pytest.raises(InputError):
+    # above the ceiling: refused, naming the largest feasible speed
+    with pytest.raises(InputError, match=rf"no feasible crossing at v_sing = .*v_sing <= {smooth:.3f} m/s"):
         plan_crossing(kin, task, smooth * 1.01, PlanningBounds())
-    with pytest.raises(Exception):
+    with pytest.raises(SimulationError, match=rf"no feasible crossing at v_sing = .*max feasible speed .* {fast:.5f} m/s"):
         plan_crossing(kin, task, fast * 1.02, PlanningBounds(method="time-optimal"))
 
 

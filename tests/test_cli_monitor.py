@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from problems import CATALOGUE, default_settings, interval_model, run_of
-from verifier.cli import main
+from planner.cli import main
 from verifier.tracker import track
 from verifier.trajfile import write_trajectory
 
@@ -134,7 +134,7 @@ def test_piped_through_a_subprocess(csv_text):
     """A real pipe: each event is read before the next sample is written; then the summary line."""
     rows = csv_text("crossing_1458").splitlines(keepends=True)
     expected = _events("crossing_1458")[0]
-    proc = subprocess.Popen([sys.executable, "-m", "verifier.cli", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=Path(__file__).resolve().parents[1])
     out = queue.Queue()

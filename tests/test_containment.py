@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 
 from adversarial import A_FRACTION, EDGE, V0_FRACTION, far_scenarios, near_scenarios
-from problems import default_settings, interval_model, kinematics
+from problems import interval_model
 from robots import DEXTAR
 from verifier.contractors import mode_of
 from verifier.model import IntervalModel
@@ -57,26 +57,24 @@ def _run(q, x0, settings, backend, model=None):
     return track_batch(interval_model() if model is None else model, q, settings, x0, record=True, backend=backend)
 
 
-def _track(scenarios, backend):
-    """Run the tracker with the robot's defaults on scenarios, from their true initial mode."""
-    s = default_settings()
-    m = interval_model()
+def _track(scenarios, backend, m, s):
+    """Run the tracker (interval model ``m``, settings ``s``) on scenarios, from their true initial mode."""
     boxes = [initial_box_from_mode(m, sc.q_meas[0], int(sc.mode[0]), s, backend=backend) for sc in scenarios]
     x0 = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
     q = np.stack([sc.q_meas for sc in scenarios])
-    return _run(q, x0, s, backend)
+    return _run(q, x0, s, backend, m)
 
 
 @pytest.fixture(scope="module", params=BACKENDS)
-def far(request):
+def far(request, imodel, settings):
     sc = far_scenarios(N_FAR, FAR_SEED)
-    return (sc, *_track(sc, request.param))
+    return (sc, *_track(sc, request.param, imodel, settings))
 
 
 @pytest.fixture(scope="module", params=BACKENDS)
-def near(request):
+def near(request, imodel, settings):
     sc = near_scenarios(N_NEAR, NEAR_SEED)
-    return (sc, *_track(sc, request.param))
+    return (sc, *_track(sc, request.param, imodel, settings))
 
 
 def _violations(scenarios, res, rec):
@@ -108,7 +106,7 @@ def _violations(scenarios, res, rec):
     return out
 
 
-def test_scenarios_spend_every_bound():
+def test_scenarios_spend_every_bound(kin):
     """The generator is as hard as claimed (guards it against becoming gentle).
 
     Acceleration exactly ``+-A_FRACTION a_max`` between switches and never
@@ -117,7 +115,7 @@ def test_scenarios_spend_every_bound():
     with the true geometry and move continuously; geometries at the centre
     or a corner of ``[xi]``; some runs cross the locus, some bounce on it.
     """
-    km = kinematics()
+    km = kin
     lo, hi = DEXTAR.xi_lo_array, DEXTAR.xi_hi_array
     ts, eps = DEXTAR.t_s, DEXTAR.eps_q
     a = A_FRACTION * np.asarray(DEXTAR.a_max)

@@ -3,25 +3,24 @@
 import numpy as np
 import pytest
 
-from planner.certify import CrossingTask, PlanningBounds, certify_plan, execution_class, plan_crossing
+from planner import certify_plan, execution_class, plan_crossing
 from planner.execution import cartesian_class, effective_deviation, in_class, joint_class
 from planner.simulate import random_geometry
-from problems import interval_model, kinematics
-from robots import DEXTAR, benchmark_crossing
+from planner.task import PlanningBounds
+from problems import check_contains
+from robots import DEXTAR
 from robots.errors import InputError
 from verifier.tracker import Verdict
 
 
 @pytest.fixture(scope="module")
-def plan():
-    b = benchmark_crossing()
-    task = CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
-    return plan_crossing(kinematics(), task, 1.45, PlanningBounds())
+def plan(kin, task):
+    return plan_crossing(kin, task, 1.45, PlanningBounds())
 
 
 @pytest.fixture(scope="module")
-def cls(plan):
-    return execution_class(kinematics(), plan, PlanningBounds())
+def cls(kin, plan):
+    return execution_class(kin, plan, PlanningBounds())
 
 
 def test_cartesian_class_replaces_the_offset_box_only(cls):
@@ -41,9 +40,8 @@ def test_cartesian_class_replaces_the_offset_box_only(cls):
     assert cls.fast_error == DEXTAR.eps_q and 1e-6 < cls.drift_per_sample < 1e-4
 
 
-def test_executions_following_the_path_are_in_the_class(plan, cls):
+def test_executions_following_the_path_are_in_the_class(plan, cls, kin):
     """Fresh geometries (other seed, corners of the whole box included) all belong to the derived class."""
-    kin = kinematics()
     rng = np.random.default_rng(2024)
     for r in range(60):
         xi = random_geometry(DEXTAR, rng, corners=(r % 3 == 0))
@@ -54,8 +52,7 @@ def test_executions_following_the_path_are_in_the_class(plan, cls):
         np.testing.assert_allclose(D[:, 0], q_true[:, 0] - plan.q[:, 0] + xi[5] - plan.xi_plan[5], atol=1e-10)
 
 
-def test_in_class_rejects_what_the_class_excludes(plan, cls):
-    kin = kinematics()
+def test_in_class_rejects_what_the_class_excludes(plan, cls, kin):
     xi = plan.xi_plan.copy()
     q = kin.ik_path(plan.x, xi, plan.q[0])
     assert in_class(cls, DEXTAR, q, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
@@ -69,11 +66,10 @@ def test_in_class_rejects_what_the_class_excludes(plan, cls):
     assert not in_class(cls, DEXTAR, shifted, plan.q, xi, plan.xi_plan, DEXTAR.eps_q)
 
 
-def test_in_class_checks_how_fast_the_drift_changes(plan, cls):
+def test_in_class_checks_how_fast_the_drift_changes(plan, cls, kin):
     """A ramp of twice the per-sample bound, small enough for the amplitude, breaks the difference bound."""
     from dataclasses import replace
 
-    kin = kinematics()
     q = kin.ik_path(plan.x, plan.xi_plan, plan.q[0]).copy()
     k0, n = len(q) // 2, 10
     q[k0:k0 + n, 0] += 2 * cls.drift_per_sample * np.arange(1, n + 1)
@@ -82,10 +78,9 @@ def test_in_class_checks_how_fast_the_drift_changes(plan, cls):
     assert in_class(replace(cls, drift_per_sample=None), DEXTAR, q, plan.q, plan.xi_plan, plan.xi_plan, DEXTAR.eps_q)
 
 
-def test_joint_class_is_the_literal_tube(plan):
+def test_joint_class_is_the_literal_tube(plan, kin):
     jc = joint_class(DEXTAR, DEXTAR.eps_q, 1e-4)
     assert jc.reading_error == pytest.approx(DEXTAR.eps_q + 1e-4) and jc.drift == 0.0
-    kin = kinematics()
     assert in_class(jc, DEXTAR, plan.q + 1e-4, plan.q, plan.xi_plan, plan.xi_plan, DEXTAR.eps_q, 1e-4)
     # a geometry with other offsets moves the joints by mrad: outside the tube
     xi = plan.xi_plan.copy()
@@ -98,13 +93,13 @@ def test_joint_class_is_the_literal_tube(plan):
         cartesian_class(kin, plan.x, plan.q, plan.xi_plan, DEXTAR.eps_q, safety=0.5)
 
 
-def test_certifying_run_encloses_every_execution_of_the_class(plan, cls):
+def test_certifying_run_encloses_every_execution_of_the_class(plan, cls, imodel):
     """The class's run certifies at 1.45 m/s and its boxes contain the planned path.
 
     Every execution following the path has the planned pose and velocity as
     its truth, whatever its geometry; they must lie in every box.
     """
-    res = certify_plan(interval_model(), plan, PlanningBounds(), 1, execution=cls)
+    res = certify_plan(imodel, plan, PlanningBounds(), 1, execution=cls)
     assert res.verdict is Verdict.MODE_CHANGED
-    assert np.all(res.x_lo <= plan.x) and np.all(plan.x <= res.x_hi)
-    assert np.all(res.xd_lo[1:] <= plan.xd[1:]) and np.all(plan.xd[1:] <= res.xd_hi[1:])
+    check_contains(res.x_lo, res.x_hi, plan.x, "planned pose")
+    check_contains(res.xd_lo, res.xd_hi, plan.xd, "planned velocity", start=1)

@@ -19,7 +19,7 @@ import pytest
 
 from planner.certify import certify_plan
 from planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
-from planner.generate import GeneratedTrajectory, GenerationLimits, generate_crossing
+from planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
 from problems import interval_model, kinematics
 from robots import DEXTAR, benchmark_crossing
 from robots.dynamics import (
@@ -113,7 +113,7 @@ def test_inverse_dynamics_balance_the_energy(dyn, bench):
     xi = DEXTAR.xi_nominal_array
     h = 1e-5
     t = np.arange(0.0, 0.02, h)
-    y0 = bench.y_s + 0.02  # stays in mode +1, away from the locus
+    y0 = bench.point[1] + 0.02  # stays in mode +1, away from the locus
 
     def path(tt):
         x = np.stack([0.01 * np.sin(30 * tt), y0 - 0.3 * tt + 0.005 * np.cos(20 * tt)], 1)
@@ -260,8 +260,9 @@ def test_generated_plan_with_a_max_is_certified(task, dyn):
 
 def test_infeasible_and_bad_requests(task, bench):
     kin = kinematics()
-    with pytest.raises(SimulationError, match="trajectory generation did not converge: Infeasible"):
+    with pytest.raises(NotConverged, match="trajectory generation did not converge") as failed:
         generate_crossing(kin, DEXTAR_DYNAMICS, task, 10.0, LIMITS)
+    assert isinstance(failed.value, SimulationError) and failed.value.status == "Infeasible_Problem_Detected"
     same = CrossingTask(task.start, task.start + np.array([0.0, 0.01]), task.working_guess)
     with pytest.raises(InputError, match="same assembly mode"):
         generate_crossing(kin, DEXTAR_DYNAMICS, same, V_SING, LIMITS)

@@ -18,7 +18,10 @@ from planner.refute import (
     Counterexample,
     RecordingBounds,
     RefutationBound,
+    SearchOutcome,
+    SpeedRefutation,
     fk_branch_guess,
+    ipopt_outcome,
     refutation_bound,
     search_bounce,
     verify_bounce,
@@ -66,6 +69,7 @@ def test_slow_crossing_is_refuted_and_verified(bound):
     assert v.dense_ik_failures == 0 and v.dense_mode_violations == 0
     assert v.state_mismatch <= 1e-9
     assert DEXTAR.xi_in_box(row.geometry)
+    assert row.outcome is SearchOutcome.FOUND
 
 
 def test_fast_crossing_is_not_refuted(bound):
@@ -74,6 +78,8 @@ def test_fast_crossing_is_not_refuted(bound):
     assert len(row.attempts) == 2  # every start tried
     assert all(not a.found and a.counterexample is None for a in row.attempts)
     assert row.status != "Solve_Succeeded" and np.isnan(row.joint_ratio)
+    assert row.outcome is not SearchOutcome.FOUND
+    assert all(a.outcome is ipopt_outcome(a.status) for a in row.attempts)
 
 
 def test_nlp_size(slow_case):
@@ -168,3 +174,55 @@ def test_input_errors():
         search_bounce(kin, rb, xi_start=DEXTAR.xi_hi_array + 1.0)
     with pytest.raises(InputError):
         refutation_bound(kin, "not callable", [0.5])
+
+
+# Every return_status CasADi 3.7 reports for IPOPT 3.14, and the outcome it must give.
+IPOPT_STATUSES = {
+    "Solve_Succeeded": SearchOutcome.CONVERGED,
+    "Solved_To_Acceptable_Level": SearchOutcome.CONVERGED,
+    "Infeasible_Problem_Detected": SearchOutcome.INFEASIBLE,
+    "Search_Direction_Becomes_Too_Small": SearchOutcome.NOT_CONVERGED,
+    "Diverging_Iterates": SearchOutcome.NOT_CONVERGED,
+    "Restoration_Failed": SearchOutcome.NOT_CONVERGED,
+    "Error_In_Step_Computation": SearchOutcome.NOT_CONVERGED,
+    "Maximum_Iterations_Exceeded": SearchOutcome.ITERATION_LIMIT,
+    "Maximum_CpuTime_Exceeded": SearchOutcome.TIME_LIMIT,
+    "Maximum_WallTime_Exceeded": SearchOutcome.TIME_LIMIT,
+    "Feasible_Point_Found": SearchOutcome.SOLVER_ERROR,
+    "User_Requested_Stop": SearchOutcome.SOLVER_ERROR,
+    "Not_Enough_Degrees_Of_Freedom": SearchOutcome.SOLVER_ERROR,
+    "Invalid_Problem_Definition": SearchOutcome.SOLVER_ERROR,
+    "Invalid_Option": SearchOutcome.SOLVER_ERROR,
+    "Invalid_Number_Detected": SearchOutcome.SOLVER_ERROR,
+    "Unrecoverable_Exception": SearchOutcome.SOLVER_ERROR,
+    "NonIpopt_Exception_Thrown": SearchOutcome.SOLVER_ERROR,
+    "Insufficient_Memory": SearchOutcome.SOLVER_ERROR,
+    "Internal_Error": SearchOutcome.SOLVER_ERROR,
+}
+
+
+@pytest.mark.parametrize("status", sorted(IPOPT_STATUSES))
+def test_ipopt_status_maps_to_its_outcome(status):
+    assert ipopt_outcome(status) is IPOPT_STATUSES[status]
+
+
+@pytest.mark.parametrize("status", ["Unknown", "", "solve_succeeded", "Some_Future_Status"])
+def test_unknown_ipopt_status_is_a_solver_error(status):
+    assert ipopt_outcome(status) is SearchOutcome.SOLVER_ERROR
+
+
+def test_outcome_of_a_search_follows_its_verification(slow_case):
+    _kin, _rb, res = slow_case
+    assert res.outcome is SearchOutcome.FOUND
+    rejected = dataclasses.replace(res, verified=False)
+    assert rejected.outcome is SearchOutcome.REJECTED
+    unchecked = dataclasses.replace(res, verified=False, verification=None)
+    assert unchecked.outcome is SearchOutcome.CONVERGED
+    stopped = BounceSearch(False, False, "Maximum_CpuTime_Exceeded", 10, 1.0, 1, 1, res.xi_start)
+    assert stopped.outcome is SearchOutcome.TIME_LIMIT and str(stopped.outcome) == "time-limit"
+
+
+def test_a_speed_without_attempts_was_not_searched():
+    nan = float("nan")
+    row = SpeedRefutation(0.5, 0, False, False, None, nan, nan, nan, "no plan: too fast", 0.0, ())
+    assert row.outcome is SearchOutcome.NOT_SEARCHED

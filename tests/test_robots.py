@@ -24,11 +24,6 @@ from robots.dextar import distal_joints, mode_by_cross_product
 from robots.errors import InputError, ModelError, SimulationError, UnknownRobotError
 
 
-@pytest.fixture(scope="module")
-def model() -> KinematicModel:
-    return KinematicModel(DEXTAR)
-
-
 def eq7_numpy(x, q, xi):
     """Independent numpy transcription of eq. (7) of the paper (the +- form)."""
     l11, l21, l12, l22, d, d1, d2 = xi
@@ -137,14 +132,14 @@ def test_model_rejects_bad_loop_closures():
         KinematicModel("dextar")  # type: ignore[arg-type]
 
 
-def test_model_is_immutable(model):
+def test_model_is_immutable(kin):
     with pytest.raises(AttributeError):
-        model.f = None
+        kin.f = None
     with pytest.raises(AttributeError):
-        model.new_attribute = 1
-    assert model.n == 2 and model.m == 7
-    assert model.sx_jx.shape == (2, 2) and model.sx_det.shape == (1, 1)
-    assert model.sx_x.shape == (2, 1) and model.sx_xi.shape == (7, 1)
+        kin.new_attribute = 1
+    assert kin.n == 2 and kin.m == 7
+    assert kin.sx_jx.shape == (2, 2) and kin.sx_det.shape == (1, 1)
+    assert kin.sx_x.shape == (2, 1) and kin.sx_xi.shape == (7, 1)
 
 
 @pytest.mark.parametrize("robot", [DEXTAR], ids=lambda r: r.name)
@@ -169,39 +164,39 @@ def test_declared_joint_offsets_enter_as_q_plus_xi(robot):
 
 
 # --------------------------------------------------------------- kinematics
-def test_f_matches_numpy_eq7(model):
+def test_f_matches_numpy_eq7(kin):
     rng = np.random.default_rng(11)
     for _ in range(50):
         x = rng.uniform(-0.15, 0.15, 2)
         q = rng.uniform(-4, 4, 2)
         xi = random_xi(rng)
-        got = np.asarray(model.f(x, q, xi)).ravel()
+        got = np.asarray(kin.f(x, q, xi)).ravel()
         np.testing.assert_allclose(got, eq7_numpy(x, q, xi), rtol=1e-13, atol=1e-17)
 
 
-def test_batch_equals_pointwise(model):
+def test_batch_equals_pointwise(kin):
     rng = np.random.default_rng(12)
     X = rng.uniform(-0.1, 0.1, (7, 2))
     Q = rng.uniform(-3, 3, (7, 2))
     xi = random_xi(rng)
-    F, JX, JQ, DET = (model.f_batch(X, Q, xi), model.jac_x_batch(X, Q, xi),
-                      model.jac_q_batch(X, Q, xi), model.det_batch(X, Q, xi))
+    F, JX, JQ, DET = (kin.f_batch(X, Q, xi), kin.jac_x_batch(X, Q, xi),
+                      kin.jac_q_batch(X, Q, xi), kin.det_batch(X, Q, xi))
     for k in range(7):
-        np.testing.assert_array_equal(F[k], np.asarray(model.f(X[k], Q[k], xi)).ravel())
-        np.testing.assert_array_equal(JX[k], np.asarray(model.jac_x(X[k], Q[k], xi)))
-        np.testing.assert_array_equal(JQ[k], np.asarray(model.jac_q(X[k], Q[k], xi)))
-        assert DET[k] == float(model.det_jx(X[k], Q[k], xi))
+        np.testing.assert_array_equal(F[k], np.asarray(kin.f(X[k], Q[k], xi)).ravel())
+        np.testing.assert_array_equal(JX[k], np.asarray(kin.jac_x(X[k], Q[k], xi)))
+        np.testing.assert_array_equal(JQ[k], np.asarray(kin.jac_q(X[k], Q[k], xi)))
+        assert DET[k] == float(kin.det_jx(X[k], Q[k], xi))
 
 
-def test_jacobians_match_central_differences(model):
+def test_jacobians_match_central_differences(kin):
     rng = np.random.default_rng(13)
     h = 1e-6
     for _ in range(20):
         x = rng.uniform(-0.1, 0.1, 2)
         q = rng.uniform(-3, 3, 2)
         xi = random_xi(rng)
-        jx = np.asarray(model.jac_x(x, q, xi))
-        jq = np.asarray(model.jac_q(x, q, xi))
+        jx = np.asarray(kin.jac_x(x, q, xi))
+        jq = np.asarray(kin.jac_q(x, q, xi))
         for j in range(2):
             e = np.zeros(2)
             e[j] = h
@@ -209,11 +204,11 @@ def test_jacobians_match_central_differences(model):
             fdq = (eq7_numpy(x, q + e, xi) - eq7_numpy(x, q - e, xi)) / (2 * h)
             np.testing.assert_allclose(jx[:, j], fdx, atol=1e-9)
             np.testing.assert_allclose(jq[:, j], fdq, atol=1e-9)
-        assert float(model.det_jx(x, q, xi)) == pytest.approx(np.linalg.det(jx), rel=1e-12, abs=1e-20)
-        assert float(model.mode_value(x, q, xi)) == float(model.det_jx(x, q, xi))  # mode_sign = +1
+        assert float(kin.det_jx(x, q, xi)) == pytest.approx(np.linalg.det(jx), rel=1e-12, abs=1e-20)
+        assert float(kin.mode_value(x, q, xi)) == float(kin.det_jx(x, q, xi))  # mode_sign = +1
 
 
-def test_jdot_term_is_time_derivative(model):
+def test_jdot_term_is_time_derivative(kin):
     rng = np.random.default_rng(14)
     h = 1e-5
     for _ in range(10):
@@ -223,64 +218,64 @@ def test_jdot_term_is_time_derivative(model):
 
         def g(t):
             xx, qq = x + t * xd, q + t * qd
-            return np.asarray(model.jac_x(xx, qq, xi)) @ xd + np.asarray(model.jac_q(xx, qq, xi)) @ qd
+            return np.asarray(kin.jac_x(xx, qq, xi)) @ xd + np.asarray(kin.jac_q(xx, qq, xi)) @ qd
 
         fd = (g(h) - g(-h)) / (2 * h)
-        got = np.asarray(model.jdot_term(x, q, xi, xd, qd)).ravel()
+        got = np.asarray(kin.jdot_term(x, q, xi, xd, qd)).ravel()
         np.testing.assert_allclose(got, fd, rtol=1e-6, atol=1e-9)
 
 
-def test_ik_fk_round_trip(model):
+def test_ik_fk_round_trip(kin):
     rng = np.random.default_rng(15)
     worst_q = worst_x = 0.0
     for _ in range(40):
         xi = random_xi(rng)
         x, q_closed = random_elbows_out_pose(rng, xi)
-        q = model.ik(x, xi, q_closed + rng.uniform(-0.2, 0.2, 2))
-        assert np.max(np.abs(model.f_batch(x, q, xi))) < 1e-13
+        q = kin.ik(x, xi, q_closed + rng.uniform(-0.2, 0.2, 2))
+        assert np.max(np.abs(kin.f_batch(x, q, xi))) < 1e-13
         worst_q = max(worst_q, np.max(np.abs(q - q_closed)))
         # The guess must be nearer to x than to the other assembly mode.
-        x_back = model.fk(q, xi, x + rng.uniform(-2e-4, 2e-4, 2))
+        x_back = kin.fk(q, xi, x + rng.uniform(-2e-4, 2e-4, 2))
         worst_x = max(worst_x, np.max(np.abs(x_back - x)))
     assert worst_q < 1e-11
     assert worst_x < 1e-11
 
 
-def test_ik_and_fk_failures(model):
+def test_ik_and_fk_failures(kin):
     xi = DEXTAR.xi_nominal_array
     with pytest.raises(SimulationError, match="IK failed"):
-        model.ik([0.0, 0.5], xi, [1.9, 1.2])  # beyond the legs' reach
+        kin.ik([0.0, 0.5], xi, [1.9, 1.2])  # beyond the legs' reach
     with pytest.raises(SimulationError, match="FK failed"):
-        model.fk([math.pi, 0.0], xi, [0.0, 0.05])  # B1, B2 farther apart than l12 + l22
+        kin.fk([math.pi, 0.0], xi, [0.0, 0.05])  # B1, B2 farther apart than l12 + l22
     with pytest.raises(ModelError):
-        model.ik([0.0, 0.1, 0.0], xi, [1.9, 1.2])
+        kin.ik([0.0, 0.1, 0.0], xi, [1.9, 1.2])
 
 
-def test_ik_path_follows_the_branch(model):
+def test_ik_path_follows_the_branch(kin):
     xi = DEXTAR.xi_center
     X = np.stack([np.linspace(-0.03, 0.03, 61), np.linspace(0.13, 0.05, 61)], axis=1)
-    Q = model.ik_path(X, xi, elbows_out_ik(X[0], xi) + 0.1)
+    Q = kin.ik_path(X, xi, elbows_out_ik(X[0], xi) + 0.1)
     np.testing.assert_allclose(Q, elbows_out_ik(X, xi), atol=1e-11)
     with pytest.raises(SimulationError, match="path point 2"):
-        model.ik_path(np.array([[0.0, 0.1], [0.0, 0.12], [0.0, 0.4]]), xi, elbows_out_ik(X[0], xi))
+        kin.ik_path(np.array([[0.0, 0.1], [0.0, 0.12], [0.0, 0.4]]), xi, elbows_out_ik(X[0], xi))
 
 
-def test_fk_all_two_solutions_of_opposite_modes(model):
+def test_fk_all_two_solutions_of_opposite_modes(kin):
     rng = np.random.default_rng(16)
     for E in ([0.0, 0.1], [0.01, 0.09], [-0.02, 0.06], [0.0, 0.0845]):
         xi = random_xi(rng)
         E = np.array(E)
         q = elbows_out_ik(E, xi)
-        sols = model.fk_all(q, xi)
+        sols = kin.fk_all(q, xi)
         assert sols.shape == (2, 2)
         assert np.min(np.max(np.abs(sols - E), axis=1)) < 1e-11
-        modes = [model.mode(s, q, xi) for s in sols]
+        modes = [kin.mode(s, q, xi) for s in sols]
         assert sorted(modes) == [-1, 1]
         np.testing.assert_array_equal(modes, mode_by_cross_product(sols, np.tile(q, (2, 1)), xi))
-        assert np.max(np.abs(model.f_batch(sols, np.tile(q, (2, 1)), xi))) < 1e-13
+        assert np.max(np.abs(kin.f_batch(sols, np.tile(q, (2, 1)), xi))) < 1e-13
 
 
-def test_mode_convention_is_the_cross_product(model):
+def test_mode_convention_is_the_cross_product(kin):
     """mode = mode_sign * sign(det J_x) agrees with sign(cross(B2 - B1, E - B1))."""
     rng = np.random.default_rng(17)
     xs, qs = [], []
@@ -296,29 +291,29 @@ def test_mode_convention_is_the_cross_product(model):
         delta = xi[5:7]
         flip = rng.integers(0, 2, 2) == 1
         q = np.where(flip, 2 * phi - (q + delta) - delta, q)
-        for sol in model.fk_all(q, xi, grid=4):
+        for sol in kin.fk_all(q, xi, grid=4):
             xs.append(sol)
             qs.append(q)
     X, Q = np.array(xs), np.array(qs)
-    modes = model.mode_batch(X, Q, xi)
+    modes = kin.mode_batch(X, Q, xi)
     assert set(modes.tolist()) == {-1, 1}
     np.testing.assert_array_equal(modes, mode_by_cross_product(X, Q, xi))
     # Elbows out with E above the distal links (benchmark start) is mode +1.
     E = np.array([0.0, 0.11])
-    assert model.mode(E, elbows_out_ik(E), DEXTAR.xi_nominal) == 1
+    assert kin.mode(E, elbows_out_ik(E), DEXTAR.xi_nominal) == 1
 
 
-def test_det_changes_sign_across_the_benchmark_singularity(model):
+def test_det_changes_sign_across_the_benchmark_singularity(kin):
     xi = DEXTAR.xi_nominal_array
     y_s = singular_y()
     modes = []
     for y in (y_s + 1e-4, y_s, y_s - 1e-4):
         E = np.array([0.0, y])
-        modes.append(model.mode(E, elbows_out_ik(E, xi), xi))
+        modes.append(kin.mode(E, elbows_out_ik(E, xi), xi))
     assert modes == [1, 0, -1]
 
 
-def test_nominal_singular_point(model):
+def test_nominal_singular_point(kin):
     b = benchmark_crossing()
     # Distal links aligned along X: |B1 A1| = 90 mm with B1 = (-90 mm, y_s).
     assert b.point[1] == pytest.approx(math.sqrt(0.09**2 - 0.031**2), abs=1e-13)
@@ -328,10 +323,10 @@ def test_nominal_singular_point(model):
     np.testing.assert_allclose(b1[0], [-0.09, b.point[1]], atol=1e-12)
     np.testing.assert_allclose(b2[0], [0.09, b.point[1]], atol=1e-12)
     assert b1[0, 0] < -DEXTAR.xi_nominal[4] / 2 and b2[0, 0] > DEXTAR.xi_nominal[4] / 2  # elbows out
-    assert model.mode(b.point, model.ik(b.point, b.xi, b.q_point), b.xi) == 0
+    assert kin.mode(b.point, kin.ik(b.point, b.xi, b.q_point), b.xi) == 0
 
 
-def test_singular_y_for_true_geometries(model):
+def test_singular_y_for_true_geometries(kin):
     rng = np.random.default_rng(18)
     y_nom = singular_y()
     for _ in range(5):
@@ -340,12 +335,12 @@ def test_singular_y_for_true_geometries(model):
         assert abs(y - y_nom) < 1e-3
         for dy, want in ((1e-7, 1), (-1e-7, -1)):
             E = np.array([0.0, y + dy])
-            assert model.mode(E, elbows_out_ik(E, xi), xi) == want
+            assert kin.mode(E, elbows_out_ik(E, xi), xi) == want
     with pytest.raises(ModelError):
         singular_y(y_range=(0.12, 0.16))
 
 
-def test_x_bounds_contain_every_reachable_pose(model):
+def test_x_bounds_contain_every_reachable_pose(kin):
     rng = np.random.default_rng(19)
     lo, hi = DEXTAR.x_lo_array, DEXTAR.x_hi_array
     # Extreme reach: fully stretched legs, longest links, narrowest base.
@@ -353,7 +348,7 @@ def test_x_bounds_contain_every_reachable_pose(model):
     xi[4] = DEXTAR.xi_lo[4]
     for _ in range(40):
         q = rng.uniform(-0.5 * np.pi, 1.5 * np.pi, 2)
-        for E in model.fk_all(q, xi, grid=5):
+        for E in kin.fk_all(q, xi, grid=5):
             assert np.all(E >= lo) and np.all(E <= hi)
     r_max = max(xi[0] + xi[2], xi[1] + xi[3])
     assert hi[0] >= r_max - xi[4] / 2 and -lo[0] >= r_max - xi[4] / 2

@@ -19,21 +19,11 @@ from planner.simulate import (
     simulate_bounce,
     simulate_crossing,
 )
-from robots import DEXTAR, KinematicModel, benchmark_crossing, singular_y
+from robots import DEXTAR, singular_y
 from robots.dextar import mode_by_cross_product
 from robots.errors import InputError, SimulationError
 
 V_SING = 1.458  # fastest crossing of Table II, m/s
-
-
-@pytest.fixture(scope="module")
-def model():
-    return KinematicModel(DEXTAR)
-
-
-@pytest.fixture(scope="module")
-def bench():
-    return benchmark_crossing()
 
 
 @pytest.fixture(scope="module")
@@ -42,23 +32,23 @@ def xi_true():
 
 
 @pytest.fixture(scope="module")
-def crossing(model, bench, xi_true):
-    return simulate_crossing(model, bench.point, bench.direction, V_SING, xi_true=xi_true,
+def crossing(kin, bench, xi_true):
+    return simulate_crossing(kin, bench.point, bench.direction, V_SING, xi_true=xi_true,
                              working_guess=bench.q_point, seed=1)
 
 
 @pytest.fixture(scope="module")
-def bounce(model, bench, xi_true):
-    return simulate_bounce(model, bench.point, bench.direction, V_SING, xi_true=xi_true,
+def bounce(kin, bench, xi_true):
+    return simulate_bounce(kin, bench.point, bench.direction, V_SING, xi_true=xi_true,
                            working_guess=bench.q_point, seed=1)
 
 
 @pytest.fixture(scope="module")
-def fine_runs(model, bench, xi_true):
+def fine_runs(kin, bench, xi_true):
     """Crossing and bounce sampled at 10 kHz, for finite-difference checks."""
     kw = dict(xi_true=xi_true, working_guess=bench.q_point, t_s=1e-4, t_rest=0.01, t_rest_end=0.01)
-    return (simulate_crossing(model, bench.point, bench.direction, V_SING, **kw),
-            simulate_bounce(model, bench.point, bench.direction, V_SING, **kw))
+    return (simulate_crossing(kin, bench.point, bench.direction, V_SING, **kw),
+            simulate_bounce(kin, bench.point, bench.direction, V_SING, **kw))
 
 
 def central(a, t):
@@ -100,17 +90,17 @@ def test_crossing_law_has_constant_speed_around_the_point():
 
 
 # ---------------------------------------------------------------- crossings
-def test_encoder_error_bounds(model, bench, xi_true, crossing):
+def test_encoder_error_bounds(kin, bench, xi_true, crossing):
     err = crossing.q_meas - crossing.q_true
     eps = DEXTAR.eps_q
     assert np.all(np.abs(err) <= eps)
     assert np.all(err <= 1e-15) and np.all(err > -eps)  # floor
     kw = dict(xi_true=xi_true, working_guess=bench.q_point, t_rest=0.05, t_rest_end=0.01)
-    rnd = simulate_crossing(model, bench.point, bench.direction, V_SING, quantisation="round", **kw)
+    rnd = simulate_crossing(kin, bench.point, bench.direction, V_SING, quantisation="round", **kw)
     assert np.all(np.abs(rnd.q_meas - rnd.q_true) <= eps / 2 * (1 + 1e-9))
-    u1 = simulate_crossing(model, bench.point, bench.direction, V_SING, quantisation="uniform", seed=5, **kw)
-    u2 = simulate_crossing(model, bench.point, bench.direction, V_SING, quantisation="uniform", seed=5, **kw)
-    u3 = simulate_crossing(model, bench.point, bench.direction, V_SING, quantisation="uniform", seed=6, **kw)
+    u1 = simulate_crossing(kin, bench.point, bench.direction, V_SING, quantisation="uniform", seed=5, **kw)
+    u2 = simulate_crossing(kin, bench.point, bench.direction, V_SING, quantisation="uniform", seed=5, **kw)
+    u3 = simulate_crossing(kin, bench.point, bench.direction, V_SING, quantisation="uniform", seed=6, **kw)
     e1 = u1.q_meas - u1.q_true
     assert np.all(np.abs(e1) <= eps)
     assert np.max(np.abs(e1)) > 0.9 * eps and np.min(e1) < 0 < np.max(e1)
@@ -118,13 +108,13 @@ def test_encoder_error_bounds(model, bench, xi_true, crossing):
     assert not np.array_equal(u1.q_meas, u3.q_meas)
 
 
-def test_ground_truth_satisfies_the_model(model, crossing, xi_true):
-    f = model.f_batch(crossing.x_true, crossing.q_true, xi_true)
+def test_ground_truth_satisfies_the_model(kin, crossing, xi_true):
+    f = kin.f_batch(crossing.x_true, crossing.q_true, xi_true)
     assert np.max(np.abs(f)) < 1e-13
     np.testing.assert_array_equal(crossing.xi_true, xi_true)
     # Eq. (2) holds exactly (up to rounding) with the simulated velocities.
-    jx = model.jac_x_batch(crossing.x_true, crossing.q_true, xi_true)
-    jq = model.jac_q_batch(crossing.x_true, crossing.q_true, xi_true)
+    jx = kin.jac_x_batch(crossing.x_true, crossing.q_true, xi_true)
+    jq = kin.jac_q_batch(crossing.x_true, crossing.q_true, xi_true)
     res = np.einsum("kij,kj->ki", jx, crossing.xd_true) + np.einsum("kij,kj->ki", jq, crossing.qd_true)
     assert np.max(np.abs(res)) < 1e-14
 
@@ -172,7 +162,7 @@ def test_acceleration_and_speed(crossing):
     assert crossing.t[k] >= 0.5  # the default rest precedes the motion
 
 
-def test_mode_flips_exactly_once(crossing, model, xi_true):
+def test_mode_flips_exactly_once(crossing, kin, xi_true):
     m = crossing.mode_true
     nz = m[m != 0]
     assert np.count_nonzero(nz[1:] != nz[:-1]) == 1
@@ -183,7 +173,7 @@ def test_mode_flips_exactly_once(crossing, model, xi_true):
     assert not crossing.bounce
 
 
-def test_true_singular_point(crossing, bench, xi_true, model):
+def test_true_singular_point(crossing, bench, xi_true, kin):
     # The generic line search agrees with the DexTAR-specific solver.
     assert crossing.x_sing[0] == 0.0
     assert crossing.x_sing[1] == pytest.approx(singular_y(xi_true), abs=1e-13)
@@ -200,7 +190,7 @@ def test_run_is_read_only(crossing):
 
 
 # ------------------------------------------------------------------ bounces
-def test_bounce_never_changes_mode(bounce, model, xi_true):
+def test_bounce_never_changes_mode(bounce, kin, xi_true):
     m = bounce.mode_true
     assert bounce.bounce
     assert np.all(m[m != 0] == 1)
@@ -218,20 +208,20 @@ def test_bounce_never_changes_mode(bounce, model, xi_true):
     assert np.max(vs) == pytest.approx(V_SING)
     # It never passes the true locus.
     assert np.all((bounce.x_true - bounce.x_sing) @ bounce.direction <= 1e-15)
-    assert np.max(np.abs(model.f_batch(bounce.x_true, bounce.q_true, xi_true))) < 1e-13
+    assert np.max(np.abs(kin.f_batch(bounce.x_true, bounce.q_true, xi_true))) < 1e-13
     assert np.all(np.abs(bounce.q_meas - bounce.q_true) <= bounce.eps_q)
 
 
 # --------------------------------------------------------- limits, errors
-def test_max_v_sing_of_the_default_benchmark(model, bench):
-    v = max_v_sing(model, bench.point, bench.direction, working_guess=bench.q_point)
+def test_max_v_sing_of_the_default_benchmark(kin, bench):
+    v = max_v_sing(kin, bench.point, bench.direction, working_guess=bench.q_point)
     assert 2.2 < v < 2.35
-    run = simulate_crossing(model, bench.point, bench.direction, 0.999 * v, working_guess=bench.q_point,
+    run = simulate_crossing(kin, bench.point, bench.direction, 0.999 * v, working_guess=bench.q_point,
                             t_rest=0.01, t_rest_end=0.01)
     assert run.mode_true[0] == 1 and run.mode_true[-1] == -1
     with pytest.raises(SimulationError, match=r"v_sing <= 2\.2"):
-        simulate_crossing(model, bench.point, bench.direction, 1.01 * v, working_guess=bench.q_point)
-    vb = max_v_sing(model, bench.point, bench.direction, working_guess=bench.q_point, bounce=True)
+        simulate_crossing(kin, bench.point, bench.direction, 1.01 * v, working_guess=bench.q_point)
+    vb = max_v_sing(kin, bench.point, bench.direction, working_guess=bench.q_point, bounce=True)
     assert 1.2 < vb < v
 
 
@@ -253,17 +243,17 @@ def test_max_v_sing_of_the_default_benchmark(model, bench):
     ({"crossing_point": [0.0, 0.3]}, SimulationError),    # unreachable
     ({"working_guess": [-1.4, 4.5]}, SimulationError),    # joints outside their limits
 ])
-def test_bad_inputs(model, bench, over, err):
+def test_bad_inputs(kin, bench, over, err):
     kw = dict(crossing_point=bench.point, direction=bench.direction, v_sing=1.0,
               working_guess=bench.q_point, t_rest=0.01, t_rest_end=0.01)
     kw.update(over)
     for fn in (simulate_crossing, simulate_bounce):
         with pytest.raises(err):
-            fn(model, **kw)
+            fn(kin, **kw)
 
 
-def test_nominal_geometry_needs_opt_in(model, bench):
-    run = simulate_crossing(model, bench.point, bench.direction, 1.0, xi_true=DEXTAR.xi_nominal,
+def test_nominal_geometry_needs_opt_in(kin, bench):
+    run = simulate_crossing(kin, bench.point, bench.direction, 1.0, xi_true=DEXTAR.xi_nominal,
                             strict_xi=False, working_guess=bench.q_point, t_rest=0.01)
     assert abs(run.s_sing) < 1e-15  # the nominal point is the nominal singularity
 

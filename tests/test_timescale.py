@@ -23,11 +23,8 @@ import math
 import numpy as np
 import pytest
 
-# The "plan" extra (pyproject): skip, rather than fail, where it is not installed.
-pytest.importorskip("cvxpy")
-toppra = pytest.importorskip("toppra")
-import toppra.algorithm  # noqa: E402
-from toppra.constraint import JointAccelerationConstraint, JointVelocityConstraint  # noqa: E402
+import toppra.algorithm
+from toppra.constraint import JointAccelerationConstraint, JointVelocityConstraint
 
 from planner.timescale import (  # noqa: E402
     FEAS_RTOL,

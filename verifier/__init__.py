@@ -2,7 +2,10 @@
 
 Explicit re-exports of the public API (no star imports).  The one-sample
 function is ``verifier.step.step`` (not re-exported: the name is its module's).
+The error classes are :mod:`robots.errors`'s, re-exported for convenience.
 """
+
+import logging
 
 from robots.errors import (
     CrosscertError,
@@ -15,13 +18,12 @@ from robots.errors import (
 from .model import IntervalModel
 from .step import Backend, Event, StepConfig, StepResult, Tracker, TrackerState, advance, configure, init_state
 from .tape import Tape
+from .files import atomic_write
+from .settings import TrackerSettings, VelocityModel, Verdict
 from .tracker import (
     BatchResult,
     SampleStream,
-    TrackerSettings,
     TrackResult,
-    VelocityModel,
-    Verdict,
     initial_box_from_mode,
     track,
     track_batch,
@@ -57,6 +59,9 @@ __all__ = [
     "track",
     "track_batch",
     "Trajectory",
+    "atomic_write",
     "read_trajectory",
     "write_trajectory",
 ]
+
+logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .files import atomic_write
+
 __all__ = ["plot_run"]
 
 
@@ -82,5 +84,5 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="")
             a.axvline(k_sing * t_s, color="k", lw=1)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")
     plt.close(fig)

@@ -116,7 +116,7 @@ def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, par
               spread_hypotheses: bool = False) -> StepConfig:
     """Validate ``settings`` for ``model`` and derive the step's constants once
     (``parallel``, ``spread_hypotheses``: see :class:`StepConfig`)."""
-    from .tracker import VelocityModel  # settings live there; no cycle at import time
+    from .settings import VelocityModel
 
     try:
         backend = Backend(backend)

@@ -20,7 +20,10 @@ the period is given or fixed by the first step).
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import re
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,10 +33,71 @@ from robots.errors import TrajectoryFileError
 from .files import atomic_write
 from .trajectory import Trajectory
 
-__all__ = ["Trajectory", "TrajectoryReader", "read_trajectory", "write_trajectory", "TIME_STEP_RTOL"]
+__all__ = ["Trajectory", "TrajectoryReader", "open_trajectory", "read_trajectory", "write_trajectory",
+           "step_tolerance", "parse_number", "TIME_STEP_RTOL", "STAMP_ULPS"]
 
 #: Relative tolerance on the sampling step (time stamps written in decimal).
 TIME_STEP_RTOL = 1e-6
+#: Spacings of doubles at the time stamps' magnitude added to that tolerance:
+#: an absolute (Unix epoch) stamp of 1.7e9 s is only known to 2.4e-7 s, so a
+#: step between two of them is off by up to two such spacings however even
+#: the clock was (two more for the period the steps are compared with).
+STAMP_ULPS = 4
+#: Rows read per block by :func:`read_trajectory` (memory grows by blocks, not rows).
+_BLOCK_ROWS = 65536
+#: A number as a CSV cell may write it: ASCII digits, optional sign, point and
+#: exponent; no digit separators (``1_0``), no other scripts' digits, no words (``nan``).
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?", re.ASCII)
+
+
+def parse_number(text: str) -> float:
+    """The float a CSV cell or an option writes, or ValueError: ASCII decimal notation only.
+
+    Python's ``float`` also takes ``1_0.5``, Arabic-Indic digits, ``nan`` and
+    ``infinity``; a recording or an option holding those is a mistake to
+    report, not a number to guess.
+    """
+    t = text.strip()
+    if not _NUMBER.fullmatch(t):
+        raise ValueError(f"{text!r} is not a decimal number")
+    return float(t)
+
+
+def step_tolerance(t_prev: float, t: float, t_s: float) -> float:
+    """Largest ``|(t - t_prev) - t_s|`` (s) a constant-period recording may show.
+
+    ``TIME_STEP_RTOL * t_s`` for the decimal writing of the stamps, plus
+    :data:`STAMP_ULPS` spacings of doubles at the stamps' magnitude (absolute
+    time stamps).
+    """
+    return TIME_STEP_RTOL * t_s + STAMP_ULPS * float(np.spacing(max(abs(t_prev), abs(t))))
+
+
+@contextlib.contextmanager
+def open_trajectory(path):
+    """The text stream of a recording: a file, a named pipe, or stdin for ``-``.
+
+    Opened as UTF-8 with an optional byte-order mark; yields ``(stream, name)``.
+
+    Raises
+    ------
+    TrajectoryFileError
+        For a missing path, a directory, or a file that cannot be opened.
+    """
+    if str(path) == "-":
+        yield sys.stdin, "<stdin>"
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise TrajectoryFileError(f"{p}: is a directory, not a recording")
+    if not p.exists():
+        raise TrajectoryFileError(f"{p}: no such file")
+    try:
+        fh = p.open(newline="", encoding="utf-8-sig")
+    except OSError as exc:
+        raise TrajectoryFileError(f"{p}: cannot open ({exc.strerror})") from None
+    with fh:
+        yield fh, str(p)
 
 
 class TrajectoryReader:
@@ -53,10 +117,16 @@ class TrajectoryReader:
     name : str
         Names the source in error messages.
     t_s : float, optional
-        Expected sampling period, s; ``None``: the first step fixes it.
+        Expected sampling period, s; ``None``: the first step fixes it (the
+        robot's ``nominal_t_s`` when the first step matches it within
+        :func:`step_tolerance`).
     even : bool
-        Check every step against ``t_s`` (within :data:`TIME_STEP_RTOL`) as it
+        Check every step against ``t_s`` (within :func:`step_tolerance`) as it
         is read; :func:`read_trajectory` checks against the mean step instead.
+    nominal_t_s : float, optional
+        The robot's sampling period, s: a file whose period differs gets a warning.
+    q_range : (lo, hi) arrays (n,), optional
+        The robot's joint range, rad: the first sample outside it gets a warning.
 
     Attributes
     ----------
@@ -66,6 +136,8 @@ class TrajectoryReader:
         Sampling period, once known.
     line : int
         Number of the last line read (non-blank rows, the header being line 1).
+    warnings : list of str
+        What was odd but not wrong (period off the robot's, joints out of range).
 
     Raises
     ------
@@ -73,10 +145,14 @@ class TrajectoryReader:
         While iterating, with a message naming the source, the line and what is wrong.
     """
 
-    def __init__(self, stream, n: int, name, *, t_s: float | None = None, even: bool = True):
+    def __init__(self, stream, n: int, name, *, t_s: float | None = None, even: bool = True,
+                 nominal_t_s: float | None = None, q_range=None):
         self.name, self.n, self.t_s, self.even = str(name), n, t_s, even
+        self.nominal_t_s, self.q_range = nominal_t_s, q_range
         self.header = None
         self.line = 0
+        self.warnings: list[str] = []
+        self._out_of_range = False
         self._rows = csv.reader(stream)
         self._cols = {"q": [f"q{i + 1}" for i in range(n)], "qd": [f"qd{i + 1}" for i in range(n)],
                       "x": [f"x{i + 1}" for i in range(n)]}
@@ -101,10 +177,11 @@ class TrajectoryReader:
         if row is None:
             raise TrajectoryFileError(f"{self.name}: empty file (expected a header t,q1..q{self.n})")
         header = [c.strip() for c in row]
+        header[0] = header[0].lstrip("\ufeff")  # a byte-order mark read through a stream that kept it
         missing = [c for c in ["t"] + qcols if c not in header]
         if missing:
             raise TrajectoryFileError(f"{self.name}: missing column(s) {', '.join(missing)}; "
-                                      f"expected t,{','.join(qcols)}[,{','.join(qdcols)}]")
+                                      f"expected t,{','.join(qcols)}[,{','.join(qdcols)}]{self._delimiter_hint(row)}")
         extra = [c for c in header if c not in ["t"] + qcols + qdcols + xcols]
         if extra:
             raise TrajectoryFileError(
@@ -118,23 +195,60 @@ class TrajectoryReader:
                 raise TrajectoryFileError(f"{self.name}: give all of {','.join(group)} or none")
         self.header = header
 
+    @staticmethod
+    def _delimiter_hint(row) -> str:
+        text = ",".join(row)
+        for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+            if sep in text:
+                return (f" (the file seems to separate values with {name}: crosscert reads comma-separated "
+                        "values with '.' as the decimal mark)")
+        return ""
+
     def _parse(self, row):
         header = self.header
         if len(row) != len(header):
-            raise self._error(f"{len(row)} values for {len(header)} columns")
+            hint = self._delimiter_hint(row)
+            if not hint and len(row) > len(header):
+                hint = " (a decimal comma? crosscert reads '.' as the decimal mark and ',' between values)"
+            raise self._error(f"{len(row)} values for {len(header)} columns{hint}")
         values = np.empty(len(header))
         for j, cell in enumerate(row):
+            if cell.strip().lower().lstrip("+-") in ("nan", "inf", "infinity"):
+                raise self._error(f"column {header[j]} is {cell.strip()} (NaN and infinities are not allowed)")
             try:
-                values[j] = float(cell)
+                values[j] = parse_number(cell)
             except ValueError:
                 raise self._error(f"{cell.strip()!r} in column {header[j]} is not a number") from None
             if not np.isfinite(values[j]):
                 raise self._error(f"column {header[j]} is {values[j]} (NaN and infinities are not allowed)")
         return values
 
+    def _check_range(self, values) -> None:
+        if self.q_range is None or self._out_of_range:
+            return
+        q = self.columns(values)[1]
+        lo, hi = self.q_range
+        bad = np.flatnonzero((q < lo) | (q > hi))
+        if bad.size:
+            self._out_of_range = True
+            j = int(bad[0])
+            self.warnings.append(f"{self.name}, line {self.line}: q{j + 1} = {q[j]:.6g} rad is outside the robot's "
+                                 f"joint range [{lo[j]:.6g}, {hi[j]:.6g}] rad (first such sample; are the units rad?)")
+
+    def _first_step(self, t_prev: float, t: float, line: int) -> None:
+        """Fix ``t_s`` from the first step: the nominal period when it matches, with a warning when not."""
+        step, nominal = float(t - t_prev), self.nominal_t_s
+        if nominal is not None and abs(step - nominal) <= step_tolerance(t_prev, t, nominal):
+            self.t_s = float(nominal)  # the controller's period, not a stamp difference rounded at 1.7e9 s
+            return
+        self.t_s = step
+        if nominal is not None:
+            self.warnings.append(f"{self.name}, line {line}: sampling period {step:.9g} s differs from the robot's "
+                                 f"nominal {nominal:.9g} s (times in ms? pass --t-s to state it)")
+
     def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
-        """Raise unless the step ``t - t_prev`` ending on ``line`` is within ``TIME_STEP_RTOL * t_s`` of ``t_s``."""
-        if abs((t - t_prev) - t_s) > TIME_STEP_RTOL * t_s:
+        """Raise unless the step ``t - t_prev`` ending on ``line`` is within :func:`step_tolerance` of ``t_s``."""
+        if abs((t - t_prev) - t_s) > step_tolerance(t_prev, t, t_s):
             raise TrajectoryFileError(
                 f"{self.name}, line {line}: uneven sampling (step {t - t_prev:.9g} s, {what} {t_s:.9g} s); "
                 "the tracker assumes one constant sampling period: resample or split the file"
@@ -148,6 +262,7 @@ class TrajectoryReader:
         t_prev = None
         while (row := self._next_row()) is not None:
             values = self._parse(row)
+            self._check_range(values)
             t = values[it]
             if t_prev is not None:
                 if not t > t_prev:
@@ -155,7 +270,7 @@ class TrajectoryReader:
                                       "the tracker needs strictly increasing times")
                 if self.even:
                     if self.t_s is None:
-                        self.t_s = float(t - t_prev)
+                        self._first_step(t_prev, t, self.line)
                     self.check_step(t_prev, t, self.t_s, self.line)
             yield self.line, values
             t_prev = t
@@ -167,29 +282,43 @@ class TrajectoryReader:
         return values[..., h.index("t")], pick(self._cols["q"]), pick(self._cols["qd"]), pick(self._cols["x"])
 
 
-def read_trajectory(path, n: int) -> Trajectory:
-    """Read and validate a trajectory file for a robot with ``n`` joints.
+def read_trajectory(path, n: int, *, nominal_t_s: float | None = None) -> Trajectory:
+    """Read and validate a whole trajectory file (or ``-``, stdin) for a robot with ``n`` joints.
+
+    The period is the mean step, or ``nominal_t_s`` when the mean step matches
+    it within :func:`step_tolerance`.  Memory is the array of values (read in
+    blocks of rows); to track a recording in constant memory, iterate a
+    :class:`TrajectoryReader` instead (as ``crosscert check`` does).
 
     Raises
     ------
     TrajectoryFileError
         With a message naming the file, the line and what is wrong.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise TrajectoryFileError(f"{path}: no such file")
-    try:
-        with path.open(newline="") as fh:
-            reader = TrajectoryReader(fh, n, path, even=False)
-            samples = list(reader)
-    except OSError as exc:
-        raise TrajectoryFileError(f"{path}: cannot read as CSV ({exc})") from None
-    if len(samples) < 2:
-        raise TrajectoryFileError(f"{path}: at least two samples are needed, got {len(samples)}")
-    t, q, qd, x = reader.columns(np.array([v for _, v in samples]))
+    blocks, first_line, rows = [], None, 0
+    with open_trajectory(path) as (fh, name):
+        reader = TrajectoryReader(fh, n, name, even=False)
+        block = None
+        for line, values in reader:
+            if block is None or rows == block.shape[0]:
+                block, rows = np.empty((_BLOCK_ROWS, values.size)), 0
+                blocks.append(block)
+            block[rows] = values
+            rows += 1
+            first_line = line if first_line is None else first_line
+    if blocks:
+        blocks[-1] = blocks[-1][:rows]
+    data = np.concatenate(blocks) if blocks else np.empty((0, 0))
+    if data.shape[0] < 2:
+        raise TrajectoryFileError(f"{name}: at least two samples are needed, got {data.shape[0]}")
+    t, q, qd, x = reader.columns(data)
     t_s = float((t[-1] - t[0]) / (len(t) - 1))
-    for i in np.flatnonzero(np.abs(np.diff(t) - t_s) > TIME_STEP_RTOL * t_s)[:1] + 1:  # the first uneven step
-        reader.check_step(t[i - 1], t[i], t_s, samples[i][0], "mean")
+    if nominal_t_s is not None and abs(t_s - nominal_t_s) <= step_tolerance(t[0], t[-1], nominal_t_s):
+        t_s = float(nominal_t_s)
+    tol = TIME_STEP_RTOL * t_s + STAMP_ULPS * np.spacing(np.maximum(np.abs(t[:-1]), np.abs(t[1:])))
+    for i in np.flatnonzero(np.abs(np.diff(t) - t_s) > tol)[:1] + 1:  # the first uneven step
+        # line numbers count non-blank rows, so row i is on line first_line + i
+        reader.check_step(t[i - 1], t[i], t_s, first_line + int(i), "mean")
     return Trajectory(t=t, q=q, qd=qd, t_s=t_s, x=x)
 
 

@@ -44,9 +44,12 @@ if importlib.util.find_spec("planner") is None:  # not installed: run from a che
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 
-from planner import CrossingTask, PlanningBounds, certify_crossing
-from robots import DEXTAR, benchmark_crossing
+from planner import PlanningBounds, benchmark_task, certify_crossing
+from robots import get_entry
 from robots.errors import ModelError
+
+ENTRY = get_entry("dextar")
+DEXTAR = ENTRY.robot
 
 #: Default peak acceleration of the planned speed ramps (PlanningBounds.a_peak), m/s^2.
 A_PEAK = PlanningBounds().a_peak
@@ -94,12 +97,6 @@ def run_cases(fn, cases, executor=None):
 
 
 # ------------------------------------------------------------------ one case
-def benchmark_task() -> CrossingTask:
-    """Start and goal 60 mm either side of the nominal singular point, along the benchmark direction."""
-    b = benchmark_crossing()
-    return CrossingTask(b.point - 0.06 * b.direction, b.point + 0.06 * b.direction, b.q_point)
-
-
 def scaled_robot(width: float, robot=DEXTAR):
     """``robot`` with the half-widths of ``[xi]`` scaled by ``width`` around the box centre.
 
@@ -130,7 +127,7 @@ def run_case(case: dict) -> dict:
     try:
         robot = scaled_robot(width)
         bounds = PlanningBounds(a_max=(a, a), a_peak=a_peak)
-        cert = certify_crossing(robot, benchmark_task(), bounds, refute=False, monte_carlo_runs=0, tol=tol)
+        cert = certify_crossing(robot, benchmark_task(ENTRY), bounds, refute=False, monte_carlo_runs=0, tol=tol)
         out["v_min"] = cert.v_min
         out["verdict"] = cert.verdict.value
         out["trials"] = len(cert.trials)

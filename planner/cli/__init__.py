@@ -1,0 +1,48 @@
+"""The ``crosscert`` command: certify a planned crossing, plan one, check a recording, monitor a stream,
+simulate, sweep.
+
+Exit codes: 0 a verdict was given, 2 bad input or usage (one line on stderr,
+no traceback), 3 the data contradict the assumptions (inconsistent).  Robots
+come from :mod:`robots.registry`; every command takes ``--robot``.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from robots.errors import CrosscertError
+
+from .parser import UsageError, build_parser
+from .planning import certify, plan
+from .simulation import simulate, sweep
+from .track import check, monitor
+
+__all__ = ["build_parser", "main"]
+
+_COMMANDS = {"check": check, "monitor": monitor, "simulate": simulate, "sweep": sweep, "plan": plan,
+             "certify": certify}
+
+
+def main(argv=None) -> int:
+    """Entry point of the ``crosscert`` script; returns the exit code.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name (default: ``sys.argv[1:]``).
+    """
+    try:
+        a = build_parser().parse_args(argv)
+        return _COMMANDS[a.command](a)
+    except UsageError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    except CrosscertError as exc:
+        print(f"crosscert: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("crosscert: interrupted", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"crosscert: error: {exc}", file=sys.stderr)
+        return 2

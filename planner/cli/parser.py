@@ -1,0 +1,149 @@
+"""The argument parser of ``crosscert``: every command, option, default and unit in one place."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.metadata as md
+
+from robots.registry import DEFAULT_ROBOT, available_robots
+from verifier.step import Backend
+from verifier.tracker import VelocityModel
+
+from ..execution import ExecutionKind
+from ..task import Method
+
+__all__ = ["build_parser", "UsageError", "TABLE2_SPEEDS"]
+
+#: Table II speeds of the paper, m/s, and two slower ones.
+TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
+
+METHOD_HELP = ("time law of the plan: constant speed through the crossing (smoothstep), minimal time along the "
+               "straight path (time-optimal, cvxpy), or minimal time with the robot's dynamic model, torque limits "
+               "and the dynamic crossing criterion (dynamic, CasADi + IPOPT)")
+
+
+class UsageError(Exception):
+    """A usage error argparse found: printed as one line, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # usage errors: one line, exit 2
+        raise UsageError(f"{self.prog}: {message}")
+
+
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Defaults in ``--help``, except where there is none to show."""
+
+    def _get_help_string(self, action):
+        if action.default in (None, False, argparse.SUPPRESS) or "%(default)" in (action.help or ""):
+            return action.help
+        return super()._get_help_string(action)
+
+
+def _version() -> str:
+    try:
+        return md.version("crosscert")
+    except md.PackageNotFoundError:  # running from a source tree that was never installed
+        return "unknown (not installed)"
+
+
+def _robot_option(p):
+    p.add_argument("--robot", default=DEFAULT_ROBOT, help=f"robot: one of {', '.join(available_robots())}")
+
+
+def _tracker_options(p):
+    """The tracker-bound options ``check`` and ``monitor`` share."""
+    _robot_option(p)
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
+    g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
+    p.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (all components; robot default)")
+    p.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
+    p.add_argument("--xd0", type=float, help="initial velocity bound, m/s (all components; robot default)")
+    p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
+                   help="joint-data error model (paper = quantisation only, NOT sound)")
+    p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
+                   help="tracker implementation: compiled kernels or the numpy reference (same results)")
+
+
+def _task_options(p):
+    _robot_option(p)
+    p.add_argument("--start", help="start pose at rest, comma-separated, SI (default: 60 mm before the benchmark crossing)")
+    p.add_argument("--goal", help="goal pose at rest in the other mode, SI (default: 60 mm after it)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``crosscert``."""
+    p = _Parser(prog="crosscert", formatter_class=_Formatter,
+                description="Certify whether a parallel robot's motion through a Type 2 singularity changes its "
+                            "assembly mode, from joint encoders alone, with interval analysis. Exit codes: 0 a "
+                            "verdict, 2 bad input or usage, 3 the data contradict the assumptions (inconsistent).")
+    p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def command(name, help_):
+        return sub.add_parser(name, help=help_, description=help_, formatter_class=_Formatter)
+
+    c = command("check", "certify the assembly mode of a recorded joint trajectory")
+    c.add_argument("trajectory", help="CSV file: t,q1..qn[,qd1..qdn] (s, rad, rad/s)")
+    _tracker_options(c)
+    c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.add_argument("--plot", help="write a PNG figure of the boxes")
+    c.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    mo = command("monitor", "certify the assembly mode online, from samples read one line at a time")
+    mo.add_argument("trajectory", nargs="?", default="-",
+                    help="CSV stream t,q1..qn[,qd1..qdn]: '-' for stdin, a named pipe or a file")
+    _tracker_options(mo)
+    mo.add_argument("--t-s", type=float, help="sampling period, s (default: fixed by the first two samples)")
+    mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
+    mo.add_argument("--spread-hypotheses", action="store_true",
+                    help="track the geometry hypotheses of each sample on several threads: lower latency on "
+                         "dedicated cores, erratic on busy ones")
+
+    s = command("simulate", "simulate encoder readings of the benchmark crossing (or a bounce)")
+    _robot_option(s)
+    s.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
+    s.add_argument("--bounce", action="store_true", help="fail the crossing: stop on the locus and come back")
+    s.add_argument("--seed", type=int, default=0,
+                   help="seed of the true geometry drawn in the calibration box (0: its centre)")
+    s.add_argument("--t-rest", type=float, default=0.3, help="rest before the motion, s")
+    s.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    s.add_argument("-o", "--output", required=True, help="CSV file to write")
+
+    ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound")
+    _task_options(ce)
+    ce.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (default: planned peak + 10%%)")
+    ce.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
+    ce.add_argument("--tracking-error", type=float, default=0.0, help="extra joint tracking error allowed, rad")
+    ce.add_argument("--execution", choices=[k.value for k in ExecutionKind], default=ExecutionKind.CARTESIAN.value,
+                    help="executions the certificate covers: 'cartesian' follow the planned path with any geometry "
+                         "in the calibration box; 'joint' keep the joints within eps_q + tracking error of the plan")
+    ce.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
+    ce.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
+    ce.add_argument("--v-low", type=float, default=0.6, help="slowest speed tried, m/s")
+    ce.add_argument("--v-high", type=float, help="fastest speed tried, m/s (default: the fastest the segment allows)")
+    ce.add_argument("--tol", type=float, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
+    ce.add_argument("--monte-carlo", type=int, default=50, help="simulated executions at v_min (0 skips)")
+    ce.add_argument("--no-refute", action="store_true", help="skip the counterexample search")
+    ce.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo executions and search starts")
+    ce.add_argument("--out", default="crosscert-certify", help="folder for the PNG plot and the JSON report")
+    ce.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
+    ce.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    pl = command("plan", "plan a crossing at a given speed and write it as a trajectory file")
+    _task_options(pl)
+    pl.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
+    pl.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    pl.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
+    pl.add_argument("-o", "--output", required=True, help="CSV file to write (t, q1..qn, x1..xn)")
+
+    w = command("sweep", "the paper's Table II on the simulated benchmark crossing")
+    _robot_option(w)
+    w.add_argument("--speeds", help="comma-separated speeds at the singularity, m/s (default: "
+                                    f"{','.join(map(str, TABLE2_SPEEDS))})")
+    w.add_argument("--seed", type=int, default=0,
+                   help="seed of the true geometry drawn in the calibration box (0: its centre)")
+    w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
+    w.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p

@@ -1,0 +1,85 @@
+"""``crosscert plan`` and ``crosscert certify``: crossings before execution."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from verifier.files import atomic_write
+from verifier.plots import plot_run
+from verifier.trajfile import write_trajectory
+
+from ..pipeline import certify_crossing
+from ..plan import plan_crossing
+from ..task import Method, PlanningBounds
+from .setup import progress_bar, task_setup
+
+__all__ = ["plan", "certify"]
+
+
+def plan(a) -> int:
+    """``crosscert plan``: write the planned crossing at ``--v-sing`` as a trajectory file."""
+    entry, kin, task = task_setup(a)
+    dyn = entry.require_dynamics() if a.method == Method.DYNAMIC else None
+    p = plan_crossing(kin, task, a.v_sing, PlanningBounds(a_peak=a.a_peak, method=a.method, dynamics=dyn))
+    write_trajectory(a.output, p.t, p.q, x=p.x)
+    print(f"wrote {a.output}: {len(p.t)} samples, crossing at sample {p.k_sing} at {p.v_sing} m/s, "
+          f"peak |xdd| {np.abs(p.xdd).max():.1f} m/s^2")
+    return 0
+
+
+def certify(a) -> int:
+    """``crosscert certify``: v_min, its certificate, the refutation bound; a table, a JSON report and a figure."""
+    entry, kin, task = task_setup(a)
+    robot = entry.robot
+    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak,
+                            method=a.method, dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
+                            execution=a.execution)
+    out = Path(a.out)
+    bar, cb = progress_bar(None, not a.no_progress, "certify")
+    try:
+        cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
+                                monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
+                                progress=cb, kin=kin)
+    finally:
+        if bar is not None:
+            bar.close()
+    report = cert.summary()
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    if cert.enclosures is not None:
+        e, p = cert.enclosures, cert.trajectory
+        png = out / f"certificate_{robot.name}_{cert.v_min:.3f}.png"
+        plot_run(png, p.t[1] - p.t[0], {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
+                 p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s")
+        files.append(png)
+    js = out / "certificate.json"
+    atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
+    files.append(js)
+    if a.json:
+        print(json.dumps(report))
+        return 0
+    print(f"{'v_sing (m/s)':>12} {'m_x (mm)':>10} {'m_xd (m/s)':>11} {'verdict':>15}")
+    for r in cert.trials:
+        print(f"{r.v_sing:12.4f} {1e3 * r.max_width_pose:10.2f} {r.max_width_velocity:11.3f} {r.verdict.value:>15}")
+    vmin = "none (no tried speed certifies)" if cert.v_min is None else f"{cert.v_min:.4f} m/s"
+    ref = "not computed" if a.no_refute else ("none found" if cert.refutation_bound is None else f"{cert.refutation_bound:.4f} m/s")
+    print(f"minimal certified v_sing: {vmin}")
+    if cert.v_min_at_lower_end:
+        print(f"note: v_min is the slowest speed tried; lower --v-low (now {a.v_low} m/s) to look for a smaller one")
+    if cert.certified_below_v_min:
+        print(f"note: certification is not monotone here; also certified below v_min at "
+              f"{', '.join(f'{v:.4f}' for v in cert.certified_below_v_min)} m/s")
+    print(f"refutation bound (no sound tracker certifies at or below): {ref}")
+    mc = cert.monte_carlo
+    if mc is not None:
+        print(f"Monte Carlo at v_min: {mc.detected_in_class}/{mc.in_class} admissible executions detected "
+              f"({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
+              f"{len(mc.wrong_verdicts)} wrong verdicts")
+    phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
+    print(f"a_max used: {report['a_max_mps2']} m/s^2; elapsed {cert.elapsed_s:.1f} s ({phases})")
+    for f in files:
+        print(f"wrote {f}")
+    return 0

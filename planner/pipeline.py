@@ -1,0 +1,390 @@
+"""The whole certification of a crossing: speed search, certificate, Monte Carlo, refutation bound.
+
+:func:`certify_crossing` plans and certifies speeds (:mod:`planner.certify`),
+re-certifies the slowest certified one alone, confirms it by Monte Carlo
+(:mod:`planner.montecarlo`) and, meanwhile, searches verified
+counterexamples below it (:mod:`planner.refute`) on an executor with the
+``concurrent.futures`` interface.  It returns a :class:`CrossingCertificate`.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata as md
+import logging
+import time
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from robots import KinematicModel
+from robots import validators as V
+from robots.errors import InputError, SimulationError
+from verifier.model import IntervalModel
+from verifier.tracker import TrackResult, Verdict
+
+from . import execution as ex_
+from . import refute
+from .certify import certify_plan, execution_class, minimal_v_sing
+from .montecarlo import MonteCarloResult, monte_carlo_confirmation
+from .plan import derived_a_max, plan_crossing, speed_ceiling
+from .simulate import random_geometry
+from .task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
+from .worker import SubprocessExecutor
+
+__all__ = ["CrossingCertificate", "certify_crossing", "refute_speed", "Refuter", "refutation_search",
+           "REFUTE_CPU_TIME"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class CrossingCertificate:
+    """Result of :func:`certify_crossing` (frozen).
+
+    ``verdict`` is ``MODE_CHANGED`` when ``v_min`` exists (the change is
+    certified for every admissible execution at ``v_min``), ``UNKNOWN`` when
+    no tried speed certifies.  ``refutation_bound`` (m/s, or None when not
+    computed / no counterexample) is the largest speed at which a verified
+    counterexample exists: no sound tracker can certify at or below it.
+    ``execution`` is the class of admissible executions the certificate
+    covers (:mod:`planner.execution`); ``timings_s`` the wall time of each
+    phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``, and
+    ``refutation``: the wait for the background searches left after the
+    Monte Carlo run).
+    """
+
+    verdict: Verdict
+    v_min: float | None
+    refutation_bound: float | None
+    trials: tuple
+    trajectory: PlannedTrajectory | None
+    enclosures: TrackResult | None
+    bounds: PlanningBounds
+    a_max_used: tuple | None
+    monte_carlo: MonteCarloResult | None
+    versions: dict
+    elapsed_s: float
+    refutation: tuple = field(default=(), repr=False)
+    execution: ex_.ExecutionClass | None = None
+    timings_s: dict = field(default_factory=dict)
+
+    @property
+    def certified_below_v_min(self) -> list:
+        """Tried speeds below ``v_min`` that certified (m/s): where certification was not monotone in the speed."""
+        if self.v_min is None:
+            return [t.v_sing for t in self.trials if t.verdict is Verdict.MODE_CHANGED]
+        return [t.v_sing for t in self.trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing < self.v_min]
+
+    @property
+    def v_min_at_lower_end(self) -> bool:
+        """``v_min`` is the slowest speed tried: a smaller one may certify too (lower ``v_low``)."""
+        return self.v_min is not None and self.v_min <= min(t.v_sing for t in self.trials)
+
+    def summary(self) -> dict:
+        """JSON-ready summary."""
+        return {
+            "verdict": self.verdict.value,
+            "v_min_mps": self.v_min,
+            "refutation_bound_mps": self.refutation_bound,
+            "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
+            "certified_below_v_min_mps": self.certified_below_v_min,
+            "v_min_at_lower_end": self.v_min_at_lower_end,
+            "a_max_mps2": None if self.a_max_used is None else list(self.a_max_used),
+            "eps_q_rad": self.bounds.eps_q,
+            "tracking_error_rad": self.bounds.tracking_error,
+            "t_s": self.bounds.t_s,
+            "xi_splits": None if self.bounds.xi_splits is None else list(self.bounds.xi_splits),
+            "execution": None if self.execution is None else self.execution.summary(),
+            "trials": [
+                {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "max_width_pose_m": r.max_width_pose,
+                 "max_width_velocity_mps": r.max_width_velocity,
+                 "certified_at_step": None if r.certified_at_step < 0 else r.certified_at_step}
+                for r in self.trials
+            ],
+            "refutation": [
+                {"v_sing_mps": r.speed, "counterexample": bool(r.verified), "status": r.status,
+                 "geometry": None if r.geometry is None else list(map(float, r.geometry))}
+                for r in self.refutation
+            ],
+            "monte_carlo": None if self.monte_carlo is None else self.monte_carlo.summary(),
+            "versions": self.versions,
+            "elapsed_s": self.elapsed_s,
+            "timings_s": self.timings_s,
+        }
+
+
+def _versions():
+    out = {}
+    for pkg in ("crosscert", "numpy", "casadi", "scipy"):
+        try:
+            out[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=0.6, v_high=None,
+                     tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
+                     executor: Executor | None = None, seed=0, progress=None, kin=None,
+                     imodel=None) -> CrossingCertificate:
+    """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
+
+    Parameters
+    ----------
+    robot : robots.Robot
+    task : CrossingTask
+    bounds : PlanningBounds, optional
+    v_low, v_high : float
+        Speed bracket, m/s; ``v_high`` defaults to (and is capped at)
+        :func:`speed_ceiling`: the fastest crossing the time law allows.
+    tol : float
+        Resolution of ``v_min``, m/s.
+    monte_carlo_runs : int
+        Executions simulated at ``v_min`` (0 to skip).
+    refute : bool
+        Search verified counterexamples (planner.refute) below ``v_min``.
+    refute_speeds : sequence of float, optional
+        Speeds of the coarse counterexample scan (default every 0.1 m/s from 0.3).
+    refute_in_background : bool
+        Run the counterexample searches on ``executor`` while the speed search
+        and the Monte Carlo run go on (the same searches, with the same 2 s
+        CPU cap per attempt; ``False`` runs them here, afterwards).
+    executor : concurrent.futures.Executor, optional
+        Where background searches run (a process pool, a Dask client's
+        ``get_executor()``...); default: a :class:`~planner.worker.SubprocessExecutor`
+        made for this call and shut down at its end.  A given executor is not
+        shut down.
+    seed : int
+        Seed of the Monte Carlo executions and of the counterexample starts.
+    progress : callable, optional
+        ``progress(k)`` after each tracked sample of every batch.
+    """
+    t0 = time.perf_counter()
+    kin = KinematicModel(robot) if kin is None else kin
+    imodel = IntervalModel(robot) if imodel is None else imodel
+    b = (bounds or PlanningBounds()).resolved(robot)
+    m0 = crossing_on_segment(kin, task, robot.xi_center).m0
+    v_feasible = speed_ceiling(kin, task, b)
+    v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)
+    v_low = V.positive("v_low", v_low)
+    tol = V.positive("tol", tol)
+    if v_high <= v_low:
+        raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the {b.method} time law allows "
+                         f"at most {v_feasible:.3f} m/s on this task")
+    refuter = None
+    if refute:
+        # starting geometries of the (non-convex) searches: the box centre and a seeded corner
+        starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
+        scan = refute_speeds if refute_speeds is not None else np.arange(0.3, v_high, 0.1)
+        try:
+            scan = sorted({round(float(v), 6) for v in scan})
+        except (TypeError, ValueError):
+            raise InputError(f"refute_speeds must be numbers (m/s), got {refute_speeds!r}") from None
+        refuter = Refuter(robot, task, b, m0, starts, kin, (executor or SubprocessExecutor())
+                          if refute_in_background else None, own_executor=executor is None)
+        refuter.submit(scan)
+    # wall time of each phase (the refutation's is the wait left after the Monte Carlo run)
+    clock = {"setup": time.perf_counter() - t0}
+
+    def lap(name, since):
+        clock[name] = time.perf_counter() - since
+        log.info("certify_crossing: %s done in %.2f s", name, clock[name])
+        return time.perf_counter()
+
+    try:
+        t1 = time.perf_counter()
+        v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
+        t1 = lap("search", t1)
+        plan = enc = mc = a_used = cls = None
+        # the batched search pads shorter plans with rest samples: re-certify the
+        # candidate alone, on its own samples; if it fails, try the next faster
+        # certified speed (the certificate's verdict is this run's verdict)
+        for cand in ([t.v_sing for t in trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing >= v_min]
+                     if v_min is not None else []):
+            plan = plan_crossing(kin, task, cand, b)
+            cls = execution_class(kin, plan, b)
+            enc = certify_plan(imodel, plan, b, m0, execution=cls)
+            if enc.verdict is Verdict.MODE_CHANGED:
+                v_min = cand
+                a_used = derived_a_max(plan, b)
+                break
+        else:
+            v_min = plan = enc = cls = None
+        t1 = lap("certificate", t1)
+        top = v_min if v_min is not None else max(t.v_sing for t in trials)
+        ref_job = None
+        if refuter is not None:
+            refuter.drop_from(top)
+            if refute_in_background:
+                # the bisection mostly waits on the worker: let it wait beside the Monte Carlo run
+                helper = ThreadPoolExecutor(max_workers=1)
+                ref_job = helper.submit(refutation_search, refuter, top, tol)
+                helper.shutdown(wait=False)
+        if v_min is not None and monte_carlo_runs:
+            mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
+                                          execution=cls)
+        t1 = lap("monte_carlo", t1)
+        if ref_job is not None:
+            ref_bound, ref = ref_job.result()
+        elif refuter is not None:
+            ref_bound, ref = refutation_search(refuter, top, tol)
+        else:
+            ref_bound = ref = None
+        lap("refutation", t1)
+    finally:
+        if refuter is not None:
+            refuter.close()
+    return CrossingCertificate(
+        verdict=enc.verdict if enc is not None else Verdict.UNKNOWN,
+        v_min=v_min,
+        refutation_bound=ref_bound,
+        trials=tuple(trials),
+        trajectory=plan,
+        enclosures=enc,
+        bounds=b,
+        a_max_used=a_used,
+        monte_carlo=mc,
+        versions=_versions(),
+        elapsed_s=time.perf_counter() - t0,
+        refutation=tuple(ref or ()),
+        execution=cls,
+        timings_s=clock,
+    )
+
+
+#: Kinematic models built in this process for :func:`refute_speed`, by robot value.
+_MODELS: dict = {}
+#: IPOPT time cap per counterexample attempt, s.  On the benchmark task of
+#: docs/planning.md every verified counterexample took <= 0.2 s (<= 60
+#: iterations); attempts near the bound can wander for 10-25 s before declaring
+#: infeasibility, and a stopped attempt proves nothing either way (it only
+#: costs bound tightness).
+REFUTE_CPU_TIME = 2.0
+
+
+def refute_speed(robot, task, b, m0, starts, v, kin=None):
+    """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
+
+    Module-level so that any executor can run it in another process; builds
+    (and keeps) the robot's ``KinematicModel`` there.  A speed the planner cannot plan gives
+    a row with no counterexample and the planner's message as status.
+    """
+    if kin is None:
+        # keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes
+        kin = _MODELS.get(robot)
+        if kin is None:
+            kin = _MODELS[robot] = KinematicModel(robot)
+    try:
+        plan = plan_crossing(kin, task, v, b)
+    except (InputError, SimulationError) as exc:
+        nan = float("nan")
+        return refute.SpeedRefutation(float(v), 0, False, False, None, nan, nan, nan, f"no plan: {exc}", 0.0, ())
+    a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b)
+    overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
+    return refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
+                                   bounds=overrides, max_cpu_time=REFUTE_CPU_TIME).rows[0]
+
+
+class Refuter:
+    """Counterexample searches by speed: submitted to an executor, or run here when asked.
+
+    Parameters
+    ----------
+    robot, task, b, m0, starts
+        The arguments of :func:`refute_speed` before the speed.
+    kin : KinematicModel or None
+        This process's model, for searches run here.
+    executor : concurrent.futures.Executor or None
+        Where searches run in the background (None: here, on demand).
+    own_executor : bool
+        Shut ``executor`` down in :meth:`close`.
+    """
+
+    def __init__(self, robot, task, b, m0, starts, kin, executor: Executor | None, *, own_executor: bool = False):
+        self._args = (robot, task, b, m0, starts)
+        self._kin = kin
+        self._executor = executor
+        self._own = own_executor
+        self._futures: dict[float, Future] = {}
+        self._speeds: set = set()
+        self._rows: dict = {}
+
+    def submit(self, speeds) -> None:
+        """Queue searches at ``speeds`` (m/s) on the executor."""
+        self._speeds.update(speeds)
+        if self._executor is not None:
+            for v in speeds:
+                if v not in self._futures:
+                    self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+
+    def drop_from(self, v_top) -> None:
+        """Forget the speeds at or above ``v_top`` (searches not started are cancelled)."""
+        self._speeds = {v for v in self._speeds if v < v_top}
+        for v, f in self._futures.items():
+            if v >= v_top:
+                f.cancel()
+
+    def speeds(self) -> list:
+        """The speeds still wanted, sorted."""
+        return sorted(self._speeds)
+
+    def result(self, v):
+        """The search at speed ``v``: the executor's result, or a run here if the executor failed."""
+        self._speeds.add(v)
+        if v not in self._rows:
+            row = None
+            if self._executor is not None:
+                future = self._futures.get(v)
+                if future is None or future.cancelled():
+                    future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+                try:
+                    row = future.result()
+                except Exception as exc:
+                    # e.g. a robot defined in a script the worker cannot import: go on here (a
+                    # genuine error of the search is raised again by the run here), possibly on
+                    # the helper thread, so with a model of its own (CasADi functions are not to
+                    # be called from two threads at once)
+                    log.warning("background counterexample search failed (%r); searching in this process", exc)
+                    self.close()
+                    self._executor = None
+                    self._kin = None
+            self._rows[v] = row if row is not None else refute_speed(*self._args, v, kin=self._kin)
+        return self._rows[v]
+
+    def close(self) -> None:
+        """Cancel what has not started; shut the executor down if this object made it."""
+        for f in self._futures.values():
+            f.cancel()
+        if self._own and self._executor is not None:
+            self._executor.shutdown(wait=False, cancel_futures=True)
+
+
+def refutation_search(refuter: Refuter, v_top, tol):
+    """Refutation bound below ``v_top``: the largest speed with a verified counterexample.
+
+    The coarse scan submitted to ``refuter`` (0.1 m/s from 0.3 m/s, or the
+    caller's speeds) below ``v_top``, then bisection between the fastest
+    refuted and the slowest non-refuted speed above it, to ``tol``.  Each
+    speed is searched against its own plan's readings and ``a_max`` (the
+    bounds its certificate would use); a failed search proves nothing (the
+    NLP is non-convex).
+
+    Returns
+    -------
+    bound : float or None
+    rows : list of planner.refute.SpeedRefutation (sorted by speed)
+    """
+    rows = {v: refuter.result(v) for v in refuter.speeds() if v < v_top}
+    while True:
+        ordered = sorted(rows)
+        refuted = [v for v in ordered if rows[v].verified]
+        if not refuted:
+            return None, [rows[v] for v in ordered]
+        v_ok = max(refuted)
+        above = [v for v in ordered if v > v_ok]
+        v_no = min(above) if above else v_top
+        if v_no - v_ok <= tol:
+            return v_ok, [rows[v] for v in ordered]
+        mid = round(0.5 * (v_ok + v_no), 6)
+        rows[mid] = refuter.result(mid)

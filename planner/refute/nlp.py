@@ -1,0 +1,269 @@
+"""Search a counterexample with CasADi's NLP interface and IPOPT.
+
+The whole recording is solved at once, not a window around the crossing: a
+counterexample must explain *every* sample (a tracker may certify at any
+step), and a few hundred samples of an ``n = 2`` robot give a few thousand
+variables, which IPOPT solves in well under a second (the two-joint benchmark crossing of the tests:
+K = 250..400 samples, 2000..3200 variables, 0.1..0.4 s to converge,
+0.3..1 s to report infeasibility).  To study a window, pass the slice
+of the recording; the result then refutes only trackers fed that slice.
+
+Non-convergence of IPOPT is never a counterexample; an unverified candidate is
+never reported as one: every converged candidate goes through
+:func:`~planner.refute.verify.verify_bounce`, and only
+:attr:`BounceSearch.verified` results count.  SI units throughout (m, rad, s).
+"""
+
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+
+from robots import validators as V
+from robots.errors import InputError, SimulationError
+from robots.kinematics import KinematicModel
+
+from .problem import (
+    ACCEL_MARGIN,
+    JOINT_MARGIN,
+    MODE_MARGIN,
+    XI_MARGIN,
+    Counterexample,
+    RecordingBounds,
+    SearchOutcome,
+    ipopt_outcome,
+)
+from .results import BounceSearch
+from .verify import DENSE_POINTS, verify_bounce
+
+__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "search_bounce"]
+
+#: Default IPOPT iteration cap per attempt: on the benchmark crossing IPOPT
+#: converges or reports infeasibility within 24..76 iterations.
+MAX_ITER = 3000
+#: Default IPOPT CPU time cap per attempt, s: a stopped attempt proves nothing, so be generous.
+MAX_CPU_TIME = 120.0
+#: IPOPT's optimality tolerance; the objective is only a regulariser, so this matters little.
+IPOPT_TOL = 1e-9
+#: IPOPT's constraint violation tolerance (also the "acceptable" one), in the scaled
+#: rows (eps_q- and full-acceleration units): far inside the margins above.
+IPOPT_CONSTR_VIOL_TOL = 1e-10
+
+
+def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, np.ndarray]:
+    """The forward kinematics of every sample in assembly mode ``m0``, by continuation.
+
+    For a crossing this is the recording's own path before the locus and its
+    reflection (the other FK solution) after it: the "bounce" the NLP starts
+    from.  Samples with no mode-``m0`` solution (near the locus, where the two
+    solutions merge and vanish for this ``xi``) are linearly interpolated.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+        The robot's kinematics.
+    q_meas : array_like, shape (K, n)
+        Joints, rad.
+    xi : array_like, shape (m,)
+        Geometry, SI.
+    m0 : int
+        Assembly mode, +1 or -1.
+
+    Returns
+    -------
+    X : ndarray, shape (K, n)
+        Poses, m.
+    solved : ndarray of bool, shape (K,)
+        Samples where an FK solution of mode ``m0`` was found (others interpolated).
+
+    Raises
+    ------
+    SimulationError
+        If no sample has an FK solution of mode ``m0``.
+    """
+    Q = np.asarray(q_meas, dtype=float)
+    K = Q.shape[0]
+    X = np.full((K, kin.n), np.nan)
+    solved = np.zeros(K, dtype=bool)
+    prev = None
+    for k in range(K):
+        x = None
+        if prev is not None:
+            Xk, ok = kin.fk_batch(Q[k:k + 1], xi, prev[None, :])
+            if ok[0] and kin.mode(Xk[0], Q[k], xi) == m0:
+                x = Xk[0]
+        if x is None:  # no continuation (first sample, or it fell into the other mode)
+            sols = kin.fk_all(Q[k], xi)
+            mine = [s for s in sols if kin.mode(s, Q[k], xi) == m0]
+            if mine:
+                # Nearest to the last pose keeps the branch; the first sample takes
+                # the lexicographically first solution of its mode.
+                x = mine[0] if prev is None else min(mine, key=lambda s: float(np.max(np.abs(s - prev))))
+        if x is not None:
+            X[k], solved[k], prev = x, True, x
+    if not solved.any():
+        raise SimulationError(f"{kin.robot.name}: no sample has a forward-kinematics solution in mode {m0:+d}")
+    idx = np.nonzero(solved)[0]
+    for j in range(kin.n):
+        X[:, j] = np.interp(np.arange(K), idx, X[idx, j])
+    return X, solved
+
+
+# --------------------------------------------------------------------- NLP
+def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, *,
+                     max_iter: int, max_cpu_time: float, print_level: int):
+    """Set up and solve the bounce NLP; returns (Counterexample or None, status, iters, time, nv, ng)."""
+    K, n, m = rb.n_samples, kin.n, kin.m
+    ts, qm, eps, amax = rb.t_s, rb.q_meas, rb.eps_q, rb.a_max
+    xc, xh = 0.5 * (rb.xi_lo + rb.xi_hi), 0.5 * (rb.xi_hi - rb.xi_lo)
+
+    # Initial guess: mode-m0 FK of the samples with the starting geometry.
+    X0, _solved = fk_branch_guess(kin, qm, xi_start, rb.m0)
+    V0 = np.gradient(X0, ts, axis=0)
+    U0 = np.clip(np.diff(V0, axis=0) / ts, -amax, amax)
+    # Scales: f in "eps_q-equivalents" (row norm of J_q times eps_q), the
+    # dynamics in units of one full-acceleration step; IPOPT then sees O(1) rows.
+    jq = kin.jac_q_batch(X0, qm, xi_start)
+    fscale = np.median(np.linalg.norm(jq * eps[None, None, :], axis=2), axis=0)
+    fscale = np.where(fscale > 0, fscale, 1.0)
+
+    # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq.
+    s = ca.SX.sym("s", m)
+    Xs = ca.SX.sym("x", n, K)
+    Vs = ca.SX.sym("v", n, K)
+    Ws = ca.SX.sym("w", n, K - 1)
+    Ds = ca.SX.sym("dq", n, K)
+    xi = ca.DM(xc) + ca.DM(xh) * s
+    U = ca.repmat(ca.DM(amax), 1, K - 1) * Ws
+    Q = ca.DM(qm.T) + ca.repmat(ca.DM(eps), 1, K) * Ds
+
+    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi],
+                        [kin.sx_f / ca.DM(fscale), rb.m0 * kin.sx_mode / kin.sx_hadamard])
+    F, M = point.map(K)(Xs, Q, ca.repmat(xi, 1, K))
+    dyn_x = ((Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U)
+             / ca.repmat(ca.DM(0.5 * ts * ts * amax), 1, K - 1))
+    dyn_v = (Vs[:, 1:] - Vs[:, :-1] - ts * U) / ca.repmat(ca.DM(ts * amax), 1, K - 1)
+    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), ca.vec(M))
+    z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds))
+    n_eq = 2 * n * (K - 1) + n * K
+    lbg = np.concatenate([np.zeros(n_eq), np.full(K, MODE_MARGIN)])
+    ubg = np.concatenate([np.zeros(n_eq), np.full(K, np.inf)])
+
+    inf = np.inf
+    x_lo = np.full((n, K), -inf) if rb.x_lo is None else np.repeat(rb.x_lo[:, None], K, axis=1)
+    x_hi = np.full((n, K), inf) if rb.x_hi is None else np.repeat(rb.x_hi[:, None], K, axis=1)
+    vb = np.full((n, K), inf) if rb.v_max is None else np.repeat((1 - ACCEL_MARGIN) * rb.v_max[:, None], K, axis=1)
+    if rb.v0_max is not None:
+        vb[:, 0] = np.minimum(vb[:, 0], (1 - ACCEL_MARGIN) * rb.v0_max)
+    sb = np.full(m, 1 - XI_MARGIN)
+    wb = np.full((n, K - 1), 1 - ACCEL_MARGIN)
+    db = np.full((n, K), 1 - JOINT_MARGIN)
+
+    def vecF(a):  # CasADi's vec() is column-major
+        return np.asarray(a, dtype=float).reshape(-1, order="F")
+
+    lbx = np.concatenate([-sb, vecF(x_lo), vecF(-vb), vecF(-wb), vecF(-db)])
+    ubx = np.concatenate([sb, vecF(x_hi), vecF(vb), vecF(wb), vecF(db)])
+    s0 = np.divide(xi_start - xc, xh, out=np.zeros(m), where=xh > 0)
+    X0c = np.clip(X0.T, x_lo, x_hi)
+    z0 = np.concatenate([np.clip(s0, -sb, sb), vecF(X0c), vecF(np.clip(V0.T, -vb, vb)),
+                         vecF(U0.T / amax[:, None]), np.zeros(n * K)])
+
+    # Feasibility problem; the small smoothness objective picks a regular point.
+    obj = ca.sumsqr(Ws) / (n * (K - 1))
+    opts = {
+        "ipopt": {
+            "print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
+            "tol": IPOPT_TOL, "constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
+            "acceptable_constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
+            # Bounds are the measurement intervals: never relax them.
+            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
+            "mu_strategy": "adaptive", "sb": "yes",
+        },
+        "print_time": False,
+    }
+    solver = ca.nlpsol("bounce", "ipopt", {"x": z, "f": obj, "g": g}, opts)
+    t0 = time.perf_counter()
+    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+    elapsed = time.perf_counter() - t0
+    stats = solver.stats()
+    status = str(stats.get("return_status", "unknown"))
+    iters = int(stats.get("iter_count", -1))
+    nv, ng = int(z.numel()), int(g.numel())
+    if ipopt_outcome(status) is not SearchOutcome.CONVERGED:
+        return None, status, iters, elapsed, nv, ng
+    zs = np.asarray(sol["x"], dtype=float).reshape(-1)
+    s_v, xv, vv, wv, dv = np.split(zs, np.cumsum([m, n * K, n * K, n * (K - 1)]))
+    Xv, Vv, Dv = (a.reshape((n, K), order="F").T for a in (xv, vv, dv))
+    Wv = wv.reshape((n, K - 1), order="F").T
+    ce = Counterexample(xi=xc + xh * s_v, x=Xv, v=Vv, u=amax[None, :] * Wv,
+                        q=qm + eps[None, :] * Dv, t_s=ts, m0=rb.m0)
+    return ce, status, iters, elapsed, nv, ng
+
+
+def search_bounce(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, max_iter: int = MAX_ITER,
+                  max_cpu_time: float = MAX_CPU_TIME, print_level: int = 0,
+                  dense: int = DENSE_POINTS) -> BounceSearch:
+    """Search one counterexample with IPOPT from one starting geometry, and verify it.
+
+    Unknowns: one geometry ``xi`` (m,), the pose ``x_k`` and velocity ``v_k`` at
+    every sample, a constant acceleration ``u_k`` per interval and the joints
+    ``q_k``: ``(m + n (4K - 1))`` variables.  Constraints: exact
+    piecewise-quadratic dynamics, ``f(x_k, q_k, xi) = 0``, and the mode
+    ``m0`` at every sample (normalised ``det J_x >= MODE_MARGIN``); bounds:
+    the measurement intervals, ``a_max``, ``[xi]``, each shrunk by a small
+    margin (``JOINT_MARGIN``, ``ACCEL_MARGIN``, ``XI_MARGIN``) so that an
+    accepted solution is strictly feasible.  See :mod:`planner.refute.verify`
+    for why the mode is constrained at the samples only.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+        The robot's kinematics (its CasADi expressions build the NLP).
+    rb : RecordingBounds
+        The recording and the bounds.
+    xi_start : array_like, shape (m,), optional
+        Starting geometry (default: centre of the box); it only seeds the
+        initial guess (the mode-``m0`` FK of the samples with it), ``xi`` is free.
+    max_iter : int
+        IPOPT iteration cap.
+    max_cpu_time : float
+        IPOPT time cap, s.
+    print_level : int
+        IPOPT verbosity (0 silent).
+    dense : int
+        Sub-samples per interval of the verification (:func:`verify_bounce`).
+
+    Returns
+    -------
+    BounceSearch
+        ``found=False`` with IPOPT's status when it did not converge (this is
+        no counterexample, and no proof that none exists); otherwise the
+        candidate and its verification.  ``outcome`` is
+        :attr:`SearchOutcome.FOUND` only for a verified counterexample.
+
+    Raises
+    ------
+    InputError
+        If ``rb`` does not match ``kin`` or ``xi_start`` lies outside the box.
+    SimulationError
+        If no sample has an FK solution of mode ``m0`` with ``xi_start``.
+    """
+    if not isinstance(kin, KinematicModel):
+        raise InputError(f"kin must be a KinematicModel, got {type(kin).__name__}")
+    if not isinstance(rb, RecordingBounds):
+        raise InputError(f"rb must be RecordingBounds, got {type(rb).__name__}")
+    if rb.q_meas.shape[1] != kin.n or rb.xi_lo.shape != (kin.m,):
+        raise InputError(f"recording has {rb.q_meas.shape[1]} joints and {rb.xi_lo.size} parameters; "
+                         f"{kin.robot.name} needs {kin.n} and {kin.m}")
+    xs = 0.5 * (rb.xi_lo + rb.xi_hi) if xi_start is None else V.vector("xi_start", xi_start, kin.m, broadcast=True)
+    if np.any(xs < rb.xi_lo) or np.any(xs > rb.xi_hi):
+        raise InputError(f"xi_start = {xs.tolist()} lies outside the calibration box")
+    ce, status, iters, elapsed, nv, ng = _build_and_solve(
+        kin, rb, xs, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level)
+    if ce is None:
+        return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs)
+    ver = verify_bounce(kin, ce, rb, dense=dense)
+    return BounceSearch(True, ver.ok, status, iters, elapsed, nv, ng, xs, ce, ver)

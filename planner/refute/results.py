@@ -1,0 +1,185 @@
+"""The records a counterexample search returns: a check, one attempt, one speed, a sweep.
+
+Each result carries an ``outcome`` (:class:`~planner.refute.problem.SearchOutcome`)
+derived from its other fields, next to IPOPT's raw ``status`` kept for
+diagnostics.  Only ``SearchOutcome.FOUND`` is a counterexample; no other
+outcome means that none exists.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .problem import Counterexample, SearchOutcome, ipopt_outcome
+
+__all__ = ["BounceSearch", "RefutationBound", "SpeedRefutation", "Verification", "deciding_attempt"]
+
+@dataclass(frozen=True)
+class Verification:
+    """Outcome of the independent check of a :class:`Counterexample`.
+
+    Attributes
+    ----------
+    ok : bool
+        Every check passed.
+    failures : tuple of str
+        One message per failed check (empty when ``ok``).
+    joint_ratio : float
+        ``max_k,i (|q_ik - q_meas| + |Newton correction|) / eps_q`` with ``q_ik``
+        the IK of the re-integrated pose; ``<= 1`` required.
+    accel_ratio : float
+        ``max |u_k,i| / a_max_i``; ``<= 1`` required.
+    xi_excess : float
+        Largest distance (SI) of ``xi`` outside the box; ``0`` required.
+    mode_margin : float
+        ``min_k m0 * mode_sign * det J_x / prod |rows of J_x|`` at the samples; ``> 0`` required.
+    dense_mode_violations : int
+        Dense points (between samples) whose mode is not ``m0``.
+    dense_ik_failures : int
+        Dense points where the IK continuation failed, left the workspace box,
+        or landed on another leg branch at the next sample.
+    state_mismatch : float
+        ``max |x_k - x_hat_k|`` (m) and ``t_s |v_k - v_hat_k|`` between the
+        candidate's states and the re-integrated ones.
+    """
+
+    ok: bool
+    failures: tuple[str, ...]
+    joint_ratio: float
+    accel_ratio: float
+    xi_excess: float
+    mode_margin: float
+    dense_mode_violations: int
+    dense_ik_failures: int
+    state_mismatch: float
+
+
+@dataclass(frozen=True, eq=False)
+class BounceSearch:
+    """One NLP solve from one starting geometry, and the verification of its result.
+
+    Attributes
+    ----------
+    found : bool
+        IPOPT converged (its status maps to :attr:`SearchOutcome.CONVERGED`).
+    verified : bool
+        ``found`` and :func:`~planner.refute.verify_bounce` accepted the candidate: a counterexample.
+    status : str
+        IPOPT's raw return status, for diagnostics.
+    iterations : int
+    solve_time : float
+        Wall time of the solve (s), building excluded.
+    n_variables, n_constraints : int
+        NLP size.
+    xi_start : ndarray (m,)
+        Starting geometry.
+    counterexample : Counterexample or None
+        The candidate (``None`` unless ``found``).
+    verification : Verification or None
+        Its check (``None`` unless ``found``).
+    outcome : SearchOutcome
+        Derived from ``status`` and ``verification``: FOUND or REJECTED once a
+        converged candidate has been checked, else :func:`ipopt_outcome` of the status.
+    """
+
+    found: bool
+    verified: bool
+    status: str
+    iterations: int
+    solve_time: float
+    n_variables: int
+    n_constraints: int
+    xi_start: np.ndarray
+    counterexample: Counterexample | None = field(default=None, repr=False)
+    verification: Verification | None = None
+    outcome: SearchOutcome = field(init=False)
+
+    def __post_init__(self) -> None:
+        out = ipopt_outcome(self.status)
+        if out is SearchOutcome.CONVERGED and self.verification is not None:
+            out = SearchOutcome.FOUND if self.verified else SearchOutcome.REJECTED
+        object.__setattr__(self, "outcome", out)
+
+
+def deciding_attempt(attempts: Sequence[BounceSearch]) -> BounceSearch | None:
+    """The attempt a speed's result reports: the verified one, else the last converged, else the last (None if none)."""
+    for a in attempts:
+        if a.verified:
+            return a
+    converged = [a for a in attempts if a.found]
+    if converged:
+        return converged[-1]
+    return attempts[-1] if attempts else None
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedRefutation:
+    """Search result for one recording (one speed).
+
+    Attributes
+    ----------
+    speed : float
+        The speed passed to ``make_recording``, m/s.
+    n_samples : int
+        Samples of the recording.
+    found : bool
+        Some start converged.
+    verified : bool
+        Some start gave a verified counterexample.
+    geometry : ndarray (m,) or None
+        Geometry of the verified counterexample (else of the last converged candidate, else ``None``).
+    joint_ratio, accel_ratio, mode_margin : float
+        The counterexample's :class:`Verification` figures (``nan`` if none converged).
+    status : str
+        Raw status of the deciding attempt (the verified one, else the last), for diagnostics.
+    solve_time : float
+        Total solver wall time over the attempts, s.
+    attempts : tuple of BounceSearch
+    outcome : SearchOutcome
+        Derived: FOUND if ``verified``, NOT_SEARCHED without attempts, else the
+        outcome of the deciding attempt (:func:`deciding_attempt`).
+    """
+
+    speed: float
+    n_samples: int
+    found: bool
+    verified: bool
+    geometry: np.ndarray | None
+    joint_ratio: float
+    accel_ratio: float
+    mode_margin: float
+    status: str
+    solve_time: float
+    attempts: tuple[BounceSearch, ...] = field(repr=False)
+    outcome: SearchOutcome = field(init=False)
+
+    def __post_init__(self) -> None:
+        dec = deciding_attempt(self.attempts)
+        if self.verified:
+            out = SearchOutcome.FOUND
+        else:
+            out = SearchOutcome.NOT_SEARCHED if dec is None else dec.outcome
+        object.__setattr__(self, "outcome", out)
+
+
+@dataclass(frozen=True)
+class RefutationBound:
+    """Counterexample search over speeds.
+
+    Attributes
+    ----------
+    rows : tuple of SpeedRefutation
+        One per speed, in the order given.
+    bound : float or None
+        Largest speed with a verified counterexample (m/s), ``None`` if none.
+        That recording cannot be certified "mode changed" by any sound tracker
+        under the same bounds, so the slowest certifiable crossing (of this
+        family of recordings) is faster than ``bound``, or the family is not
+        monotone in speed — :attr:`rows` shows which speeds were refuted.
+    """
+
+    rows: tuple[SpeedRefutation, ...]
+    bound: float | None

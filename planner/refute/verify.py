@@ -1,0 +1,175 @@
+"""The trusted check of a counterexample, independent of the search that produced it.
+
+This is the code to read to trust a counterexample.  It uses numpy and the
+robot's numeric kinematics (:class:`~robots.kinematics.KinematicModel`) only:
+no optimisation problem is built here and nothing of the NLP is reused, so a
+wrong NLP can at worst propose a candidate that this check rejects.
+
+Why the NLP constrains the mode at the samples only: a tracker's verdict is a
+statement about the mode *at sample times* (at the step where it certifies).
+A motion whose mode equals ``m0`` at every sample refutes every such verdict,
+even if it touched or crossed the locus between two samples, provided it is a
+real motion: the joints must follow ``x(t)`` continuously on their leg
+branches.  :func:`verify_bounce` therefore follows the IK along ``x(t)``
+densely between samples, and by default it also requires the mode to stay
+``m0`` at every dense point (a genuine bounce, never crossing).  Dense
+evaluation at finitely many points is a numerical check, not a proof that the
+mode never flips between two of them; it is stricter than the claim needs,
+not weaker.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from robots.errors import InputError
+from robots.kinematics import KinematicModel
+
+from .problem import Counterexample, RecordingBounds, integrate_states
+from .results import Verification
+
+__all__ = ["BRANCH_TOL", "DENSE_POINTS", "STATE_TOL", "verify_bounce"]
+
+#: Largest disagreement (m) between the NLP's sample poses and the trajectory
+#: re-integrated from ``x_0, v_0`` and the accelerations (velocities: divided by ``t_s``).
+STATE_TOL = 1e-9
+#: After IK continuation over one interval, the joints must land within this
+#: distance (rad) of the sample's own IK: the leg branches did not switch.
+BRANCH_TOL = 1e-7
+#: Default points per interval of the dense check: enough to follow the IK
+#: continuation of the benchmark crossing; more only costs time.
+DENSE_POINTS = 8
+
+
+def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, *, dense: int = DENSE_POINTS,
+                  require_dense_mode: bool = True) -> Verification:
+    """Check a candidate counterexample independently of the NLP (numpy and the robot's numeric kinematics).
+
+    The motion checked is the piecewise quadratic re-integrated from
+    ``ce.x[0]``, ``ce.v[0]`` and ``ce.u`` (so it is C^1 with ``x'' = u_k`` on
+    each interval by construction); the candidate's own states must agree with
+    it to ``STATE_TOL``.  Then, with no tolerance beyond what is stated:
+
+    0. every value is finite, ``ce.m0`` and ``ce.t_s`` are the recording's;
+    1. ``xi`` lies in ``[xi_lo, xi_hi]`` and ``|u_k,i| <= a_max_i``; ``|v_0| <= v0_max``
+       and ``|v_k| <= v_max`` (velocity is linear per interval: samples suffice);
+       the sample poses lie in ``[x_lo, x_hi]``;
+    2. at every sample the joints ``q_ik`` re-solved by the robot's IK (Newton
+       from ``q_meas[k]``, which selects the leg branch) satisfy
+       ``|q_ik - q_meas| + |d| <= eps_q``, ``d = J_q^{-1} f`` the remaining
+       Newton correction (bounds the IK's own error); ``ce.q`` lies in the
+       intervals and within ``BRANCH_TOL`` of ``q_ik``;
+    3. the mode is ``m0`` at every sample (``KinematicModel.mode_batch``, nonzero);
+    4. between samples, at ``dense`` points per interval, the IK continues from
+       ``q_ik[k]`` without failure, stays in the workspace box, lands within
+       ``BRANCH_TOL`` of ``q_ik[k+1]`` (same leg branches), and, if
+       ``require_dense_mode``, the mode stays ``m0`` (stricter than the claim
+       needs; a numerical check at finitely many points, not a proof).
+
+    Parameters
+    ----------
+    kin : KinematicModel
+        The robot's kinematics.
+    ce : Counterexample
+        The candidate: ``xi`` (m,), ``x``, ``v``, ``q`` (K, n), ``u`` (K - 1, n), SI.
+    rb : RecordingBounds
+        The recording and the bounds the candidate must respect.
+    dense : int
+        Points per interval for check 4 (``0`` skips it).
+    require_dense_mode : bool
+        Count dense mode violations as failures.
+
+    Returns
+    -------
+    Verification
+        ``ok`` when every check passed, the failed checks' messages and the figures.
+
+    Raises
+    ------
+    InputError
+        If ``ce`` is not a Counterexample or its arrays do not match the recording's shape.
+    """
+    if not isinstance(ce, Counterexample):
+        raise InputError(f"ce must be a Counterexample, got {type(ce).__name__}")
+    K, n = rb.n_samples, kin.n
+    fails: list[str] = []
+    xi = np.asarray(ce.xi, dtype=float)
+    x, v, u, q = (np.asarray(a, dtype=float) for a in (ce.x, ce.v, ce.u, ce.q))
+    if x.shape != (K, n) or v.shape != (K, n) or q.shape != (K, n) or u.shape != (K - 1, n) or xi.shape != (kin.m,):
+        raise InputError("counterexample arrays do not match the recording's shape")
+    if not all(np.all(np.isfinite(a)) for a in (xi, x, v, u, q)):
+        return Verification(False, ("non-finite values",), math.inf, math.inf, math.inf, -math.inf,
+                            K * dense, K * dense, math.inf)
+    if ce.m0 != rb.m0 or abs(ce.t_s - rb.t_s) > 0:
+        fails.append("mode or sampling period differs from the recording's")
+
+    # 1. geometry, acceleration, velocity and workspace bounds.
+    xi_excess = float(max(np.max(rb.xi_lo - xi), np.max(xi - rb.xi_hi), 0.0))
+    if xi_excess > 0:
+        fails.append(f"geometry outside the calibration box by {xi_excess:.3g}")
+    accel_ratio = float(np.max(np.abs(u) / rb.a_max))
+    if accel_ratio > 1.0:
+        fails.append(f"|u| reaches {accel_ratio:.6g} a_max")
+
+    xs, vs = integrate_states(x[0], v[0], u, rb.t_s)
+    mismatch = float(max(np.max(np.abs(xs - x)), rb.t_s * np.max(np.abs(vs - v))))
+    if mismatch > STATE_TOL:
+        fails.append(f"states disagree with the integrated accelerations by {mismatch:.3g} m")
+    if rb.v0_max is not None and np.any(np.abs(vs[0]) > rb.v0_max):
+        fails.append("initial velocity outside v0_max")
+    if rb.v_max is not None and np.any(np.abs(vs) > rb.v_max):
+        fails.append("velocity above v_max")
+    if rb.x_lo is not None and (np.any(xs < rb.x_lo) or np.any(xs > rb.x_hi)):
+        fails.append("pose outside the workspace box at a sample")
+
+    # 2. joints: IK of the integrated poses, branch picked by the measurement.
+    q_ik, ok = kin.ik_batch(xs, xi, rb.q_meas)
+    if not ok.all():
+        fails.append(f"IK fails at {int(np.count_nonzero(~ok))} samples")
+    jq = kin.jac_q_batch(xs, q_ik, xi)
+    resid = kin.f_batch(xs, q_ik, xi)
+    with np.errstate(all="ignore"):
+        corr = np.abs(np.linalg.solve(jq, resid[..., None])[..., 0])
+    joint_ratio = float(np.max((np.abs(q_ik - rb.q_meas) + corr) / rb.eps_q))
+    if not joint_ratio <= 1.0:  # also catches NaN
+        fails.append(f"re-solved joints leave their intervals: max |q - q_meas| = {joint_ratio:.6g} eps_q")
+    q_ratio = float(np.max(np.abs(q - rb.q_meas) / rb.eps_q))
+    if q_ratio > 1.0:
+        fails.append(f"candidate joints leave their intervals: max |q - q_meas| = {q_ratio:.6g} eps_q")
+    if np.max(np.abs(q - q_ik)) > BRANCH_TOL:
+        fails.append("candidate joints are not the IK of its poses")
+
+    # 3. mode at the samples.
+    modes = kin.mode_batch(xs, q_ik, xi)
+    mode_margin = float(np.min(rb.m0 * kin.normalised_mode_batch(xs, q_ik, xi)))
+    if np.any(modes != rb.m0):
+        fails.append(f"mode differs from {rb.m0:+d} at {int(np.count_nonzero(modes != rb.m0))} samples")
+
+    # 4. dense continuation between samples (all intervals advance together).
+    dense_mode_bad = dense_ik_bad = 0
+    if dense > 0 and ok.all():
+        qc = q_ik[:-1].copy()
+        live = np.ones(K - 1, dtype=bool)
+        for j in range(1, dense + 1):
+            tau = rb.t_s * j / dense
+            xd = xs[:-1] + tau * vs[:-1] + 0.5 * tau * tau * u
+            qn, okj = kin.ik_batch(xd, xi, qc)
+            if rb.x_lo is not None:
+                okj &= np.all((xd >= rb.x_lo) & (xd <= rb.x_hi), axis=1)
+            live &= okj
+            qc = np.where(okj[:, None], qn, qc)
+            if j < dense:
+                mj = kin.mode_batch(xd, qc, xi)
+                dense_mode_bad += int(np.count_nonzero(live & (mj != rb.m0)))
+        live &= np.max(np.abs(qc - q_ik[1:]), axis=1) <= BRANCH_TOL
+        dense_ik_bad = int(np.count_nonzero(~live))
+        if dense_ik_bad:
+            fails.append(f"IK continuation fails or switches branch in {dense_ik_bad} intervals")
+        if require_dense_mode and dense_mode_bad:
+            fails.append(f"mode differs from {rb.m0:+d} at {dense_mode_bad} points between samples")
+    elif dense > 0:
+        dense_ik_bad = K - 1
+    return Verification(not fails, tuple(fails), joint_ratio, accel_ratio, xi_excess, mode_margin,
+                        dense_mode_bad, dense_ik_bad, mismatch)
