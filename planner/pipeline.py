@@ -37,6 +37,9 @@ __all__ = ["CrossingCertificate", "certify_crossing", "refute_speed", "Refuter",
 
 log = logging.getLogger(__name__)
 
+#: Version of the layout of :meth:`CrossingCertificate.summary` (``certificate.json``).
+CERTIFICATE_SCHEMA = "crosscert-certificate/2"
+
 
 @dataclass(frozen=True)
 class CrossingCertificate:
@@ -51,7 +54,8 @@ class CrossingCertificate:
     covers (:mod:`planner.execution`); ``timings_s`` the wall time of each
     phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``, and
     ``refutation``: the wait for the background searches left after the
-    Monte Carlo run).
+    Monte Carlo run).  ``robot_name``, ``param_names`` (of the geometry
+    vector ``xi``) and ``task`` say what was certified.
     """
 
     verdict: Verdict
@@ -68,6 +72,9 @@ class CrossingCertificate:
     refutation: tuple = field(default=(), repr=False)
     execution: ex_.ExecutionClass | None = None
     timings_s: dict = field(default_factory=dict)
+    robot_name: str = ""
+    param_names: tuple = ()
+    task: CrossingTask | None = field(default=None, repr=False)
 
     @property
     def certified_below_v_min(self) -> list:
@@ -81,21 +88,41 @@ class CrossingCertificate:
         """``v_min`` is the slowest speed tried: a smaller one may certify too (lower ``v_low``)."""
         return self.v_min is not None and self.v_min <= min(t.v_sing for t in self.trials)
 
+    def _named(self, xi) -> dict | None:
+        """A geometry vector as ``{parameter name: value}`` (SI)."""
+        if xi is None:
+            return None
+        names = self.param_names or tuple(f"xi{i + 1}" for i in range(len(xi)))
+        return {k: float(v) for k, v in zip(names, xi)}
+
     def summary(self) -> dict:
-        """JSON-ready summary."""
+        """JSON-ready, self-describing report (schema :data:`CERTIFICATE_SCHEMA`; docs/file-formats.md)."""
+        b = self.bounds
+        execution = None
+        if self.execution is not None:
+            execution = self.execution.summary()
+            execution["xi_lo"] = self._named(self.execution.xi_lo)
+            execution["xi_hi"] = self._named(self.execution.xi_hi)
         return {
+            "schema": CERTIFICATE_SCHEMA,
+            "robot": self.robot_name,
+            "task": None if self.task is None else {"start_m": self.task.start.tolist(), "goal_m": self.task.goal.tolist(),
+                                                    "working_guess_rad": self.task.working_guess.tolist()},
+            "method": b.method.value,
+            "bounds": {
+                "eps_q_rad": b.eps_q, "tracking_error_rad": b.tracking_error, "t_s": b.t_s, "t_rest_s": b.t_rest,
+                "a_peak_mps2": b.a_peak, "a_max_mps2": None if b.a_max is None else list(b.a_max),
+                "a_margin": b.a_margin, "xi_splits": None if b.xi_splits is None else list(b.xi_splits),
+                "execution": b.execution.value, "qd_max_radps": b.qd_max, "qdd_max_radps2": b.qdd_max,
+            },
             "verdict": self.verdict.value,
             "v_min_mps": self.v_min,
             "refutation_bound_mps": self.refutation_bound,
             "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
             "certified_below_v_min_mps": self.certified_below_v_min,
             "v_min_at_lower_end": self.v_min_at_lower_end,
-            "a_max_mps2": None if self.a_max_used is None else list(self.a_max_used),
-            "eps_q_rad": self.bounds.eps_q,
-            "tracking_error_rad": self.bounds.tracking_error,
-            "t_s": self.bounds.t_s,
-            "xi_splits": None if self.bounds.xi_splits is None else list(self.bounds.xi_splits),
-            "execution": None if self.execution is None else self.execution.summary(),
+            "a_max_used_mps2": None if self.a_max_used is None else list(self.a_max_used),
+            "execution": execution,
             "trials": [
                 {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "max_width_pose_m": r.max_width_pose,
                  "max_width_velocity_mps": r.max_width_velocity,
@@ -103,8 +130,8 @@ class CrossingCertificate:
                 for r in self.trials
             ],
             "refutation": [
-                {"v_sing_mps": r.speed, "counterexample": bool(r.verified), "status": r.status,
-                 "geometry": None if r.geometry is None else list(map(float, r.geometry))}
+                {"v_sing_mps": r.speed, "counterexample": bool(r.verified), "outcome": r.outcome.value,
+                 "solver_status": r.status, "geometry": self._named(r.geometry)}
                 for r in self.refutation
             ],
             "monte_carlo": None if self.monte_carlo is None else self.monte_carlo.summary(),
@@ -250,6 +277,9 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         refutation=tuple(ref or ()),
         execution=cls,
         timings_s=clock,
+        robot_name=robot.name,
+        param_names=tuple(robot.param_names),
+        task=task,
     )
 
 

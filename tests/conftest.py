@@ -43,3 +43,15 @@ def bench():
 def task():
     """The DexTAR benchmark task: 60 mm either side of the benchmark crossing (a frozen CrossingTask)."""
     return problems.PLANNING["dextar_benchmark"].task()
+
+
+@pytest.fixture(scope="session")
+def simulated_recording(tmp_path_factory, kin, bench):
+    """A recording file of a simulated benchmark crossing at 1.3 m/s (readings only), as ``simulate`` writes it."""
+    from planner.simulate import simulate_crossing
+    from verifier.trajfile import write_trajectory
+
+    run = simulate_crossing(kin, bench.point, bench.direction, 1.3, working_guess=bench.q_point, t_rest=0.1)
+    path = tmp_path_factory.mktemp("recording") / "crossing.csv"
+    write_trajectory(path, run.t, run.q_meas)
+    return path

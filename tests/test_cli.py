@@ -136,7 +136,7 @@ def test_simulate_errors(tmp_path, capsys):
     assert "v_sing" in _one_line_error(capsys)
     assert not (tmp_path / "x.csv").exists()
     assert main(["simulate", "--v-sing", "-1", "-o", str(tmp_path / "x.csv")]) == 2
-    assert "v_sing must be > 0" in _one_line_error(capsys)
+    assert "--v-sing = -1 m/s is out of range" in _one_line_error(capsys)
 
 
 def test_check_backends_give_the_same_report(crossing_csv, capsys):

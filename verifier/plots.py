@@ -12,22 +12,42 @@ from .files import atomic_write
 __all__ = ["plot_run"]
 
 
-def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title=""):
-    """Write a 2x2 figure: pose boxes in the plane, velocity enclosure of the
-    last coordinate with its integral ``[Delta]`` (Fig. 4), and box widths (Fig. 5).
+#: Velocity axis limit, m/s: boxes wider than this (before the first samples
+#: contract them) would flatten the plot; the clipping is marked on the figure.
+VELOCITY_CLIP = 20.0
+#: Displacement axis limit, m.
+DISPLACEMENT_CLIP = 1.0
+
+
+def _clip(lo, hi, limit):
+    """Clip a band to ``[-limit, limit]``; also says whether anything was cut."""
+    cut = bool(np.any(lo < -limit) or np.any(hi > limit))
+    return np.clip(lo, -limit, limit), np.clip(hi, -limit, limit), cut
+
+
+def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="", bounds="", truth="true"):
+    """Write a 2x2 figure: pose boxes in the plane, velocity enclosure of the last
+    coordinate and its integral, the displacement enclosure ``[Δ]`` (Fig. 4),
+    and the widths of the pose (mm) and velocity (m/s) boxes (Fig. 5).
 
     Parameters
     ----------
     path : str or Path
-        Output PNG.
+        Output PNG, written by :func:`verifier.files.atomic_write`.
     t_s : float
         Sampling period, s.
     boxes : dict
-        ``x_lo, x_hi, xd_lo, xd_hi`` arrays ``(K, n)`` and ``mode`` ``(K,)``.
+        ``x_lo, x_hi, xd_lo, xd_hi`` arrays ``(K, n)`` (m, m/s) and ``mode`` ``(K,)``.
     x_true, xd_true : array (K, n), optional
         Ground truth (simulations), drawn on top.
     k_sing : int, optional
-        Sample of the singular instant (a vertical line).
+        Sample of the singular instant (a labelled vertical line).
+    title : str
+        Figure title.
+    bounds : str
+        The bounds the run assumed (eps_q, a_max, t_s...), printed under the title.
+    truth : str
+        What ``x_true``/``xd_true`` are, for the legend (``"true"``, ``"planned"``).
     """
     import matplotlib
 
@@ -35,10 +55,10 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="")
     import matplotlib.pyplot as plt
     from matplotlib.patches import Rectangle
 
-    xl, xh, vl, vh = (np.asarray(boxes[k]) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
+    xl, xh, vl, vh = (np.asarray(boxes[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = xl.shape
     t = np.arange(K) * t_s
-    fig, ax = plt.subplots(2, 2, figsize=(11, 8))
+    fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
     a = ax[0, 0]
     step = max(1, K // 400)
     for k in range(0, K, step):
@@ -46,43 +66,58 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="")
             color = {1: "tab:blue", -1: "tab:red"}.get(int(boxes["mode"][k]), "0.6")
             a.add_patch(Rectangle((xl[k, 0] * 1e3, xl[k, -1] * 1e3), (xh[k, 0] - xl[k, 0]) * 1e3,
                                   (xh[k, -1] - xl[k, -1]) * 1e3, fill=False, lw=0.5, ec=color))
+    for label, color in (("mode +1", "tab:blue"), ("mode -1", "tab:red"), ("undecided", "0.6")):
+        a.plot([], [], color=color, lw=1, label=f"pose box, {label}")
     if x_true is not None:
-        a.plot(x_true[:, 0] * 1e3, x_true[:, -1] * 1e3, "k-", lw=0.8, label="true pose")
-        a.legend(loc="best")
+        a.plot(x_true[:, 0] * 1e3, x_true[:, -1] * 1e3, "k-", lw=0.8, label=f"{truth} pose")
+    a.legend(loc="best", fontsize=8)
     fin = np.isfinite(xl).all(1) & np.isfinite(xh).all(1)
     if fin.any():
         a.set_xlim(xl[fin, 0].min() * 1e3 - 5, xh[fin, 0].max() * 1e3 + 5)
         a.set_ylim(xl[fin, -1].min() * 1e3 - 5, xh[fin, -1].max() * 1e3 + 5)
     a.set_xlabel("x1 (mm)")
     a.set_ylabel(f"x{n} (mm)")
-    a.set_title("pose boxes (blue +1, red -1, grey undecided)")
+    a.set_title(f"pose boxes, every {step} sample(s)")
     a = ax[0, 1]
-    a.fill_between(t, np.clip(vl[:, -1], -20, 20), np.clip(vh[:, -1], -20, 20), color="tab:orange", alpha=0.4, label="enclosure")
+    lo, hi, cut = _clip(vl[:, -1], vh[:, -1], VELOCITY_CLIP)
+    a.fill_between(t, lo, hi, color="tab:orange", alpha=0.4, label=f"velocity enclosure of x{n}")
     if xd_true is not None:
-        a.plot(t, xd_true[:, -1], "k-", lw=0.8, label="true")
-    a.set_ylabel(f"velocity x{n} (m/s)")
+        a.plot(t, xd_true[:, -1], "k-", lw=0.8, label=f"{truth} velocity")
+    a.set_ylabel(f"velocity of x{n} (m/s)")
     a.set_xlabel("t (s)")
-    a.legend(loc="best")
+    a.set_title(f"velocity (clipped at ±{VELOCITY_CLIP:g} m/s)" if cut else "velocity")
+    a.legend(loc="best", fontsize=8)
     a = ax[1, 0]
     # displacement enclosure: sum of t_s * velocity over each step (eq. 8)
     dl = np.concatenate([[0.0], np.cumsum(t_s * vl[1:, -1])])
     dh = np.concatenate([[0.0], np.cumsum(t_s * vh[1:, -1])])
-    a.fill_between(t, np.clip(dl, -1, 1) * 1e3, np.clip(dh, -1, 1) * 1e3, color="tab:green", alpha=0.4, label="[Delta]")
+    lo, hi, cut = _clip(dl, dh, DISPLACEMENT_CLIP)
+    a.fill_between(t, lo * 1e3, hi * 1e3, color="tab:green", alpha=0.4, label=r"displacement enclosure $[\Delta]$")
     if x_true is not None:
-        a.plot(t, (x_true[:, -1] - x_true[0, -1]) * 1e3, "k-", lw=0.8, label="true")
-    a.set_ylabel(f"displacement x{n} (mm)")
+        a.plot(t, (x_true[:, -1] - x_true[0, -1]) * 1e3, "k-", lw=0.8, label=f"{truth} displacement")
+    a.set_ylabel(f"displacement of x{n} since t = 0 (mm)")
     a.set_xlabel("t (s)")
-    a.legend(loc="best")
-    a = ax[1, 1]
-    for i in range(n):
-        a.semilogy(t, np.maximum(xh[:, i] - xl[:, i], 1e-9) * 1e3, label=f"width x{i + 1} (mm)")
-        a.semilogy(t, np.maximum(vh[:, i] - vl[:, i], 1e-9), "--", label=f"width xd{i + 1} (m/s)")
-    a.set_xlabel("t (s)")
+    a.set_title(f"displacement (clipped at ±{DISPLACEMENT_CLIP * 1e3:g} mm)" if cut else "displacement")
     a.legend(loc="best", fontsize=8)
+    a = ax[1, 1]
+    av = a.twinx()
+    for i in range(n):
+        a.semilogy(t, np.maximum(xh[:, i] - xl[:, i], 1e-9) * 1e3, label=f"pose x{i + 1}")
+        av.semilogy(t, np.maximum(vh[:, i] - vl[:, i], 1e-9), "--", label=f"velocity x{i + 1}")
+    a.set_xlabel("t (s)")
+    a.set_ylabel("pose box width (mm, solid)")
+    av.set_ylabel("velocity box width (m/s, dashed)")
+    a.set_title("box widths")
+    handles = a.get_legend_handles_labels()
+    more = av.get_legend_handles_labels()
+    a.legend(handles[0] + more[0], handles[1] + more[1], loc="best", fontsize=8)
     for a in (ax[0, 1], ax[1, 0], ax[1, 1]):
         if k_sing is not None:
-            a.axvline(k_sing * t_s, color="k", lw=1)
-    fig.suptitle(title)
+            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
+    if k_sing is not None:
+        ax[0, 1].legend(loc="best", fontsize=8)
+        ax[1, 0].legend(loc="best", fontsize=8)
+    fig.suptitle(title + (f"\n{bounds}" if bounds else ""))
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")
     plt.close(fig)

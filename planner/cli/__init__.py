@@ -11,7 +11,9 @@ from __future__ import annotations
 import sys
 
 from robots.errors import CrosscertError
+from robots.registry import get_entry
 
+from .checks import check_command
 from .parser import UsageError, build_parser
 from .planning import certify, plan
 from .simulation import simulate, sweep
@@ -32,7 +34,10 @@ def main(argv=None) -> int:
         The arguments after the program name (default: ``sys.argv[1:]``).
     """
     try:
+        argv = sys.argv[1:] if argv is None else list(argv)
         a = build_parser().parse_args(argv)
+        a.argv = argv
+        check_command(a, get_entry(a.robot))  # every option, before any work
         return _COMMANDS[a.command](a)
     except UsageError as exc:
         print(str(exc), file=sys.stderr)

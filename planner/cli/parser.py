@@ -8,11 +8,12 @@ import importlib.metadata as md
 from robots.registry import DEFAULT_ROBOT, available_robots
 from verifier.step import Backend
 from verifier.tracker import VelocityModel
+from verifier.trajfile import parse_number
 
 from ..execution import ExecutionKind
 from ..task import Method
 
-__all__ = ["build_parser", "UsageError", "TABLE2_SPEEDS"]
+__all__ = ["build_parser", "UsageError", "TABLE2_SPEEDS", "number", "count"]
 
 #: Table II speeds of the paper, m/s, and two slower ones.
 TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
@@ -20,6 +21,22 @@ TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
 METHOD_HELP = ("time law of the plan: constant speed through the crossing (smoothstep), minimal time along the "
                "straight path (time-optimal, cvxpy), or minimal time with the robot's dynamic model, torque limits "
                "and the dynamic crossing criterion (dynamic, CasADi + IPOPT)")
+
+
+def number(text: str) -> float:
+    """argparse ``type=``: a finite decimal number (see :func:`verifier.trajfile.parse_number`)."""
+    try:
+        return parse_number(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a decimal number") from None
+
+
+def count(text: str) -> int:
+    """argparse ``type=``: a non-negative integer in ASCII digits."""
+    t = text.strip()
+    if not (t.isascii() and t.isdigit()):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a non-negative whole number")
+    return int(t)
 
 
 class UsageError(Exception):
@@ -57,9 +74,9 @@ def _tracker_options(p):
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
     g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
-    p.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (all components; robot default)")
-    p.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
-    p.add_argument("--xd0", type=float, help="initial velocity bound, m/s (all components; robot default)")
+    p.add_argument("--a-max", type=number, help="end-effector acceleration bound, m/s^2 (all components; robot default)")
+    p.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
+    p.add_argument("--xd0", type=number, help="initial velocity bound, m/s (all components; robot default)")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
                    help="joint-data error model (paper = quantisation only, NOT sound)")
     p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
@@ -95,7 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("trajectory", nargs="?", default="-",
                     help="CSV stream t,q1..qn[,qd1..qdn]: '-' for stdin, a named pipe or a file")
     _tracker_options(mo)
-    mo.add_argument("--t-s", type=float, help="sampling period, s (default: fixed by the first two samples)")
+    mo.add_argument("--t-s", type=number, help="sampling period, s (default: fixed by the first two samples)")
     mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
     mo.add_argument("--spread-hypotheses", action="store_true",
                     help="track the geometry hypotheses of each sample on several threads: lower latency on "
@@ -103,38 +120,38 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = command("simulate", "simulate encoder readings of the benchmark crossing (or a bounce)")
     _robot_option(s)
-    s.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
+    s.add_argument("--v-sing", type=number, required=True, help="speed at the singularity, m/s")
     s.add_argument("--bounce", action="store_true", help="fail the crossing: stop on the locus and come back")
-    s.add_argument("--seed", type=int, default=0,
+    s.add_argument("--seed", type=count, default=0,
                    help="seed of the true geometry drawn in the calibration box (0: its centre)")
-    s.add_argument("--t-rest", type=float, default=0.3, help="rest before the motion, s")
-    s.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    s.add_argument("--t-rest", type=number, default=0.3, help="rest before the motion, s")
+    s.add_argument("--a-peak", type=number, default=60.0, help="peak acceleration of the ramps, m/s^2")
     s.add_argument("-o", "--output", required=True, help="CSV file to write")
 
     ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound")
     _task_options(ce)
-    ce.add_argument("--a-max", type=float, help="end-effector acceleration bound, m/s^2 (default: planned peak + 10%%)")
-    ce.add_argument("--eps-q", type=float, help="encoder error bound, rad (robot default)")
-    ce.add_argument("--tracking-error", type=float, default=0.0, help="extra joint tracking error allowed, rad")
+    ce.add_argument("--a-max", type=number, help="end-effector acceleration bound, m/s^2 (default: planned peak + 10%%)")
+    ce.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
+    ce.add_argument("--tracking-error", type=number, default=0.0, help="extra joint tracking error allowed, rad")
     ce.add_argument("--execution", choices=[k.value for k in ExecutionKind], default=ExecutionKind.CARTESIAN.value,
                     help="executions the certificate covers: 'cartesian' follow the planned path with any geometry "
                          "in the calibration box; 'joint' keep the joints within eps_q + tracking error of the plan")
-    ce.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
+    ce.add_argument("--a-peak", type=number, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
     ce.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
-    ce.add_argument("--v-low", type=float, default=0.6, help="slowest speed tried, m/s")
-    ce.add_argument("--v-high", type=float, help="fastest speed tried, m/s (default: the fastest the segment allows)")
-    ce.add_argument("--tol", type=float, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
-    ce.add_argument("--monte-carlo", type=int, default=50, help="simulated executions at v_min (0 skips)")
+    ce.add_argument("--v-low", type=number, default=0.6, help="slowest speed tried, m/s")
+    ce.add_argument("--v-high", type=number, help="fastest speed tried, m/s (default: the fastest the segment allows)")
+    ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
+    ce.add_argument("--monte-carlo", type=count, default=50, help="simulated executions at v_min (0 skips)")
     ce.add_argument("--no-refute", action="store_true", help="skip the counterexample search")
-    ce.add_argument("--seed", type=int, default=0, help="seed of the Monte Carlo executions and search starts")
+    ce.add_argument("--seed", type=count, default=0, help="seed of the Monte Carlo executions and search starts")
     ce.add_argument("--out", default="crosscert-certify", help="folder for the PNG plot and the JSON report")
     ce.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     ce.add_argument("--no-progress", action="store_true", help="no progress bar")
 
     pl = command("plan", "plan a crossing at a given speed and write it as a trajectory file")
     _task_options(pl)
-    pl.add_argument("--v-sing", type=float, required=True, help="speed at the singularity, m/s")
-    pl.add_argument("--a-peak", type=float, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    pl.add_argument("--v-sing", type=number, required=True, help="speed at the singularity, m/s")
+    pl.add_argument("--a-peak", type=number, default=60.0, help="peak acceleration of the ramps, m/s^2")
     pl.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
     pl.add_argument("-o", "--output", required=True, help="CSV file to write (t, q1..qn, x1..xn)")
 
@@ -142,7 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     _robot_option(w)
     w.add_argument("--speeds", help="comma-separated speeds at the singularity, m/s (default: "
                                     f"{','.join(map(str, TABLE2_SPEEDS))})")
-    w.add_argument("--seed", type=int, default=0,
+    w.add_argument("--seed", type=count, default=0,
                    help="seed of the true geometry drawn in the calibration box (0: its centre)")
     w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
     w.add_argument("--no-progress", action="store_true", help="no progress bar")

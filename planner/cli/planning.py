@@ -47,13 +47,17 @@ def certify(a) -> int:
         if bar is not None:
             bar.close()
     report = cert.summary()
+    report["command_line"] = ["crosscert", *a.argv]
     out.mkdir(parents=True, exist_ok=True)
     files = []
     if cert.enclosures is not None:
         e, p = cert.enclosures, cert.trajectory
         png = out / f"certificate_{robot.name}_{cert.v_min:.3f}.png"
-        plot_run(png, p.t[1] - p.t[0], {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
-                 p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s")
+        plot_run(png, p.t_s, {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
+                 p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s",
+                 bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} rad, a_max = "
+                         f"{max(cert.a_max_used):.4g} m/s^2, t_s = {cert.bounds.t_s:.3g} s, "
+                         f"{cert.execution.kind.value} executions"), truth="planned")
         files.append(png)
     js = out / "certificate.json"
     atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
@@ -79,7 +83,9 @@ def certify(a) -> int:
               f"({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
               f"{len(mc.wrong_verdicts)} wrong verdicts")
     phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
-    print(f"a_max used: {report['a_max_mps2']} m/s^2; elapsed {cert.elapsed_s:.1f} s ({phases})")
+    used = ("none (no certificate)" if cert.a_max_used is None
+            else "(" + ", ".join(f"{v:.4g}" for v in cert.a_max_used) + ") m/s^2")
+    print(f"a_max used: {used}; elapsed {cert.elapsed_s:.1f} s ({phases})")
     for f in files:
         print(f"wrote {f}")
     return 0

@@ -11,6 +11,7 @@ from robots.errors import InputError
 from robots.registry import get_entry
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings
+from verifier.trajfile import parse_number
 
 from ..simulate import random_geometry
 from ..task import CrossingTask, benchmark_task
@@ -21,7 +22,7 @@ __all__ = ["floats_option", "tracker_setup", "task_setup", "benchmark_setup", "t
 def floats_option(text: str, count: int | None, what: str) -> list[float]:
     """The comma-separated numbers of option ``what`` (``count`` of them, any number when None)."""
     try:
-        vals = [float(v) for v in text.split(",")]
+        vals = [parse_number(v) for v in text.split(",")]
     except ValueError:
         raise InputError(f"{what}: expected comma-separated numbers, got {text!r}") from None
     if count is not None and len(vals) != count:

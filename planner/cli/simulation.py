@@ -10,8 +10,7 @@ from verifier.trajfile import write_trajectory
 
 from ..simulate import simulate_bounce, simulate_crossing
 from ..sweep import sweep as run_sweep
-from .parser import TABLE2_SPEEDS
-from .setup import benchmark_setup, floats_option, progress_bar, true_geometry
+from .setup import benchmark_setup, progress_bar, true_geometry
 
 __all__ = ["simulate", "sweep"]
 
@@ -33,7 +32,7 @@ def sweep(a) -> int:
     """``crosscert sweep``: the paper's Table II on simulated benchmark crossings, with figures."""
     entry, kin, bench = benchmark_setup(a.robot)
     robot = entry.robot
-    speeds = TABLE2_SPEEDS if a.speeds is None else tuple(floats_option(a.speeds, None, "--speeds"))
+    speeds = a.speeds_list  # parsed and checked by planner.cli.checks
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     models = (VelocityModel.PAPER, VelocityModel.SOUND)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 import time
@@ -13,8 +12,8 @@ import numpy as np
 from robots.errors import CrosscertError, TrajectoryFileError
 from verifier.plots import plot_run
 from verifier.step import Backend, Tracker
-from verifier.tracker import Verdict, initial_box_from_mode, track, verdict_of
-from verifier.trajfile import TrajectoryReader, read_trajectory
+from verifier.tracker import Verdict, initial_box_from_mode, verdict_of
+from verifier.trajfile import TrajectoryReader, open_trajectory
 
 from .setup import progress_bar, tracker_setup
 
@@ -25,22 +24,46 @@ INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box
                      "violated by the data")
 
 
+#: Keys of the monitor's summary that say nothing about a file read at once.
+_MONITOR_ONLY = ("latency_us_mean", "latency_us_p99", "latency_us_max", "interrupted", "error")
+
+
+def _print_warnings(reader) -> None:
+    for w in reader.warnings[getattr(reader, "_printed", 0):]:
+        print(f"crosscert: warning: {w}", file=sys.stderr)
+    reader._printed = len(reader.warnings)
+
+
 def check(a) -> int:
-    """``crosscert check``: track a recording file and print the verdict; returns the exit code."""
+    """``crosscert check``: track a recording while it is read and print the verdict; returns the exit code.
+
+    Memory does not grow with the recording's length, except with ``--plot``
+    (the boxes of every sample are kept for the figure).
+    """
     robot, model, make_settings, x0 = tracker_setup(a)
-    traj = read_trajectory(a.trajectory, robot.n)
-    settings = make_settings(traj.t_s)
-    bar, cb = progress_bar(len(traj.t), not a.no_progress and not a.json, "tracking")
+    t0 = time.perf_counter()
+    run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False)
+    bar, cb = progress_bar(None, not a.no_progress and not a.json, "tracking")
     try:
-        res = track(model, traj.q, settings, x0=x0, initial_mode=a.initial_mode, progress=cb, backend=a.backend)
+        with open_trajectory(a.trajectory) as (src, name):
+            reader = TrajectoryReader(src, robot.n, name, nominal_t_s=robot.t_s,
+                                      q_range=(robot.q_lo_array, robot.q_hi_array))
+            for line, values in reader:
+                t, q = reader.columns(values)[:2]
+                _print_warnings(reader)
+                run.feed(line, t, q, reader.t_s)
+                if cb is not None:
+                    cb(1)
     finally:
         if bar is not None:
             bar.close()
+    if run.samples < 2:
+        raise TrajectoryFileError(f"{name}: at least two samples are needed, got {run.samples}")
+    out = {k: v for k, v in run.summary().items() if k not in _MONITOR_ONLY}
+    out["elapsed_s"] = time.perf_counter() - t0
     if a.plot:
-        plot_run(a.plot, traj.t_s, {"x_lo": res.x_lo, "x_hi": res.x_hi, "xd_lo": res.xd_lo, "xd_hi": res.xd_hi, "mode": res.mode},
-                 title=f"{Path(a.trajectory).name}: {res.verdict.value}")
-    out = res.summary()
-    out["velocity_model"] = str(settings.velocity_model)
+        plot_run(a.plot, run.t_s, run.recorded(), title=f"{Path(name).name}: {out['verdict']}",
+                 bounds=run.bounds_text())
     if a.json:
         print(json.dumps(out))
     else:
@@ -50,13 +73,13 @@ def check(a) -> int:
         print(f"max width pose (m_x): {1e3 * out['max_width_pose_m']:.3f} mm")
         print(f"max width velocity (m_xd): {out['max_width_velocity_mps']:.4g} m/s")
         print(f"elapsed: {out['elapsed_s']:.2f} s")
-        if res.verdict is Verdict.INCONSISTENT:
-            print(INCONSISTENT_HINT.format(k=res.inconsistent_at_step), file=sys.stderr)
-    return 3 if res.verdict is Verdict.INCONSISTENT else 0
+    if out["inconsistent_at_step"] is not None:
+        print(INCONSISTENT_HINT.format(k=out["inconsistent_at_step"]), file=sys.stderr)
+    return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
 
 
 class Monitor:
-    """What ``crosscert monitor`` has decided so far.
+    """What ``crosscert monitor`` (or ``check``, reading a file) has decided so far.
 
     Samples wait in ``pending`` until the sampling period is known (at the
     second sample, or the first with ``--t-s``); then the compiled
@@ -72,14 +95,21 @@ class Monitor:
         ``t_s -> TrackerSettings``.
     x0 : (lo, hi) or None
         The ``--x0`` box.
+    record : bool
+        Keep the boxes and mode of every sample (for a figure).
+    echo : bool
+        Print every event as it happens (``monitor``).
     """
 
-    def __init__(self, a, model, make_settings, x0):
+    def __init__(self, a, model, make_settings, x0, *, record: bool = False, echo: bool = True):
         self.a, self.model, self.make_settings, self.x0 = a, model, make_settings, x0
+        self.record, self.echo = record, echo
         self.tracker = None
+        self.t_s = None
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
         self.latency_ns = []
+        self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
 
     def feed(self, line: int, t: float, q, t_s: float | None) -> None:
         """Track the sample read on ``line`` (time ``t`` s, readings ``q`` rad) and print its events."""
@@ -89,21 +119,37 @@ class Monitor:
             if t_s is None:
                 return
             settings = self.make_settings(t_s)
+            self.t_s = float(t_s)
             x0 = self.x0
             if x0 is None:
                 x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
                                            backend=self.a.backend)
             self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
-                                   spread_hypotheses=self.a.spread_hypotheses)
+                                   spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
         for line, t, q in self.pending:
             t0 = time.perf_counter_ns()
             r = self.tracker.update(q)
             self.latency_ns.append(time.perf_counter_ns() - t0)
+            if self.record:
+                for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
+                    self.boxes[key].append(v)
+            if not self.echo:
+                continue
             for e in r.events:
                 ev = {"event": e.value, "k": r.k, "t": t, "line": line, "mode": r.mode}
                 text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
                 print(json.dumps(ev) if self.a.json else text, flush=True)
         self.pending.clear()
+
+    def recorded(self) -> dict:
+        """The kept boxes as arrays: ``x_lo, x_hi, xd_lo, xd_hi`` (K, n), m and m/s, and ``mode`` (K,)."""
+        return {k: np.array(v) for k, v in self.boxes.items()}
+
+    def bounds_text(self) -> str:
+        """The bounds the run assumed, for a figure: eps_q, a_max, t_s and the velocity model."""
+        s = self.tracker.config.settings
+        return (f"eps_q = {np.max(s.eps_q):.3g} rad, a_max = {np.max(s.a_max):.3g} m/s^2, t_s = {s.t_s:.3g} s, "
+                f"velocity model {s.velocity_model}")
 
     def summary(self, error: str | None = None) -> dict:
         """The verdict so far (rules of :func:`verifier.tracker.verdict_of`), counts and latencies (us)."""
@@ -168,12 +214,13 @@ def monitor(a) -> int:
     if a.backend == Backend.COMPILED.value:
         load_kernels(robot, model, settings, a.spread_hypotheses)
     mon = Monitor(a, model, make_settings, x0)
-    stdin = a.trajectory == "-"
-    with contextlib.nullcontext(sys.stdin) if stdin else open(a.trajectory, newline="") as src:
-        reader = TrajectoryReader(src, robot.n, "<stdin>" if stdin else a.trajectory, t_s=a.t_s)
+    with open_trajectory(a.trajectory) as (src, name):
+        reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
+                                  q_range=(robot.q_lo_array, robot.q_hi_array))
         try:
             for line, values in reader:
                 t, q = reader.columns(values)[:2]
+                _print_warnings(reader)
                 mon.feed(line, t, q, reader.t_s)
             if mon.samples < 2:
                 raise TrajectoryFileError(f"{reader.name}: at least two samples are needed, got {mon.samples}")

@@ -1,0 +1,202 @@
+"""Every option of every command checked against its meaning before any work starts.
+
+Three kinds of checks, all cheap (no model is evaluated):
+
+* **form** — numbers in ASCII decimal notation (``number`` and ``count`` of
+  :mod:`planner.cli.parser` are its ``type=``), so ``1_0.5``, other
+  scripts' digits, ``nan`` and ``inf`` are refused by the parser itself;
+* **meaning** — sign, range and consistency with the robot (a plan may not
+  accelerate beyond the robot's ``a_max``);
+* **cost** — the samples a motion needs, and the memory and time they imply,
+  refused above :data:`MEMORY_LIMIT` / :data:`TIME_LIMIT` with the number
+  that would have been needed;
+
+and every output path is checked (:func:`verifier.files.check_output_path`)
+before the work whose result it receives.  docs/cli.md lists the limits.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from robots.errors import InputError
+from verifier.files import check_output_path
+
+from ..simulate import ramp_length
+from ..task import PlanningBounds, benchmark_task
+from .parser import TABLE2_SPEEDS
+from .setup import floats_option
+
+__all__ = ["MEMORY_LIMIT", "TIME_LIMIT", "check_command"]
+
+#: Memory a command may plan to use, bytes: well below the 24 GiB of the
+#: machines we run on, and far above any sensible crossing (~1 MB).
+MEMORY_LIMIT = 1 << 30
+#: Run time a command may plan for, s: a default certification takes ~30 s.
+TIME_LIMIT = 3600.0
+#: Bytes held per sample and joint by a simulated or planned motion: truth
+#: (q, qd, qdd, x, xd, xdd), readings, the time law and IK scratch, ~24 float64.
+_BYTES_PER_SAMPLE_JOINT = 24 * 8
+#: Tracker cost per sample and scenario, s (benchmarks/README.md: ~0.1 ms,
+#: with a margin for slower machines).
+_TRACK_S_PER_SAMPLE = 5e-4
+#: Largest encoder error or tracking error accepted, rad: 0.05 rad is an
+#: encoder of ~126 counts per turn, coarser than any robot joint we know of.
+MAX_JOINT_ERROR = 0.05
+#: Speeds at the singularity accepted, m/s (a plan or simulation beyond is a typo).
+MAX_SPEED = 20.0
+#: Finest resolution of v_min and of the refutation bound, m/s: each halving
+#: below costs a certification (seconds) for digits nobody can act on.
+MIN_TOL = 1e-4
+#: Largest Monte Carlo confirmation, executions (memory: boxes of every sample).
+MAX_MONTE_CARLO = 100_000
+#: Half-length of the cruise of ``simulate`` runs (planner.simulate default), m.
+_CRUISE = 5e-3
+#: Rest after the motion of ``simulate`` runs (planner.simulate default), s.
+_REST_END = 0.1
+#: Rest before and after a plan (PlanningBounds default), s.
+_PLAN_REST = PlanningBounds().t_rest
+#: Peak acceleration of the sweep's ramps (planner.sweep default), m/s^2.
+SWEEP_A_PEAK = 60.0
+
+
+def _in(name: str, v, lo: float, hi: float, *, lo_open: bool = True, unit: str = "") -> None:
+    if v is None:
+        return
+    if not (lo < v if lo_open else lo <= v) or v > hi:
+        left = "(" if lo_open else "["
+        raise InputError(f"{name} = {v:g}{unit} is out of range: it must lie in {left}{lo:g}, {hi:g}]{unit}")
+
+
+def _budget(what: str, samples: float, n: int, *, scenarios: int = 1, tracked: bool = False) -> None:
+    """Refuse a run whose samples would need more than the memory or time limits."""
+    memory = samples * scenarios * n * _BYTES_PER_SAMPLE_JOINT
+    seconds = samples * scenarios * _TRACK_S_PER_SAMPLE if tracked else 0.0
+    if memory > MEMORY_LIMIT or seconds > TIME_LIMIT or not math.isfinite(samples):
+        raise InputError(
+            f"{what} needs {samples * scenarios:.3g} samples (about {memory / 2**30:.3g} GiB"
+            + (f" and {seconds:.3g} s of tracking" if tracked else "")
+            + f"), above the limits of {MEMORY_LIMIT / 2**30:g} GiB and {TIME_LIMIT:g} s: shorten the motion")
+
+
+def _a_peak_within_robot(a_peak: float, direction, robot) -> None:
+    """A plan or simulation ramping at ``a_peak`` along ``direction`` stays within the robot's ``a_max``."""
+    u = np.asarray(direction, dtype=float)
+    u = u / np.linalg.norm(u)
+    peak = a_peak * np.abs(u)
+    if np.any(peak > robot.a_max_array):
+        raise InputError(f"--a-peak {a_peak:g} m/s^2 exceeds the robot's bound a_max = {list(robot.a_max)} m/s^2 "
+                         "along the motion; choose a smaller --a-peak")
+
+
+def _output_file(path, what: str, suffixes: tuple[str, ...], inputs=()) -> None:
+    if path is None:
+        return
+    if Path(path).suffix.lower() not in suffixes:
+        raise InputError(f"{what}: {path!r} must end in {' or '.join(suffixes)} (the format written)")
+    real = check_output_path(path, what=what)
+    for src in inputs:
+        if src not in (None, "-") and real.exists() and os.path.exists(src) and os.path.samefile(real, src):
+            raise InputError(f"{what}: {path} is the input recording; choose another file")
+
+
+def _output_folder(path, what: str, files: tuple[str, ...]) -> None:
+    p = Path(path)
+    if str(path) == "":
+        raise InputError(f"{what}: empty path")
+    if p.exists() and not p.is_dir():
+        raise InputError(f"{what}: {p} exists and is not a folder")
+    parent = p if p.exists() else p.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(f"{what}: cannot create or write in {p}")
+    for name in files:
+        if (p / name).exists():
+            check_output_path(p / name, what=what)
+
+
+def _tracker(a, robot) -> None:
+    _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
+    _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
+    _in("--xd0", a.xd0, 0.0, 1e3, lo_open=False, unit=" m/s")
+    _in("--t-s", getattr(a, "t_s", None), 0.0, 10.0, unit=" s")
+
+
+def check_command(a, entry) -> None:
+    """Check the options of command ``a.command`` for the registry ``entry``; InputError on the first bad one."""
+    robot = entry.robot
+    cmd = a.command
+    if cmd in ("check", "monitor"):
+        _tracker(a, robot)
+        if cmd == "check":
+            if a.plot is not None:
+                _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
+        return
+    if cmd in ("simulate", "plan", "certify"):
+        _in("--a-peak", a.a_peak, 0.0, 1e6, unit=" m/s^2")
+    if cmd in ("simulate", "plan"):
+        _in("--v-sing", a.v_sing, 0.0, MAX_SPEED, unit=" m/s")
+    if cmd == "simulate":
+        _in("--t-rest", a.t_rest, 0.0, 600.0, lo_open=False, unit=" s")
+        bench = entry.benchmark_crossing()
+        _a_peak_within_robot(a.a_peak, bench.direction, robot)
+        T = ramp_length(a.v_sing, a.a_peak)[0]
+        duration = a.t_rest + 2 * T + 2 * _CRUISE / a.v_sing + _REST_END
+        _budget(f"simulate at --v-sing {a.v_sing:g} m/s, --a-peak {a.a_peak:g} m/s^2, --t-rest {a.t_rest:g} s",
+                duration / robot.t_s, robot.n)
+        _output_file(a.output, "--output", (".csv",))
+        return
+    if cmd in ("plan", "certify"):
+        direction, length = _task_segment(a, entry)
+        _a_peak_within_robot(a.a_peak, direction, robot)
+    if cmd == "plan":
+        T = ramp_length(a.v_sing, a.a_peak)[0]
+        duration = 2 * _PLAN_REST + 2 * T + length / a.v_sing  # rests, ramps, the whole segment at v_sing at most
+        _budget(f"plan at --v-sing {a.v_sing:g} m/s", duration / robot.t_s, robot.n)
+        _output_file(a.output, "--output", (".csv",))
+        return
+    if cmd == "certify":
+        _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
+        _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
+        _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
+        if a.a_max is not None and a.a_max < a.a_peak:
+            raise InputError(f"--a-max {a.a_max:g} m/s^2 is below --a-peak {a.a_peak:g} m/s^2: the plans accelerate "
+                             "up to a_peak, so no plan would satisfy the bound")
+        _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
+        _in("--v-high", a.v_high, a.v_low, MAX_SPEED, unit=" m/s")
+        _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")
+        _in("--monte-carlo", a.monte_carlo, 0, MAX_MONTE_CARLO, lo_open=False)
+        # the slowest plan bounds every batch: samples of a crossing at v_low
+        T = ramp_length(a.v_low, a.a_peak)[0]
+        samples = (2 * _PLAN_REST + 2 * T + length / a.v_low) / robot.t_s
+        _budget(f"certify down to --v-low {a.v_low:g} m/s", samples, robot.n, scenarios=max(a.monte_carlo, 1),
+                tracked=True)
+        _output_folder(a.out, "--out", ("certificate.json",))
+        return
+    if cmd == "sweep":
+        a.speeds_list = tuple(floats_option(a.speeds, None, "--speeds")) if a.speeds else TABLE2_SPEEDS
+        for v in a.speeds_list:
+            _in("--speeds", v, 0.0, MAX_SPEED, unit=" m/s")
+        if len(a.speeds_list) > 100:
+            raise InputError(f"--speeds: {len(a.speeds_list)} speeds; at most 100")
+        slowest = min(a.speeds_list)
+        T = ramp_length(slowest, SWEEP_A_PEAK)[0]
+        _budget(f"sweep at {slowest:g} m/s", (0.1 + 2 * T + 0.07 / slowest + _REST_END) / robot.t_s, robot.n,
+                scenarios=2 * len(a.speeds_list), tracked=True)
+        _output_folder(a.out, "--out", ())
+
+
+def _task_segment(a, entry) -> tuple[np.ndarray, float]:
+    """Unit direction and length (m) of the task of ``--start``/``--goal`` (the benchmark's by default), without IK."""
+    task = benchmark_task(entry)
+    n = entry.robot.n
+    start = np.array(floats_option(a.start, n, "--start")) if a.start is not None else task.start
+    goal = np.array(floats_option(a.goal, n, "--goal")) if a.goal is not None else task.goal
+    d = goal - start
+    length = float(np.linalg.norm(d))
+    if not length > 0:
+        raise InputError("--start and --goal coincide")
+    return d / length, length
