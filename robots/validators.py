@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import CrosscertError, InputError
 
-__all__ = ["number", "positive", "vector", "floats", "frozen_array"]
+__all__ = ["number", "positive", "vector", "direction", "floats", "frozen_array"]
 
 
 def number(name: str, value, *, lo: float | None = None, hi: float | None = None,
@@ -82,6 +82,17 @@ def vector(name: str, value, n: int | None = None, *, broadcast: bool = False, p
         raise error(f"{name} must be non-negative, got {a.tolist()}")
     a.setflags(write=False)
     return a
+
+
+def direction(name: str, value, n: int | None = None, *, error: type[CrosscertError] = InputError) -> np.ndarray:
+    """A non-zero finite vector scaled to unit length, shape ``(n,)``, read-only."""
+    a = vector(name, value, n, error=error)
+    norm = float(np.linalg.norm(a))
+    if norm == 0.0:
+        raise error(f"{name} must be non-zero")
+    out = a / norm
+    out.setflags(write=False)
+    return out
 
 
 def floats(name: str, value, n: int | None = None, *, positive: bool = False, nonneg: bool = False,

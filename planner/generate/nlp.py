@@ -38,12 +38,12 @@ A guess or solution is passed around as the tuple ``(X, V, A, J, Q, h_A, h_B)``
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
+from ..ipopt import solve_with_ipopt
 from ..sampling import align_to_samples
 from .types import NotConverged, Objective, Samples
 
@@ -288,21 +288,10 @@ def solve_nlp(kin, dyn, task, point, q_point, t_dir, m0, v_sing, lim, *, objecti
     z0 = np.clip(z0, lbx, ubx)
     g = ca.vertcat(*g_list)
     lbg, ubg = np.concatenate(lb), np.concatenate(ub)
-    opts = {
-        "ipopt": {
-            "print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
-            "tol": _IPOPT_TOL, "constr_viol_tol": _IPOPT_CONSTR_VIOL_TOL, "acceptable_iter": 0,
-            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
-            "mu_strategy": "adaptive", "sb": "yes",
-        },
-        "print_time": False,
-    }
-    solver = ca.nlpsol("crossing", "ipopt", {"x": z, "f": obj, "g": g}, opts)
-    t0 = time.perf_counter()
-    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-    elapsed = time.perf_counter() - t0
-    stats = solver.stats()
-    status = str(stats.get("return_status", "unknown"))
+    run = solve_with_ipopt("crossing", z, obj, g, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
+                           ipopt={"print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
+                                  "tol": _IPOPT_TOL, "constr_viol_tol": _IPOPT_CONSTR_VIOL_TOL, "acceptable_iter": 0})
+    sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
     if status != _SUCCESS:
         raise NotConverged(status)
     zs = np.asarray(sol["x"], dtype=float).reshape(-1)

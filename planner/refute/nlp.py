@@ -16,7 +16,6 @@ never reported as one: every converged candidate goes through
 
 from __future__ import annotations
 
-import time
 
 import casadi as ca
 import numpy as np
@@ -25,6 +24,7 @@ from robots import validators as V
 from robots.errors import InputError, SimulationError
 from robots.kinematics import KinematicModel
 
+from ..ipopt import solve_with_ipopt
 from .problem import (
     ACCEL_MARGIN,
     JOINT_MARGIN,
@@ -173,23 +173,11 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
 
     # Feasibility problem; the small smoothness objective picks a regular point.
     obj = ca.sumsqr(Ws) / (n * (K - 1))
-    opts = {
-        "ipopt": {
-            "print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
-            "tol": IPOPT_TOL, "constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
-            "acceptable_constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
-            # Bounds are the measurement intervals: never relax them.
-            "bound_relax_factor": 0.0, "honor_original_bounds": "yes",
-            "mu_strategy": "adaptive", "sb": "yes",
-        },
-        "print_time": False,
-    }
-    solver = ca.nlpsol("bounce", "ipopt", {"x": z, "f": obj, "g": g}, opts)
-    t0 = time.perf_counter()
-    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-    elapsed = time.perf_counter() - t0
-    stats = solver.stats()
-    status = str(stats.get("return_status", "unknown"))
+    run = solve_with_ipopt("bounce", z, obj, g, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
+                           ipopt={"print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
+                                  "tol": IPOPT_TOL, "constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
+                                  "acceptable_constr_viol_tol": IPOPT_CONSTR_VIOL_TOL})
+    sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
     iters = int(stats.get("iter_count", -1))
     nv, ng = int(z.numel()), int(g.numel())
     if ipopt_outcome(status) is not SearchOutcome.CONVERGED:

@@ -127,11 +127,7 @@ def _prepare(model, crossing_point, direction, v_sing, xi_true, t_s, eps_q, t_re
     r = model.robot
     n = model.n
     p = V.vector("crossing_point", crossing_point, n)
-    d = V.vector("direction", direction, n)
-    nd = float(np.linalg.norm(d))
-    if nd == 0.0:
-        raise InputError("direction must be non-zero")
-    u = d / nd
+    u = V.direction("direction", direction, n)
     v_sing = V.positive("v_sing", v_sing)
     a_peak = V.positive("a_peak", a_peak)
     cruise = V.positive("cruise", cruise)

@@ -129,11 +129,7 @@ def sample_path(kin: KinematicModel, p0, u, L: float, N: int, working_guess, xi=
         raise InputError(f"kin must be a KinematicModel, got {type(kin).__name__}")
     n, r = kin.n, kin.robot
     p0 = V.vector("p0", p0, n)
-    u = V.vector("u", u, n)
-    nu = float(np.linalg.norm(u))
-    if nu == 0.0:
-        raise InputError("u must be non-zero")
-    u = u / nu
+    u = V.direction("u", u, n)
     L = V.positive("L", L)
     if isinstance(N, bool) or not isinstance(N, (int, np.integer)) or N < MIN_INTERVALS:
         raise InputError(f"N must be an integer >= {MIN_INTERVALS}, got {N!r}")
