@@ -11,8 +11,9 @@ from __future__ import annotations
 import logging
 
 from .base import BenchmarkCrossing, LoopClosure, Robot
-from .dextar import DEXTAR, benchmark_crossing, elbows_out_ik, singular_y
-from .dynamics import DEXTAR_DYNAMICS, LumpedDynamics, LumpedMassModel
+from .dextar import DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing, elbows_out_ik, singular_y
+from .dynamics import LumpedDynamics
+from .mass_model import LumpedMassModel
 from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
 from .kinematics import KinematicModel
 from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot

@@ -30,6 +30,7 @@ from .errors import ModelError
 
 from .base import BenchmarkCrossing, Robot
 from .kinematics import KinematicModel
+from .mass_model import LumpedMassModel
 
 __all__ = [
     "DEXTAR",
@@ -40,6 +41,8 @@ __all__ = [
     "singular_y",
     "BenchmarkCrossing",
     "benchmark_crossing",
+    "dextar_mass_points",
+    "DEXTAR_DYNAMICS",
 ]
 
 PARAM_NAMES = ("l11", "l21", "l12", "l22", "d", "delta1", "delta2")
@@ -234,3 +237,77 @@ def benchmark_crossing(xi=None) -> BenchmarkCrossing:
         q_point=elbows_out_ik(point, xi),
         xi=xi.copy(),
     )
+
+
+# ---------------------------------------------------------------------- dynamics
+def dextar_mass_points(x, q, xi):
+    """Mass points of the DexTAR on CasADi symbols (same geometry as :func:`robots.dextar.dextar_loop_closure`).
+
+    Parameters
+    ----------
+    x : casadi.SX, shape (2,)
+        End-effector position ``E``, m.
+    q : casadi.SX, shape (2,)
+        Motor angles, rad.
+    xi : casadi.SX, shape (7,)
+        ``(l11, l21, l12, l22, d, delta1, delta2)``, m and rad.
+
+    Returns
+    -------
+    casadi.SX, shape (2, 5)
+        Columns ``P1, B1, P2, B2, E``: mid-points of the proximal links, the
+        elbows ``B_i = A_i + l_i1 (cos q_i1, sin q_i1)`` and the end-effector, m.
+    """
+    l11, l21, _l12, _l22, d, delta1, delta2 = (xi[i] for i in range(7))
+    u1 = ca.vertcat(ca.cos(q[0] + delta1), ca.sin(q[0] + delta1))
+    u2 = ca.vertcat(ca.cos(q[1] + delta2), ca.sin(q[1] + delta2))
+    a1 = ca.vertcat(-d / 2, 0)
+    a2 = ca.vertcat(d / 2, 0)
+    e = ca.vertcat(x[0], x[1])
+    return ca.horzcat(a1 + 0.5 * l11 * u1, a1 + l11 * u1, a2 + 0.5 * l21 * u2, a2 + l21 * u2, e)
+
+
+# Assumed DexTAR data: the paper and Mecademic publish no inertial data.
+_M_PROX = 0.10  # kg, each proximal link (90 mm aluminium arm with its clamp), a uniform rod
+_M_DIST = 0.08  # kg, each distal link (90 mm tube with its two bearings)
+_M_TOOL = 0.05  # kg, end-effector shaft and tool
+_J_ROTOR = 5e-5  # kg m^2, rotor of a ~100 W servo motor
+_GEAR = 10.0  # reduction ratio; 3000 rpm at the motor gives ~31 rad/s at the joint
+#: The DexTAR's lumped-mass model.  **Every value is an assumption**: the
+#: paper (and Mecademic's public data) give no masses, inertias, gear ratios
+#: or torque limits.  Replace this instance when the real data are known.
+DEXTAR_DYNAMICS = LumpedMassModel(
+    robot_name="dextar",
+    point_names=("P1", "B1", "P2", "B2", "E"),
+    # A uniform rod of mass m rotating about A_i is *exactly* equivalent (mass,
+    # centre of mass, inertia) to m/6 at A_i, 2m/3 at its midpoint P_i and m/6
+    # at B_i; the m/6 at the fixed motor axis A_i does nothing and is left out.
+    # The distal links are lumped half at each end (B_i and E): the usual
+    # assumption of the crossing literature (Briot & Arakelian; Pagis) under
+    # which the criterion is "end-effector acceleration normal to the
+    # uncontrolled direction"; it keeps mass and centre of mass and
+    # overestimates each distal link's central inertia by m l^2 / 6.
+    masses=(
+        2 * _M_PROX / 3,
+        _M_PROX / 6 + _M_DIST / 2,
+        2 * _M_PROX / 3,
+        _M_PROX / 6 + _M_DIST / 2,
+        _M_TOOL + _M_DIST,  # tool + half of each distal link
+    ),
+    positions=dextar_mass_points,
+    # rotor 5e-5 kg m^2 behind a 10:1 reduction: 5e-3 kg m^2 at the joint
+    motor_inertia=(_J_ROTOR * _GEAR**2, _J_ROTOR * _GEAR**2),
+    # The paper does not say whether the DexTAR's plane is horizontal; the
+    # five-bar is assumed to work in a horizontal plane (table-top pick and
+    # place), where gravity has no in-plane component.  Use (0, -9.81) for a
+    # vertical plane with Y up.
+    gravity=(0.0, 0.0),
+    # peak torque of such a motor (~0.3 N m) times the 10:1 reduction
+    tau_max=(3.0, 3.0),
+    description=(
+        "DexTAR lumped-mass model with ASSUMED parameters (none are published): proximal links "
+        "90 mm, 0.10 kg uniform rods (2/3 at mid-link, 1/6 at the elbow); distal links 0.08 kg lumped "
+        "half at each end; tool 0.05 kg at E; rotor 5e-5 kg m^2 behind a 10:1 gear (5e-3 kg m^2 at "
+        "the joint); tau_max 3 N m per joint; horizontal plane (no in-plane gravity)."
+    ),
+)

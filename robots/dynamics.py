@@ -1,6 +1,6 @@
 """Lumped-mass inverse dynamics of a parallel robot, and the Type 2 crossing criterion.
 
-A :class:`LumpedMassModel` is *data*: point masses at named points whose
+A :class:`~robots.mass_model.LumpedMassModel` is *data*: point masses at named points whose
 positions are a CasADi-compatible function of ``(x, q, xi)``, the reflected
 inertias of the motors, a gravity vector and the actuator torque limits.  A
 user replaces the DexTAR's assumed values (:data:`DEXTAR_DYNAMICS`) by
@@ -52,22 +52,18 @@ Units: SI (kg, m, rad, s, N, N m).  Shapes: ``x, q`` ``(n,)``; ``xi``
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
 from .errors import InputError, ModelError
-from .validators import floats
 
 from .kinematics import KinematicModel
+from .mass_model import LumpedMassModel
 
 __all__ = [
     "LumpedMassModel",
     "LumpedDynamics",
-    "DEXTAR_DYNAMICS",
-    "dextar_mass_points",
     "uncontrolled_direction",
     "criterion_residual",
 ]
@@ -75,167 +71,6 @@ __all__ = [
 #: ``|det J_x|`` below this fraction of Hadamard's bound (product of the row
 #: norms of ``J_x``): eq. (1) is not evaluated (torques reported as NaN).
 SINGULAR_RTOL = 1e-12
-
-
-@dataclass(frozen=True, kw_only=True)
-class LumpedMassModel:
-    """Point masses, motor inertias, gravity and torque limits of a parallel robot (data).
-
-    Parameters
-    ----------
-    robot_name : str
-        Name of the :class:`~robots.base.Robot` whose ``(x, q, xi)`` the
-        positions read (checked by :class:`LumpedDynamics`).
-    point_names : tuple of str, length P
-        Names of the mass points (e.g. ``"B1"``, ``"E"``).
-    masses : tuple of float, length P
-        Point masses, kg (positive).
-    positions : callable
-        ``positions(x, q, xi) -> casadi.SX`` of shape ``(d, P)``: column ``j``
-        is the position (m) of point ``j`` in ``d``-dimensional space, for
-        ``x`` ``(n,)``, ``q`` ``(n,)``, ``xi`` ``(m,)`` CasADi SX symbols.  A
-        ``casadi.Function`` of ``(x, q, xi)`` qualifies.  Points fixed to the
-        base (a motor axis) contribute nothing and may be left out.
-    motor_inertia : tuple of float, length n
-        Inertia of each actuated joint's rotating parts reflected to the
-        joint (rotor times gear ratio squared, plus any inertia rigidly
-        attached to the joint that no point mass represents), kg m^2.
-    gravity : tuple of float, length d
-        Gravity acceleration in the frame of the positions, m/s^2.  A planar
-        robot working in a horizontal plane has no in-plane gravity:
-        ``(0, 0)``.
-    tau_max : tuple of float, length n
-        Actuator torque limits ``|tau_i| <= tau_max_i`` at the joints, N m.
-    description : str
-        Source of every value (and which are assumptions).
-    """
-
-    robot_name: str
-    point_names: tuple[str, ...]
-    masses: tuple[float, ...]
-    positions: Callable = field(repr=False)
-    motor_inertia: tuple[float, ...]
-    gravity: tuple[float, ...]
-    tau_max: tuple[float, ...]
-    description: str = ""
-
-    def __post_init__(self) -> None:
-        set_ = object.__setattr__
-        owner = f"LumpedMassModel({self.robot_name!r})"
-        if not isinstance(self.robot_name, str) or not self.robot_name:
-            raise ModelError("LumpedMassModel.robot_name must be a non-empty string")
-        names = tuple(self.point_names)
-        if not names or not all(isinstance(s, str) and s for s in names) or len(set(names)) != len(names):
-            raise ModelError(f"{owner}: point_names must be distinct non-empty strings, got {names}")
-        set_(self, "point_names", names)
-        set_(self, "masses", floats(f"{owner}: masses", self.masses, len(names), positive=True, error=ModelError))
-        if not callable(self.positions):
-            raise ModelError(f"{owner}: positions must be callable (x, q, xi) -> casadi.SX (d, P)")
-        inertia = floats(f"{owner}: motor_inertia", self.motor_inertia, nonneg=True, error=ModelError)
-        if not inertia:
-            raise ModelError(f"{owner}: motor_inertia needs one entry per actuated joint")
-        set_(self, "motor_inertia", inertia)
-        set_(self, "tau_max", floats(f"{owner}: tau_max", self.tau_max, len(inertia), positive=True, error=ModelError))
-        grav = floats(f"{owner}: gravity", self.gravity, error=ModelError)
-        if not grav:
-            raise ModelError(f"{owner}: gravity needs one entry per spatial dimension")
-        set_(self, "gravity", grav)
-        if not isinstance(self.description, str):
-            raise ModelError(f"{owner}: description must be a string")
-
-    @property
-    def n(self) -> int:
-        """Number of actuated joints."""
-        return len(self.motor_inertia)
-
-    @property
-    def dim(self) -> int:
-        """Dimension ``d`` of the space the positions live in."""
-        return len(self.gravity)
-
-    @property
-    def total_mass(self) -> float:
-        """Sum of the point masses, kg."""
-        return float(sum(self.masses))
-
-    @property
-    def tau_max_array(self) -> np.ndarray:
-        """Torque limits, shape ``(n,)``, N m."""
-        return np.array(self.tau_max, dtype=float)
-
-
-# ---------------------------------------------------------------------- DexTAR
-def dextar_mass_points(x, q, xi):
-    """Mass points of the DexTAR on CasADi symbols (same geometry as :func:`robots.dextar.dextar_loop_closure`).
-
-    Parameters
-    ----------
-    x : casadi.SX, shape (2,)
-        End-effector position ``E``, m.
-    q : casadi.SX, shape (2,)
-        Motor angles, rad.
-    xi : casadi.SX, shape (7,)
-        ``(l11, l21, l12, l22, d, delta1, delta2)``, m and rad.
-
-    Returns
-    -------
-    casadi.SX, shape (2, 5)
-        Columns ``P1, B1, P2, B2, E``: mid-points of the proximal links, the
-        elbows ``B_i = A_i + l_i1 (cos q_i1, sin q_i1)`` and the end-effector, m.
-    """
-    l11, l21, _l12, _l22, d, delta1, delta2 = (xi[i] for i in range(7))
-    u1 = ca.vertcat(ca.cos(q[0] + delta1), ca.sin(q[0] + delta1))
-    u2 = ca.vertcat(ca.cos(q[1] + delta2), ca.sin(q[1] + delta2))
-    a1 = ca.vertcat(-d / 2, 0)
-    a2 = ca.vertcat(d / 2, 0)
-    e = ca.vertcat(x[0], x[1])
-    return ca.horzcat(a1 + 0.5 * l11 * u1, a1 + l11 * u1, a2 + 0.5 * l21 * u2, a2 + l21 * u2, e)
-
-
-# Assumed DexTAR data: the paper and Mecademic publish no inertial data.
-_M_PROX = 0.10  # kg, each proximal link (90 mm aluminium arm with its clamp), a uniform rod
-_M_DIST = 0.08  # kg, each distal link (90 mm tube with its two bearings)
-_M_TOOL = 0.05  # kg, end-effector shaft and tool
-_J_ROTOR = 5e-5  # kg m^2, rotor of a ~100 W servo motor
-_GEAR = 10.0  # reduction ratio; 3000 rpm at the motor gives ~31 rad/s at the joint
-#: The DexTAR's lumped-mass model.  **Every value is an assumption**: the
-#: paper (and Mecademic's public data) give no masses, inertias, gear ratios
-#: or torque limits.  Replace this instance when the real data are known.
-DEXTAR_DYNAMICS = LumpedMassModel(
-    robot_name="dextar",
-    point_names=("P1", "B1", "P2", "B2", "E"),
-    # A uniform rod of mass m rotating about A_i is *exactly* equivalent (mass,
-    # centre of mass, inertia) to m/6 at A_i, 2m/3 at its midpoint P_i and m/6
-    # at B_i; the m/6 at the fixed motor axis A_i does nothing and is left out.
-    # The distal links are lumped half at each end (B_i and E): the usual
-    # assumption of the crossing literature (Briot & Arakelian; Pagis) under
-    # which the criterion is "end-effector acceleration normal to the
-    # uncontrolled direction"; it keeps mass and centre of mass and
-    # overestimates each distal link's central inertia by m l^2 / 6.
-    masses=(
-        2 * _M_PROX / 3,
-        _M_PROX / 6 + _M_DIST / 2,
-        2 * _M_PROX / 3,
-        _M_PROX / 6 + _M_DIST / 2,
-        _M_TOOL + _M_DIST,  # tool + half of each distal link
-    ),
-    positions=dextar_mass_points,
-    # rotor 5e-5 kg m^2 behind a 10:1 reduction: 5e-3 kg m^2 at the joint
-    motor_inertia=(_J_ROTOR * _GEAR**2, _J_ROTOR * _GEAR**2),
-    # The paper does not say whether the DexTAR's plane is horizontal; the
-    # five-bar is assumed to work in a horizontal plane (table-top pick and
-    # place), where gravity has no in-plane component.  Use (0, -9.81) for a
-    # vertical plane with Y up.
-    gravity=(0.0, 0.0),
-    # peak torque of such a motor (~0.3 N m) times the 10:1 reduction
-    tau_max=(3.0, 3.0),
-    description=(
-        "DexTAR lumped-mass model with ASSUMED parameters (none are published): proximal links "
-        "90 mm, 0.10 kg uniform rods (2/3 at mid-link, 1/6 at the elbow); distal links 0.08 kg lumped "
-        "half at each end; tool 0.05 kg at E; rotor 5e-5 kg m^2 behind a 10:1 gear (5e-3 kg m^2 at "
-        "the joint); tau_max 3 N m per joint; horizontal plane (no in-plane gravity)."
-    ),
-)
 
 
 # ---------------------------------------------------------------------- derivation

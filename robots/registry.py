@@ -12,8 +12,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 from .base import BenchmarkCrossing, Robot
-from .dextar import DEXTAR, benchmark_crossing
-from .dynamics import DEXTAR_DYNAMICS, LumpedMassModel
+from .dextar import DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing
+from .mass_model import LumpedMassModel
 from .errors import InputError, UnknownRobotError
 
 __all__ = ["RobotEntry", "ROBOTS", "DEFAULT_ROBOT", "available_robots", "get_entry", "get_robot"]

@@ -22,13 +22,8 @@ from planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossi
 from planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
 from problems import interval_model, kinematics
 from robots import DEXTAR, benchmark_crossing
-from robots.dynamics import (
-    DEXTAR_DYNAMICS,
-    LumpedDynamics,
-    criterion_residual,
-    dextar_mass_points,
-    uncontrolled_direction,
-)
+from robots.dextar import DEXTAR_DYNAMICS, dextar_mass_points
+from robots.dynamics import LumpedDynamics, criterion_residual, uncontrolled_direction
 from robots.errors import InputError, ModelError, SimulationError
 from verifier.tracker import Verdict
 
