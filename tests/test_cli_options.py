@@ -119,3 +119,15 @@ def test_every_command_is_in_the_table():
 
     tried = {c[0][0] for c in CASES}
     assert tried == set(_COMMANDS)
+
+
+def test_help_shows_defaults_and_robots_and_version(capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["certify", "--help"])
+    assert stop.value.code == 0
+    out = capsys.readouterr().out
+    assert "(default: 0.01)" in out and "(default: 60.0)" in out and "(default: 0.0)" in out
+    assert "one of dextar" in out and "``" not in out
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert capsys.readouterr().out.startswith("crosscert ")
