@@ -56,7 +56,7 @@ def certify(a) -> int:
         plot_run(png, p.t_s, {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
                  p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s",
                  bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} rad, a_max = "
-                         f"{max(cert.a_max_used):.4g} m/s^2, t_s = {cert.bounds.t_s:.3g} s, "
+                         f"({', '.join(f'{v:.4g}' for v in cert.a_max_used)}) m/s^2, t_s = {cert.bounds.t_s:.3g} s, "
                          f"{cert.execution.kind.value} executions"), truth="planned")
         files.append(png)
     js = out / "certificate.json"
