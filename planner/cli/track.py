@@ -24,6 +24,10 @@ INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box
                      "violated by the data")
 
 
+#: Relative width of a latency histogram bin, and the number of bins (1 ns to ~ 4 h).
+_LATENCY_BIN_RATIO = 0.01
+_LOG_BIN_RATIO = float(np.log1p(_LATENCY_BIN_RATIO))
+_LATENCY_BINS = 3000
 #: Keys of the monitor's summary that say nothing about a file read at once.
 _MONITOR_ONLY = ("latency_us_mean", "latency_us_p99", "latency_us_max", "interrupted", "error")
 
@@ -78,6 +82,38 @@ def check(a) -> int:
     return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
 
 
+class LatencyStats:
+    """Mean, maximum and quantiles of update latencies in constant memory (a log-binned histogram).
+
+    Quantiles are the upper edge of their bin: at most :data:`_LATENCY_BIN_RATIO`
+    (1 %) above the true value, never below it.
+    """
+
+    def __init__(self) -> None:
+        self.count, self.total_ns, self.max_ns = 0, 0, 0
+        self.bins = np.zeros(_LATENCY_BINS + 1, dtype=np.int64)
+
+    def add(self, ns: int) -> None:
+        """Count one latency, ns."""
+        self.count += 1
+        self.total_ns += ns
+        self.max_ns = max(self.max_ns, ns)
+        self.bins[min(_LATENCY_BINS, int(np.log(max(ns, 1)) / _LOG_BIN_RATIO))] += 1
+
+    def mean_us(self) -> float | None:
+        return round(self.total_ns / self.count / 1e3, 1) if self.count else None
+
+    def max_us(self) -> float | None:
+        return round(self.max_ns / 1e3, 1) if self.count else None
+
+    def quantile_us(self, p: float) -> float | None:
+        """The ``p`` quantile, µs (the upper edge of its bin, capped by the maximum)."""
+        if not self.count:
+            return None
+        k = int(np.searchsorted(np.cumsum(self.bins), p * self.count))
+        return round(min(np.exp((k + 1) * _LOG_BIN_RATIO), self.max_ns) / 1e3, 1)
+
+
 class Monitor:
     """What ``crosscert monitor`` (or ``check``, reading a file) has decided so far.
 
@@ -108,7 +144,7 @@ class Monitor:
         self.t_s = None
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
-        self.latency_ns = []
+        self.latency = LatencyStats()
         self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
 
     def feed(self, line: int, t: float, q, t_s: float | None) -> None:
@@ -129,7 +165,7 @@ class Monitor:
         for line, t, q in self.pending:
             t0 = time.perf_counter_ns()
             r = self.tracker.update(q)
-            self.latency_ns.append(time.perf_counter_ns() - t0)
+            self.latency.add(time.perf_counter_ns() - t0)
             if self.record:
                 for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
                     self.boxes[key].append(v)
@@ -157,8 +193,6 @@ class Monitor:
         bad = -1 if st is None else int(st.bad_at[0])
         init = 0 if st is None else int(st.init_mode[0])
         final = int(st.mode[0]) if st is not None and bad < 0 else 0
-        lat = np.array(self.latency_ns, dtype=float) / 1e3
-        stat = (lambda f: round(float(f(lat)), 1) if lat.size else None)  # noqa: E731
         return {
             "verdict": verdict_of(init, final, bad >= 0).value,
             "initial_mode": init,
@@ -170,9 +204,9 @@ class Monitor:
             "max_width_pose_m": None if st is None else float(st.max_width_pose[0]),
             "max_width_velocity_mps": None if st is None else float(st.max_width_velocity[0]),
             "velocity_model": self.a.velocity_model,
-            "latency_us_mean": stat(np.mean),
-            "latency_us_p99": stat(lambda v: np.percentile(v, 99)),
-            "latency_us_max": stat(np.max),
+            "latency_us_mean": self.latency.mean_us(),
+            "latency_us_p99": self.latency.quantile_us(0.99),
+            "latency_us_max": self.latency.max_us(),
             "interrupted": error is not None,
             "error": error,
         }
