@@ -122,6 +122,7 @@ class SubprocessExecutor(Executor):
             future.set_exception(value)
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop accepting calls; with ``wait`` run what is queued first, else kill a call still running."""
         with self._cond:
             self._shutdown = True
             if cancel_futures:
@@ -130,19 +131,13 @@ class SubprocessExecutor(Executor):
             self._cond.notify_all()
         if not wait and self._proc.poll() is None:
             self._proc.kill()  # a search still running is not needed any more
-        if wait:
-            self._thread.join()
-        if self._proc.poll() is None:
-            self._proc.stdin.close()
-            self._proc.wait()
-        else:
-            self._proc.wait()
         self._thread.join()
         for f in (self._proc.stdin, self._proc.stdout):
             try:
-                f.close()
+                f.close()  # the child reads EOF and exits
             except OSError:
                 pass
+        self._proc.wait()
 
 
 if __name__ == "__main__":

@@ -72,7 +72,8 @@ def _in(name: str, v, lo: float, hi: float, *, lo_open: bool = True, unit: str =
         raise InputError(f"{name} = {v:g}{unit} is out of range: it must lie in {left}{lo:g}, {hi:g}]{unit}")
 
 
-def _budget(what: str, samples: float, n: int, *, scenarios: int = 1, tracked: bool = False) -> None:
+def _budget(what: str, samples: float, n: int, *, scenarios: int = 1, tracked: bool = False,
+            hint: str = "shorten the motion") -> None:
     """Refuse a run whose samples would need more than the memory or time limits."""
     memory = samples * scenarios * n * _BYTES_PER_SAMPLE_JOINT
     seconds = samples * scenarios * _TRACK_S_PER_SAMPLE if tracked else 0.0
@@ -80,7 +81,7 @@ def _budget(what: str, samples: float, n: int, *, scenarios: int = 1, tracked: b
         raise InputError(
             f"{what} needs {samples * scenarios:.3g} samples (about {memory / 2**30:.3g} GiB"
             + (f" and {seconds:.3g} s of tracking" if tracked else "")
-            + f"), above the limits of {MEMORY_LIMIT / 2**30:g} GiB and {TIME_LIMIT:g} s: shorten the motion")
+            + f"), above the limits of {MEMORY_LIMIT / 2**30:g} GiB and {TIME_LIMIT:g} s: {hint}")
 
 
 def _a_peak_within_robot(a_peak: float, direction, robot) -> None:
@@ -172,8 +173,8 @@ def check_command(a, entry) -> None:
         # the slowest plan bounds every batch: samples of a crossing at v_low
         T = ramp_length(a.v_low, a.a_peak)[0]
         samples = (2 * _PLAN_REST + 2 * T + length / a.v_low) / robot.t_s
-        _budget(f"certify down to --v-low {a.v_low:g} m/s", samples, robot.n, scenarios=max(a.monte_carlo, 1),
-                tracked=True)
+        _budget(f"certify down to --v-low {a.v_low:g} m/s with --monte-carlo {a.monte_carlo}", samples, robot.n,
+                scenarios=max(a.monte_carlo, 1), tracked=True, hint="raise --v-low or lower --monte-carlo")
         _output_folder(a.out, "--out", ("certificate.json",))
         return
     if cmd == "sweep":
@@ -185,7 +186,7 @@ def check_command(a, entry) -> None:
         slowest = min(a.speeds_list)
         T = ramp_length(slowest, SWEEP_A_PEAK)[0]
         _budget(f"sweep at {slowest:g} m/s", (0.1 + 2 * T + 0.07 / slowest + _REST_END) / robot.t_s, robot.n,
-                scenarios=2 * len(a.speeds_list), tracked=True)
+                scenarios=2 * len(a.speeds_list), tracked=True, hint="drop the slowest speeds")
         _output_folder(a.out, "--out", ())
 
 
