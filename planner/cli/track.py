@@ -101,9 +101,11 @@ class LatencyStats:
         self.bins[min(_LATENCY_BINS, int(np.log(max(ns, 1)) / _LOG_BIN_RATIO))] += 1
 
     def mean_us(self) -> float | None:
+        """Mean latency, µs (None before the first sample)."""
         return round(self.total_ns / self.count / 1e3, 1) if self.count else None
 
     def max_us(self) -> float | None:
+        """Largest latency, µs (None before the first sample)."""
         return round(self.max_ns / 1e3, 1) if self.count else None
 
     def quantile_us(self, p: float) -> float | None:
