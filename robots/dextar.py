@@ -241,16 +241,7 @@ def benchmark_crossing(xi=None) -> BenchmarkCrossing:
 
 # ---------------------------------------------------------------------- dynamics
 def dextar_mass_points(x, q, xi):
-    """Mass points of the DexTAR on CasADi symbols (same geometry as :func:`robots.dextar.dextar_loop_closure`).
-
-    Parameters
-    ----------
-    x : casadi.SX, shape (2,)
-        End-effector position ``E``, m.
-    q : casadi.SX, shape (2,)
-        Motor angles, rad.
-    xi : casadi.SX, shape (7,)
-        ``(l11, l21, l12, l22, d, delta1, delta2)``, m and rad.
+    """Mass points of the DexTAR on CasADi symbols ``x``, ``q``, ``xi`` (as for :func:`dextar_loop_closure`).
 
     Returns
     -------
