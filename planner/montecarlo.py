@@ -10,11 +10,15 @@ verdicts must be zero (they would be bugs).
 
 from __future__ import annotations
 
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
 
+from robots import KinematicModel
 from robots import validators as V
+from robots.errors import InputError
+from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
 
 from . import execution as ex_
@@ -23,7 +27,7 @@ from .plan import derived_a_max
 from .simulate import Quantisation, quantise, random_geometry
 from .task import PlannedTrajectory, PlanningBounds
 
-__all__ = ["RunRecord", "MonteCarloResult", "monte_carlo_confirmation"]
+__all__ = ["RunRecord", "MonteCarloResult", "monte_carlo_confirmation", "monte_carlo_runs", "merge_results", "BATCH_RUNS"]
 
 #: Readings cycle through the encoder models run by run.
 _KINDS = (Quantisation.FLOOR, Quantisation.ROUND, Quantisation.UNIFORM)
@@ -84,31 +88,68 @@ class MonteCarloResult:
         }
 
 
+#: Interval and kinematic models built in this process for :func:`monte_carlo_runs`, by robot value.
+_MODELS: dict = {}
+#: Executions per task when an executor is given: ~1-2 s of tracking per task on one core.
+BATCH_RUNS = 200
+
+
 def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
-                             a_max=None, progress=None, execution: ex_.ExecutionClass | None = None
-                             ) -> MonteCarloResult:
+                             a_max=None, progress=None, execution: ex_.ExecutionClass | None = None,
+                             executor: Executor | None = None, batch_runs: int = BATCH_RUNS) -> MonteCarloResult:
     """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
 
-    Each execution: geometry uniform in ``[xi]`` (every 5th at a random corner),
-    joints by the true IK, readings quantised (floor, round or a uniform
-    random error within ``eps_q``), tracked by the run-time tracker (robot
-    defaults, ``a_max`` of the certificate).  Each execution is checked
-    against the certificate's class ``execution`` (derived from ``bounds``
-    when not given).
+    Each execution ``r``: geometry uniform in ``[xi]`` (every 5th at a random
+    corner), joints by the true IK, readings quantised (floor, round or a
+    uniform random error within ``eps_q``, in turn), tracked by the run-time
+    tracker (robot defaults, ``a_max`` of the certificate) from the plan's
+    initial mode.  Each execution is checked against the certificate's class
+    ``execution`` (derived from ``bounds`` when not given).  Execution ``r``
+    draws from its own generator ``default_rng([seed, r])``, so the result does
+    not depend on how the runs are split.
+
+    Parameters
+    ----------
+    executor : concurrent.futures.Executor, optional
+        Run the executions in batches of ``batch_runs`` on it (a process pool,
+        a Dask client's ``get_executor()``): for 10^5 executions and more.
+        Each worker builds the robot's models once.
 
     Returns
     -------
     MonteCarloResult
     """
     runs = int(V.number("runs", runs, lo=1))
+    batch_runs = int(V.number("batch_runs", batch_runs, lo=1))
     robot = kin.robot
     b = bounds.resolved(robot)
     a_max = derived_a_max(plan, b) if a_max is None else a_max
     cls = execution_class(kin, plan, b) if execution is None else execution
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
-    rng = np.random.default_rng(seed)
+    if executor is None:
+        return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress)
+    futures = [executor.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, min(runs, start + batch_runs))
+               for start in range(0, runs, batch_runs)]
+    return merge_results([f.result() for f in futures])
+
+
+def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings: TrackerSettings,
+                     cls: ex_.ExecutionClass, seed: int, start: int, stop: int, *, models=None,
+                     progress=None) -> MonteCarloResult:
+    """Executions ``start .. stop - 1`` of a Monte Carlo confirmation (module-level: any executor can run it).
+
+    ``b`` are resolved bounds; ``models`` the robot's ``(KinematicModel,
+    IntervalModel)``, built (once per process) when absent.
+    """
+    if models is None:
+        models = _MODELS.get(robot)
+        if models is None:
+            models = _MODELS[robot] = (KinematicModel(robot), IntervalModel(robot))
+    kin, imodel = models
+    m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
     qs, truths = [], []
-    for r in range(runs):
+    for r in range(start, stop):
+        rng = np.random.default_rng([seed, r])
         xi = random_geometry(robot, rng, corners=(r % 5 == 4))
         q_true = kin.ik_path(plan.x, xi, plan.q[0])
         q_read = quantise(q_true, b.eps_q, _KINDS[r % len(_KINDS)], rng)
@@ -117,33 +158,46 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
         truths.append((xi, modes, ex_.in_class(cls, robot, q_true, plan.q, xi, plan.xi_plan, b.eps_q,
                                                b.tracking_error)))
     q = np.stack(qs)
-    m0 = int(truths[0][1][0])
-    boxes = [initial_box_from_mode(imodel, q[r, 0], m0, s) for r in range(runs)]
+    boxes = [initial_box_from_mode(imodel, q[i, 0], m0, settings) for i in range(len(qs))]
     x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
-    res, rec = track_batch(imodel, q, s, x0, record=True, progress=progress)
+    res, rec = track_batch(imodel, q, settings, x0, record=True, progress=progress)
     misses, failures, wrong = [], [], []
-    for r in range(runs):
-        inside = (np.all(rec["x_lo"][r] <= plan.x) and np.all(plan.x <= rec["x_hi"][r])
-                  and np.all(rec["xd_lo"][r, 1:] <= plan.xd[1:]) and np.all(plan.xd[1:] <= rec["xd_hi"][r, 1:]))
+    for i, r in enumerate(range(start, stop)):
+        inside = (np.all(rec["x_lo"][i] <= plan.x) and np.all(plan.x <= rec["x_hi"][i])
+                  and np.all(rec["xd_lo"][i, 1:] <= plan.xd[1:]) and np.all(plan.xd[1:] <= rec["xd_hi"][i, 1:]))
         if not inside:
             misses.append(r)
-        modes = truths[r][1]
-        certified = rec["mode"][r] != 0
+        modes = truths[i][1]
+        certified = rec["mode"][i] != 0
         true_changed = modes[-1] != modes[0]
-        bad_mode = bool(np.any(rec["mode"][r][certified] != modes[certified]))
-        if bad_mode or (res.verdict[r] is Verdict.MODE_CHANGED and not true_changed):
-            wrong.append(RunRecord(r, res.verdict[r], truths[r][0]))
-        elif res.verdict[r] is not Verdict.MODE_CHANGED:
-            failures.append(RunRecord(r, res.verdict[r], truths[r][0]))
-    admissible = [r for r in range(runs) if truths[r][2]]
+        bad_mode = bool(np.any(rec["mode"][i][certified] != modes[certified]))
+        if bad_mode or (res.verdict[i] is Verdict.MODE_CHANGED and not true_changed):
+            wrong.append(RunRecord(r, res.verdict[i], truths[i][0]))
+        elif res.verdict[i] is not Verdict.MODE_CHANGED:
+            failures.append(RunRecord(r, res.verdict[i], truths[i][0]))
+    admissible = [i for i in range(len(qs)) if truths[i][2]]
     return MonteCarloResult(
-        runs=runs,
+        runs=stop - start,
         seed=seed,
         detected=int(sum(v is Verdict.MODE_CHANGED for v in res.verdict)),
         in_class=len(admissible),
-        detected_in_class=int(sum(res.verdict[r] is Verdict.MODE_CHANGED for r in admissible)),
-        outside_class=tuple(r for r in range(runs) if not truths[r][2]),
+        detected_in_class=int(sum(res.verdict[i] is Verdict.MODE_CHANGED for i in admissible)),
+        outside_class=tuple(r for i, r in enumerate(range(start, stop)) if not truths[i][2]),
         containment_failures=tuple(misses),
         wrong_verdicts=tuple(wrong),
         not_detected=tuple(failures),
+    )
+
+
+def merge_results(parts: list[MonteCarloResult]) -> MonteCarloResult:
+    """One result from the results of consecutive batches of runs (counts added, lists joined)."""
+    if not parts:
+        raise InputError("no Monte Carlo batches to merge")
+    return MonteCarloResult(
+        runs=sum(p.runs for p in parts), seed=parts[0].seed, detected=sum(p.detected for p in parts),
+        in_class=sum(p.in_class for p in parts), detected_in_class=sum(p.detected_in_class for p in parts),
+        outside_class=tuple(r for p in parts for r in p.outside_class),
+        containment_failures=tuple(r for p in parts for r in p.containment_failures),
+        wrong_verdicts=tuple(w for p in parts for w in p.wrong_verdicts),
+        not_detected=tuple(w for p in parts for w in p.not_detected),
     )

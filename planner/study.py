@@ -1,0 +1,280 @@
+"""Design studies: how v_min and the refutation floor move with the bounds, on Dask or any executor.
+
+A study is a grid of inputs (:data:`GRID_KEYS`); each point is one
+certification (:func:`planner.pipeline.certify_crossing`) of a robot's
+benchmark task, run where the caller says:
+
+* a ``dask.distributed`` client (``client=``, or ``scheduler="tcp://host:8786"``),
+* any ``concurrent.futures`` executor (``executor=``),
+* or, with neither, a ``LocalCluster`` sized to the machine.
+
+Each finished case is appended to the output CSV as it arrives, so a study
+that stops loses nothing done: run it again with the same output and the
+finished cases are skipped.  A case that raises becomes a row with its error.
+A worker that dies loses only the case it was running: the Dask scheduler
+runs it again elsewhere (``distributed.scheduler.allowed-failures`` times).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import importlib.metadata as md
+import itertools
+import json
+import logging
+import os
+import time
+from collections.abc import Callable, Iterable
+from concurrent.futures import Executor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from robots import validators as V
+from robots.errors import InputError, ModelError
+from robots.registry import DEFAULT_ROBOT, get_entry
+
+from .pipeline import certify_crossing
+from .task import Method, PlanningBounds, benchmark_task, parse_option
+
+__all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "design_sweep", "read_results", "scaled_box"]
+
+log = logging.getLogger(__name__)
+
+#: What a grid may span, with the unit of its values.
+GRID_KEYS = {
+    "a_max": "m/s^2, every axis (absent: derived from each plan)",
+    "width_scale": "scale of every calibration half-width around the box centre",
+    "width_scale.lengths": "scale of the half-widths of the parameters that are not joint offsets",
+    "width_scale.offsets": "scale of the half-widths of the joint-offset parameters",
+    "eps_q": "encoder error bound, rad",
+    "crossing_offset": "m: the benchmark task moved across its direction, so it crosses the locus elsewhere",
+    "method": "time law: smoothstep, time-optimal or dynamic",
+    "robot": "a registered robot with a benchmark crossing",
+}
+#: Columns of a result row, in order (inputs first; a missing input is empty).
+COLUMNS = (["case_id"] + list(GRID_KEYS) + ["v_min_mps", "refutation_bound_mps", "verdict", "trials", "a_max_used_mps2",
+                                            "elapsed_s", "error", "versions"])
+
+
+@dataclass(frozen=True)
+class StudyCase:
+    """One point of a grid: the values of the swept inputs (the others keep the base settings)."""
+
+    inputs: tuple  # sorted (key, value) pairs
+
+    @property
+    def values(self) -> dict:
+        return dict(self.inputs)
+
+    @property
+    def case_id(self) -> str:
+        """A stable name of the inputs: the same case has the same id in every run of a study."""
+        text = json.dumps(self.inputs, sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def study_cases(grid: dict) -> list[StudyCase]:
+    """The cartesian product of ``grid`` (``{key: [values]}``, keys of :data:`GRID_KEYS`) as cases.
+
+    Raises
+    ------
+    InputError
+        An unknown key, an empty list, or a value of the wrong kind.
+    """
+    if not isinstance(grid, dict) or not grid:
+        raise InputError("a study grid is a non-empty mapping {input: [values]}")
+    axes = []
+    for key in sorted(grid):
+        if key not in GRID_KEYS:
+            raise InputError(f"unknown study input {key!r}; use one of {', '.join(GRID_KEYS)}")
+        values = grid[key] if isinstance(grid[key], (list, tuple)) else [grid[key]]
+        if not values:
+            raise InputError(f"study input {key!r} has no values")
+        axes.append([(key, _value(key, v)) for v in values])
+    return [StudyCase(tuple(combo)) for combo in itertools.product(*axes)]
+
+
+def _value(key: str, v):
+    if key == "method":
+        return parse_option(Method, "method", v).value
+    if key == "robot":
+        return get_entry(v).name
+    if key == "crossing_offset":
+        return V.number(key, v)
+    return V.positive(key, v)
+
+
+def scaled_box(robot, scale_lengths: float = 1.0, scale_offsets: float = 1.0):
+    """``robot`` with the half-widths of ``[xi]`` scaled around the box centre, per parameter group.
+
+    The offsets group is the parameters ``robot.joint_offsets`` names.  The
+    nominal geometry is kept when the robot still accepts it, else it becomes
+    the centre (neither the planner nor the tracker reads it).
+    """
+    offsets = {j for j in (robot.joint_offsets or ()) if j is not None}
+    scale = np.array([scale_offsets if i in offsets else scale_lengths for i in range(robot.m)])
+    lo, hi = robot.xi_lo_array, robot.xi_hi_array
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    new_lo = tuple(float(v) for v in centre - scale * half)
+    new_hi = tuple(float(v) for v in centre + scale * half)
+    try:
+        return dataclasses.replace(robot, xi_lo=new_lo, xi_hi=new_hi)
+    except ModelError:
+        return dataclasses.replace(robot, xi_lo=new_lo, xi_hi=new_hi, xi_nominal=tuple(float(v) for v in centre))
+
+
+def _versions() -> str:
+    out = {}
+    for pkg in ("crosscert", "numpy", "casadi", "numba"):
+        try:
+            out[pkg] = md.version(pkg)
+        except md.PackageNotFoundError:
+            out[pkg] = None
+    return json.dumps(out, sort_keys=True)
+
+
+def run_case(case: StudyCase, settings: dict) -> dict:
+    """Certify one case; a result row (never raises: an error becomes the row's ``error``).
+
+    ``settings``: ``robot`` (default), ``bounds`` (``PlanningBounds`` keyword
+    arguments) and ``certify`` (keyword arguments of ``certify_crossing``).
+    """
+    v = case.values
+    row = {"case_id": case.case_id, **{k: v.get(k, "") for k in GRID_KEYS}, "error": "", "versions": _versions()}
+    t0 = time.perf_counter()
+    try:
+        entry = get_entry(v.get("robot", settings.get("robot", DEFAULT_ROBOT)))
+        lengths = v.get("width_scale.lengths", v.get("width_scale", 1.0))
+        offsets = v.get("width_scale.offsets", v.get("width_scale", 1.0))
+        robot = scaled_box(entry.robot, lengths, offsets)
+        task = benchmark_task(entry)
+        shift = float(v.get("crossing_offset", 0.0))
+        if shift:
+            b = entry.benchmark_crossing()
+            across = np.linalg.svd(b.direction[None, :])[2][-1]  # a unit vector normal to the direction
+            task = dataclasses.replace(task, start=task.start + shift * across, goal=task.goal + shift * across)
+        kw = dict(settings.get("bounds", {}))
+        if "a_max" in v:
+            kw["a_max"] = (float(v["a_max"]),) * robot.n
+            kw["a_peak"] = min(kw.get("a_peak", PlanningBounds().a_peak), float(v["a_max"]))
+        if "eps_q" in v:
+            kw["eps_q"] = float(v["eps_q"])
+        if "method" in v:
+            kw["method"] = v["method"]
+        if kw.get("method") == Method.DYNAMIC:
+            kw["dynamics"] = entry.require_dynamics()
+        cert = certify_crossing(robot, task, PlanningBounds(**kw), **settings.get("certify", {}))
+        row.update(v_min_mps=cert.v_min, refutation_bound_mps=cert.refutation_bound, verdict=cert.verdict.value,
+                   trials=len(cert.trials),
+                   a_max_used_mps2="" if cert.a_max_used is None else json.dumps(list(cert.a_max_used)))
+    except Exception as exc:  # one bad case must not lose the study
+        row.update(v_min_mps="", refutation_bound_mps="", verdict="", trials="", a_max_used_mps2="",
+                   error=f"{type(exc).__name__}: {exc}")
+    row["elapsed_s"] = round(time.perf_counter() - t0, 3)
+    return row
+
+
+def run_cases(cases: list[StudyCase], settings: dict) -> list[dict]:
+    """Several cases in one task (cheap cases: Dask's per-task overhead is ~1 ms)."""
+    return [run_case(c, settings) for c in cases]
+
+
+def read_results(path) -> list[dict]:
+    """The rows already in a study's CSV (a last line cut by a crash is dropped)."""
+    p = Path(path)
+    if not p.exists():
+        return []
+    with p.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    return [r for r in rows if r.get("versions")]
+
+
+def _append(path: Path, rows: Iterable[dict]) -> None:
+    new = not path.exists() or path.stat().st_size == 0
+    with path.open("a", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLUMNS)
+        if new:
+            w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in COLUMNS})
+        fh.flush()
+        os.fsync(fh.fileno())
+
+
+def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | None = None,
+                 certify: dict | None = None, client=None, scheduler: str | None = None,
+                 executor: Executor | None = None, cases_per_task: int = 1,
+                 progress: Callable[[dict], None] | None = None):
+    """Run a design study; return its table (a pandas DataFrame, one row per case).
+
+    Parameters
+    ----------
+    grid : dict
+        ``{input: [values]}`` over :data:`GRID_KEYS`; every combination is a case.
+    out : str or Path
+        CSV file the rows are appended to as they finish; cases already in it
+        are skipped (restart), so one output belongs to one study.
+    robot : str
+        Robot of the cases that do not sweep ``robot``.
+    bounds, certify : dict, optional
+        Keyword arguments of ``PlanningBounds`` and of ``certify_crossing``
+        common to every case (e.g. ``{"refute": False, "tol": 0.02}``).
+    client : dask.distributed.Client, optional
+        Where the cases run.  ``scheduler``: the address of one to connect to.
+        ``executor``: any ``concurrent.futures.Executor`` instead of Dask.
+        None of them: a ``LocalCluster`` with one single-threaded worker per core.
+    cases_per_task : int
+        Cases run in one task (1: a certification is seconds, far above the
+        ~1 ms Dask overhead; more for very cheap cases).
+    progress : callable, optional
+        ``progress(row)`` as each case finishes.
+    """
+    import pandas as pd
+
+    out = Path(out)
+    if out.suffix.lower() != ".csv":
+        raise InputError(f"a study writes CSV: {out} must end in .csv")
+    if not out.parent.is_dir():
+        raise InputError(f"folder {out.parent} does not exist")
+    per_task = int(V.number("cases_per_task", cases_per_task, lo=1))
+    settings = {"robot": robot, "bounds": dict(bounds or {}), "certify": dict(certify or {})}
+    cases = study_cases(grid)
+    done = {r["case_id"] for r in read_results(out)}
+    todo = [c for c in cases if c.case_id not in done]
+    log.info("study: %d cases, %d already in %s", len(cases), len(cases) - len(todo), out)
+    batches = [todo[i:i + per_task] for i in range(0, len(todo), per_task)]
+    own = None
+    if batches:
+        if executor is None:
+            if client is None:
+                from dask.distributed import Client, LocalCluster
+
+                if scheduler is not None:
+                    client = own = Client(scheduler)
+                else:
+                    cluster = LocalCluster(n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                                           dashboard_address=None)
+                    client = own = Client(cluster)
+            executor = client.get_executor(pure=False)
+        try:
+            futures = [executor.submit(run_cases, b, settings) for b in batches]
+            for f in as_completed(futures):
+                rows = f.result()
+                _append(out, rows)
+                for r in rows:
+                    if progress is not None:
+                        progress(r)
+        finally:
+            if own is not None:
+                cluster = getattr(own, "cluster", None)
+                own.close()
+                if cluster is not None:
+                    cluster.close()
+    table = pd.read_csv(out, dtype={"case_id": str}, keep_default_na=True) if out.exists() else pd.DataFrame(columns=COLUMNS)
+    table = table[table["versions"].notna() & table["case_id"].isin({c.case_id for c in cases})]
+    return table.drop_duplicates("case_id", keep="last").reset_index(drop=True)
+
