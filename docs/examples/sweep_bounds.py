@@ -31,7 +31,6 @@ Run from the repository root::
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import importlib.util
 import json
 import os
@@ -45,8 +44,8 @@ if importlib.util.find_spec("planner") is None:  # not installed: run from a che
 
 
 from planner import PlanningBounds, benchmark_task, certify_crossing
+from planner.study import scaled_box
 from robots import get_entry
-from robots.errors import ModelError
 
 ENTRY = get_entry("dextar")
 DEXTAR = ENTRY.robot
@@ -98,23 +97,10 @@ def run_cases(fn, cases, executor=None):
 
 # ------------------------------------------------------------------ one case
 def scaled_robot(width: float, robot=DEXTAR):
-    """``robot`` with the half-widths of ``[xi]`` scaled by ``width`` around the box centre.
-
-    The nominal (design) geometry is kept when the robot's validation still
-    accepts it (within one box width of the box); otherwise it is replaced by
-    the box centre.  Neither the planner nor the tracker reads it: they use
-    the centre and the box.
-    """
+    """``robot`` with every half-width of ``[xi]`` scaled by ``width`` around the box centre."""
     if not width > 0:
         raise ValueError(f"width scale must be positive, got {width}")
-    lo, hi = robot.xi_lo_array, robot.xi_hi_array
-    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    new_lo = tuple(float(v) for v in centre - width * half)
-    new_hi = tuple(float(v) for v in centre + width * half)
-    try:
-        return dataclasses.replace(robot, xi_lo=new_lo, xi_hi=new_hi)
-    except ModelError:
-        return dataclasses.replace(robot, xi_lo=new_lo, xi_hi=new_hi, xi_nominal=tuple(float(v) for v in centre))
+    return scaled_box(robot, width, width)
 
 
 def run_case(case: dict) -> dict:
