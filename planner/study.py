@@ -207,7 +207,7 @@ def _append(path: Path, rows: Iterable[dict]) -> None:
 
 def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | None = None,
                  certify: dict | None = None, client=None, scheduler: str | None = None,
-                 executor: Executor | None = None, cases_per_task: int = 1,
+                 executor: Executor | None = None, workers: int | None = None, cases_per_task: int = 1,
                  progress: Callable[[dict], None] | None = None):
     """Run a design study; return its table (a pandas DataFrame, one row per case).
 
@@ -226,7 +226,8 @@ def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | 
     client : dask.distributed.Client, optional
         Where the cases run.  ``scheduler``: the address of one to connect to.
         ``executor``: any ``concurrent.futures.Executor`` instead of Dask.
-        None of them: a ``LocalCluster`` with one single-threaded worker per core.
+        None of them: a ``LocalCluster`` of ``workers`` single-threaded worker
+        processes (default: one per core), closed at the end.
     cases_per_task : int
         Cases run in one task (1: a certification is seconds, far above the
         ~1 ms Dask overhead; more for very cheap cases).
@@ -256,8 +257,9 @@ def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | 
                 if scheduler is not None:
                     client = own = Client(scheduler)
                 else:
-                    cluster = LocalCluster(n_workers=os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                                           dashboard_address=None)
+                    # dashboard on a free port: a second study on the machine must not collide
+                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                                           processes=True, dashboard_address=":0")
                     client = own = Client(cluster)
             executor = client.get_executor(pure=False)
         try:

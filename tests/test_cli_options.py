@@ -88,6 +88,27 @@ CASES = [
     (SWEEP + ["--speeds", "1,x"], "expected comma-separated numbers"),
     (SWEEP + ["--seed", "-3"], "not a non-negative whole number"),
     (SWEEP[:2] + ["{rec}"], "exists and is not a folder"),
+    # study (the grid: docs/examples/study_grid.toml; bad grid files: tests/test_cli_study.py)
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--workers", "0"], "--workers = 0 is out of range"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--workers", "-1"], "not a non-negative whole number"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--workers", "2", "--scheduler", "tcp://localhost:8786"], "not allowed with argument"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.txt"], "must end in .csv"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/no/r.csv"], "does not exist"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{rec}"], "is not the CSV of a study"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--plot", "{d}/p.jpg"], "must end in .png"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--robot", "delta"], "unknown robot 'delta'"),
+    (["study", "{rec}", "-o", "{d}/r.csv"], "is not valid TOML"),
+    (["study", "{d}/none.toml", "-o", "{d}/r.csv"], "no such file"),
+    (["study", "{d}", "-o", "{d}/r.csv"], "is a directory"),
+    (["study", "{d}/none.toml"], "the following arguments are required: -o/--output"),
 ]
 
 

@@ -1,5 +1,5 @@
 """The ``crosscert`` command: certify a planned crossing, plan one, check a recording, monitor a stream,
-simulate, sweep.
+simulate, sweep, run a design study.
 
 Exit codes: 0 a verdict was given, 2 bad input or usage (one line on stderr,
 no traceback), 3 the data contradict the assumptions (inconsistent).  Robots
@@ -17,12 +17,13 @@ from .checks import check_command
 from .parser import UsageError, build_parser
 from .planning import certify, plan
 from .simulation import simulate, sweep
+from .study import study
 from .track import check, monitor
 
 __all__ = ["build_parser", "main"]
 
 _COMMANDS = {"check": check, "monitor": monitor, "simulate": simulate, "sweep": sweep, "plan": plan,
-             "certify": certify}
+             "certify": certify, "study": study}
 
 
 def main(argv=None) -> int:

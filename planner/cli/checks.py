@@ -18,20 +18,24 @@ before the work whose result it receives.  docs/cli.md lists the limits.
 from __future__ import annotations
 
 import math
+import importlib.util
 import os
 from pathlib import Path
 
 import numpy as np
 
 from robots.errors import InputError
+from robots.registry import get_entry
 from verifier.files import check_output_path
 
 from ..simulate import ramp_length
-from ..task import PlanningBounds, benchmark_task
+from ..study import COLUMNS, study_cases
+from ..task import Method, PlanningBounds, benchmark_task
 from .parser import TABLE2_SPEEDS
 from .setup import floats_option
+from .study import read_grid
 
-__all__ = ["MEMORY_LIMIT", "TIME_LIMIT", "check_command"]
+__all__ = ["MEMORY_LIMIT", "TIME_LIMIT", "MAX_CASES", "MAX_WORKERS", "check_command"]
 
 #: Memory a command may plan to use, bytes: well below the 24 GiB of the
 #: machines we run on, and far above any sensible crossing (~1 MB).
@@ -62,6 +66,12 @@ _REST_END = 0.1
 _PLAN_REST = PlanningBounds().t_rest
 #: Peak acceleration of the sweep's ramps (planner.sweep default), m/s^2.
 SWEEP_A_PEAK = 60.0
+#: Largest design study, cases (each is a certification of seconds to minutes).
+MAX_CASES = 10_000
+#: Largest local cluster of ``study --workers``, worker processes.
+MAX_WORKERS = 256
+#: Slowest speed a certification tries (certify_crossing default), m/s.
+_V_LOW = 0.6
 
 
 def _in(name: str, v, lo: float, hi: float, *, lo_open: bool = True, unit: str = "") -> None:
@@ -130,6 +140,12 @@ def check_command(a, entry) -> None:
     """Check the options of command ``a.command`` for the registry ``entry``; InputError on the first bad one."""
     robot = entry.robot
     cmd = a.command
+    if cmd == "study":
+        missing = [m for m in ("distributed", "pandas") if importlib.util.find_spec(m) is None]
+        if missing:
+            raise InputError(f"crosscert study needs {' and '.join(missing)}: pip install 'crosscert[study]'")
+        _study(a)
+        return
     if cmd in ("check", "monitor"):
         _tracker(a, robot)
         if cmd == "check":
@@ -188,6 +204,66 @@ def check_command(a, entry) -> None:
         _budget(f"sweep at {slowest:g} m/s", (0.1 + 2 * T + 0.07 / slowest + _REST_END) / robot.t_s, robot.n,
                 scenarios=2 * len(a.speeds_list), tracked=True, hint="drop the slowest speeds")
         _output_folder(a.out, "--out", ())
+
+
+def _study_output(path) -> None:
+    """``study -o``: a new CSV, or the output of a study (its rows are kept and its finished cases skipped)."""
+    _output_file(path, "--output", (".csv",))
+    p = Path(path)
+    if p.exists() and p.stat().st_size > 0:
+        with p.open(newline="") as fh:
+            head = fh.readline(4096).rstrip("\r\n")
+        if head != ",".join(COLUMNS):
+            raise InputError(f"--output: {path} is not the CSV of a study (its header differs); choose a new file "
+                             "or the output of an earlier run of this study")
+
+
+def _study(a) -> None:
+    """``study``: the options, the grid file (read once, kept as ``a.spec``), and the size of the study."""
+    _in("--workers", a.workers, 1, MAX_WORKERS, lo_open=False)
+    _study_output(a.output)
+    _output_file(a.plot, "--plot", (".png",))
+    spec = read_grid(a.grid)
+    if spec["robot"] is not None:
+        a.robot = get_entry(spec["robot"]).name  # the grid file's robot wins over --robot
+    grid, bounds, cert = spec["grid"], spec["bounds"], spec["certify"]
+    cases = study_cases(grid)
+    if len(cases) > MAX_CASES:
+        raise InputError(f"{a.grid}: the grid has {len(cases)} cases, more than {MAX_CASES}; drop some values")
+    values = {k: [c.values[k] for c in cases] for k in grid}
+    for v in values.get("eps_q", ()):
+        _in("[grid] eps_q", v, 0.0, MAX_JOINT_ERROR, unit=" rad")
+    for v in values.get("a_max", ()):
+        _in("[grid] a_max", v, 0.0, 1e6, unit=" m/s^2")
+    for k, unit in (("eps_q", " rad"), ("tracking_error", " rad")):
+        if k in bounds and not isinstance(bounds[k], bool) and isinstance(bounds[k], (int, float)):
+            _in(f"[bounds] {k}", bounds[k], 0.0, MAX_JOINT_ERROR, lo_open=k == "eps_q", unit=unit)
+    if isinstance(bounds.get("a_peak"), (int, float)) and not isinstance(bounds.get("a_peak"), bool):
+        _in("[bounds] a_peak", bounds["a_peak"], 0.0, 1e6, unit=" m/s^2")
+    _in("[certify] tol", cert.get("tol"), MIN_TOL, 1.0, lo_open=False, unit=" m/s")
+    v_low = cert.get("v_low", _V_LOW)
+    _in("[certify] v_low", v_low, 0.0, MAX_SPEED, unit=" m/s")
+    _in("[certify] v_high", cert.get("v_high"), v_low, MAX_SPEED, unit=" m/s")
+    _in("[certify] monte_carlo_runs", cert.get("monte_carlo_runs"), 0, MAX_MONTE_CARLO, lo_open=False)
+    runs = cert.get("monte_carlo_runs", 50)
+    for name in sorted(set(values.get("robot", [a.robot]))):
+        entry = get_entry(name)
+        dynamic = bounds.get("method") == Method.DYNAMIC or Method.DYNAMIC in values.get("method", ())
+        kw = dict(bounds, dynamics=entry.require_dynamics() if dynamic else None)
+        try:
+            b = PlanningBounds(**kw).resolved(entry.robot)
+        except TypeError as exc:  # a value of the wrong kind deep inside numpy
+            raise InputError(f"{a.grid}: [bounds]: {exc}") from None
+        # the slowest plan of a case bounds its batches: a crossing at v_low with the lowest ramps
+        a_peak = min([b.a_peak, *values.get("a_max", ())])
+        T = ramp_length(v_low, a_peak)[0]
+        task = benchmark_task(entry)
+        length = float(np.linalg.norm(task.goal - task.start))
+        samples = (2 * b.t_rest + 2 * T + length / v_low) / b.t_s
+        _budget(f"a study case of {name} down to [certify] v_low = {v_low:g} m/s with monte_carlo_runs = {runs}",
+                samples, entry.robot.n, scenarios=max(runs, 1), tracked=True,
+                hint="raise [certify] v_low or lower monte_carlo_runs")
+    a.spec = spec
 
 
 def _task_segment(a, entry) -> tuple[np.ndarray, float]:

@@ -164,4 +164,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seed of the true geometry drawn in the calibration box (0: its centre)")
     w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
     w.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+    st = command("study", "design study: certify every point of a grid of bounds on Dask, one CSV row per case")
+    st.add_argument("grid", help="TOML file: robot = NAME (optional), [grid] {input: [values]}, optional [bounds] "
+                                 "and [certify] tables (docs/cli.md)")
+    st.add_argument("--robot", default=DEFAULT_ROBOT,
+                    help=f"robot of the cases: one of {', '.join(available_robots())} (the grid file's robot wins)")
+    st.add_argument("-o", "--output", required=True,
+                    help="CSV file the rows are appended to as cases finish; a rerun skips the cases already in it")
+    where = st.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", help="address of a running Dask scheduler, e.g. tcp://host:8786 "
+                                           "(default: a local cluster)")
+    where.add_argument("--workers", type=count,
+                       help="single-threaded worker processes of the local cluster (default: one per core)")
+    st.add_argument("--plot", help="write a PNG figure: v_min and the refutation bound against each swept input")
+    st.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
