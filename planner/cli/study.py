@@ -2,7 +2,7 @@
 
 The grid file (read with :mod:`tomllib`)::
 
-    robot = "dextar"            # optional: the robot of every case (wins over --robot)
+    robot = "NAME"              # optional: a registered robot for every case (wins over --robot)
     [grid]                      # every combination of these values is one case
     a_max = [70.0, 100.0]       # keys of planner.study.GRID_KEYS
     width_scale = [0.5, 1.0]
