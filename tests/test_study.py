@@ -99,3 +99,11 @@ def test_monte_carlo_in_batches_on_dask_equals_one_batch(client, kin, imodel, ta
                                      executor=client.get_executor(pure=False), batch_runs=5)
     assert one.summary() == split.summary()
     assert one.runs == 12 and one.containment_failures == () and one.wrong_verdicts == ()
+
+
+def test_the_crossing_point_moves_along_the_locus(tmp_path):
+    """``crossing_offset`` moves the task across its direction: it still crosses, at another point of the locus."""
+    table = design_sweep({"crossing_offset": [0.0, 0.02]}, out=tmp_path / "s.csv", certify=FAST,
+                         executor=ThreadPoolExecutor(2))
+    v = table.set_index("crossing_offset")["v_min_mps"]
+    assert table["error"].isna().all() and np.isfinite(v).all() and v[0.0] != v[0.02]
