@@ -32,7 +32,7 @@ from .simulate import random_geometry
 from .task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
 from .worker import SubprocessExecutor
 
-__all__ = ["CrossingCertificate", "certify_crossing", "refute_speed", "Refuter", "refutation_search",
+__all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refute_speed", "Refuter", "refutation_search",
            "REFUTE_CPU_TIME"]
 
 log = logging.getLogger(__name__)
@@ -141,9 +141,10 @@ class CrossingCertificate:
         }
 
 
-def _versions():
+def package_versions() -> dict:
+    """Versions of crosscert and of the packages its numbers depend on (None: not installed)."""
     out = {}
-    for pkg in ("crosscert", "numpy", "casadi", "scipy"):
+    for pkg in ("crosscert", "numpy", "casadi", "numba", "scipy"):
         try:
             out[pkg] = md.version(pkg)
         except md.PackageNotFoundError:
@@ -272,7 +273,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         bounds=b,
         a_max_used=a_used,
         monte_carlo=mc,
-        versions=_versions(),
+        versions=package_versions(),
         elapsed_s=time.perf_counter() - t0,
         refutation=tuple(ref or ()),
         execution=cls,

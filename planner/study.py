@@ -20,7 +20,6 @@ from __future__ import annotations
 import csv
 import dataclasses
 import hashlib
-import importlib.metadata as md
 import itertools
 import json
 import logging
@@ -37,7 +36,7 @@ from robots import validators as V
 from robots.errors import InputError, ModelError
 from robots.registry import DEFAULT_ROBOT, get_entry
 
-from .pipeline import certify_crossing
+from .pipeline import certify_crossing, package_versions
 from .task import Method, PlanningBounds, benchmark_task, parse_option
 
 __all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "design_sweep", "read_results", "scaled_box"]
@@ -127,16 +126,6 @@ def scaled_box(robot, scale_lengths: float = 1.0, scale_offsets: float = 1.0):
         return dataclasses.replace(robot, xi_lo=new_lo, xi_hi=new_hi, xi_nominal=tuple(float(v) for v in centre))
 
 
-def _versions() -> str:
-    out = {}
-    for pkg in ("crosscert", "numpy", "casadi", "numba"):
-        try:
-            out[pkg] = md.version(pkg)
-        except md.PackageNotFoundError:
-            out[pkg] = None
-    return json.dumps(out, sort_keys=True)
-
-
 def run_case(case: StudyCase, settings: dict) -> dict:
     """Certify one case; a result row (never raises: an error becomes the row's ``error``).
 
@@ -144,7 +133,8 @@ def run_case(case: StudyCase, settings: dict) -> dict:
     arguments) and ``certify`` (keyword arguments of ``certify_crossing``).
     """
     v = case.values
-    row = {"case_id": case.case_id, **{k: v.get(k, "") for k in GRID_KEYS}, "error": "", "versions": _versions()}
+    row = {"case_id": case.case_id, **{k: v.get(k, "") for k in GRID_KEYS}, "error": "",
+           "versions": json.dumps(package_versions(), sort_keys=True)}
     t0 = time.perf_counter()
     try:
         entry = get_entry(v.get("robot", settings.get("robot", DEFAULT_ROBOT)))
