@@ -14,10 +14,12 @@ Simulations and tasks are cached per process.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
 from planner.simulate import random_geometry, simulate_bounce, simulate_crossing
 from planner.sweep import cruise_for
@@ -215,3 +217,13 @@ def check_certified_speed(v, expected: CertificationExpectation, tol=None):
     tol = expected.v_min_tol if tol is None else tol
     assert abs(v - expected.v_min) <= tol, (f"v_min = {v} m/s, expected {expected.v_min} +- {tol} m/s "
                                             f"(measured in {expected.measured})")
+
+
+@njit(cache=False)
+def libm_trig(x, cosine):
+    """sin (or cos) of every entry of ``x`` as the compiled core computes a point value: numba's
+    ``math.sin``/``math.cos`` call libm, which may differ from numpy's by an ulp."""
+    out = np.empty_like(x)
+    for i in range(x.size):
+        out[i] = math.cos(x[i]) if cosine else math.sin(x[i])
+    return out

@@ -31,8 +31,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from numba import njit
 
+from problems import libm_trig
 from verifier import interval as I
 from verifier.compiled import vectorized as V
 
@@ -423,20 +423,11 @@ def _trig_arguments() -> np.ndarray:
     ])
 
 
-@njit(cache=False)
-def _libm_trig(x, cosine):
-    # the point values of the compiled core: math.sin/cos in numba call libm
-    out = np.empty_like(x)
-    for i in range(x.size):
-        out[i] = math.cos(x[i]) if cosine else math.sin(x[i])
-    return out
-
-
 def _point_trig(core):
     """(sin, cos) on float arrays as the core evaluates them at a point."""
     if core is I:
         return np.sin, np.cos
-    return (lambda x: _libm_trig(x, False)), (lambda x: _libm_trig(x, True))
+    return (lambda x: libm_trig(x, False)), (lambda x: libm_trig(x, True))
 
 
 def test_numpy_trig_error_within_margin(core):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -98,7 +99,7 @@ class LatencyStats:
         self.count += 1
         self.total_ns += ns
         self.max_ns = max(self.max_ns, ns)
-        self.bins[min(_LATENCY_BINS, int(np.log(max(ns, 1)) / _LOG_BIN_RATIO))] += 1
+        self.bins[min(_LATENCY_BINS, int(math.log(max(ns, 1)) / _LOG_BIN_RATIO))] += 1  # math: a scalar, once per sample
 
     def mean_us(self) -> float | None:
         """Mean latency, µs (None before the first sample)."""
