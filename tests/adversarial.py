@@ -258,15 +258,15 @@ def far_scenarios(count, seed, t_end=0.2):
     return out
 
 
-def near_scenarios(count, seed, t_end=0.16, a_ref=55.0):
+def near_scenarios(count, seed, t_end=0.16, a_ref=55.0, v_cross=(1.3, 1.6), v_bounce=(1.0, 1.5)):
     """Bang-bang runs through (even ``i``) or up to and back from (odd ``i``) the Type 2 locus.
 
     The ``Y`` coordinate follows a reference down the ``Y`` axis through the
     nominal singular point of the benchmark (``benchmark_crossing().point``):
 
-    * crossing: ramp to ``-v`` (1.3-1.6 m/s) at ``a_ref``, cruise from 15 mm
-      before to 15 mm past the singular point, ramp back to rest;
-    * bounce: ramp to ``-v`` (1.0-1.5 m/s), cruise 4 mm, ramp down to rest
+    * crossing: ramp to ``-v`` (``v_cross``, 1.3-1.6 m/s) at ``a_ref``, cruise
+      from 15 mm before to 15 mm past the singular point, ramp back to rest;
+    * bounce: ramp to ``-v`` (``v_bounce``, 1.0-1.5 m/s), cruise 4 mm, ramp down to rest
       at ``y_s + delta`` (``delta`` in [-2, 6] mm: it may just pass the locus)
       and retrace the same way up.
 
@@ -280,14 +280,14 @@ def near_scenarios(count, seed, t_end=0.16, a_ref=55.0):
     for i, xi in enumerate(geometries(rng, count)):
         x_off = float(rng.uniform(-0.004, 0.004))
         if i % 2 == 0:
-            v = float(rng.uniform(1.3, 1.6))
+            v = float(rng.uniform(*v_cross))
             T = v / a_ref
             cruise = 0.030 / v
             y0 = y_s + 0.5 * a_ref * T**2 + 0.015
             phases = ((T, -a_ref), (cruise, 0.0), (T, a_ref))
             name = f"cross{i}"
         else:
-            v = float(rng.uniform(1.0, 1.5))
+            v = float(rng.uniform(*v_bounce))
             T = v / a_ref
             cruise = 0.004 / v
             y0 = y_s + float(rng.uniform(-0.002, 0.006)) + a_ref * T**2 + 0.004

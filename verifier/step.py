@@ -38,7 +38,7 @@ from .contractors import pose_solutions as _np_pose_solutions
 from robots.errors import InputError
 from .linalg import linear_enclosure
 
-__all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "step",
+__all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
            "advance", "Tracker", "pose_solutions"]
 
 
@@ -141,7 +141,7 @@ def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, par
         raise InputError(f"xi_splits needs {model.m} counts (one per geometric parameter), got {len(s.xi_splits)}")
     fpar = np.array([ts, s.rel_tol, s.split_tol, s.split_max_width], np.float64)
     ipar = np.array([_VMODEL_CODE[s.velocity_model.value], int(s.max_iter), int(s.split_boxes), int(bool(s.keep_xi)),
-                     P, int(s.qdd_bound is not None), 0], np.int64)
+                     P, int(s.qdd_bound is not None), 0, 0], np.int64)
     return StepConfig(model=model, settings=s, backend=backend, fpar=fpar, ipar=ipar, vec=vec,
                       base=np.array(s.baselines, np.int64), diff_err=np.ascontiguousarray(diff), h=h,
                       depth=max(s.baselines) if sound else 1, parallel=bool(parallel),
@@ -191,7 +191,7 @@ class TrackerState:
     qdd_hull: np.ndarray
 
 
-def _partition(XI, splits):
+def partition_xi(XI, splits):
     """Split calibration boxes ``(B, m)`` into ``P = prod(splits)`` sub-boxes ``(B, P, m)``.
 
     Adjacent sub-boxes share the same float split point, so their union is
@@ -228,7 +228,7 @@ def init_state(config: StepConfig, x0, *, batch: int = 1, xi_box=None) -> Tracke
     model, s = config.model, config.settings
     n, m, B, D = model.n, model.m, int(batch), config.depth
     XI = model.xi_box() if xi_box is None else xi_box
-    XI = _partition((np.broadcast_to(XI[0], (B, m)), np.broadcast_to(XI[1], (B, m))), s.xi_splits)
+    XI = partition_xi((np.broadcast_to(XI[0], (B, m)), np.broadcast_to(XI[1], (B, m))), s.xi_splits)
     P = XI[0].shape[1]
     R = B * P
     lo = np.repeat(np.broadcast_to(np.asarray(x0[0], dtype=np.float64), (B, n)), P, axis=0)
@@ -292,7 +292,7 @@ def _rows(a):
     return a[:, 0], a[:, 1]
 
 
-def _numpy_step(config: StepConfig, st: TrackerState, qk):
+def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
     model, s = config.model, config.settings
     B, P, n, k = st.batch, st.hypotheses, model.n, st.k
     R, D = B * P, config.depth
@@ -326,6 +326,11 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk):
         Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), vec[3], vec[4])
         XD = I.intersect(*I.add(*XD, vec[5], vec[6]), -vec[2], vec[2])
         X = Xn
+    if prior is not None:
+        # boxes known from elsewhere (the other passes of verifier.window) to hold the truth at this sample
+        px, pxd = (np.repeat(np.asarray(a, dtype=np.float64), P, axis=0) for a in prior)
+        X = I.intersect(*X, px[:, 0], px[:, 1])
+        XD = I.intersect(*XD, pxd[:, 0], pxd[:, 1])
     # the displacement baselines depend only on past boxes and readings
     pasts = []
     if vmodel == 0:
@@ -459,7 +464,7 @@ def _empty_record(B, n):
     return np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64), np.zeros((B, 0, n))
 
 
-def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
+def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, prior=None):
     """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call,
     threaded as ``config`` says."""
     from .compiled import step as kernels
@@ -473,6 +478,11 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
         ipar = ipar.copy()
         ipar[6] = 1
         rec = record
+    if prior is None:
+        prior = (np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)))
+    else:
+        ipar = ipar.copy()
+        ipar[7] = 1
     import numba
 
     threads = numba.config.NUMBA_NUM_THREADS
@@ -485,7 +495,7 @@ def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None):
     run(prog.code, prog.value, prog.outs, prog.meta, prog.n_nodes, st.k, q, st.x, st.xd, st.xi, st.q,
         st.past_x, st.past_q, st.past_r, st.row_bad, st.init_mode, st.mode, st.streak, st.bad_at,
         st.max_width_pose, st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull,
-        config.fpar, ipar, config.vec, config.base, config.diff_err, config.h, *rec)
+        config.fpar, ipar, config.vec, config.base, config.diff_err, config.h, *rec, *prior)
     st.k += q.shape[1]
 
 
@@ -539,13 +549,17 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
         _compiled_steps(config, state, _kernel_array(q[:, None, :]))
 
 
-def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
+def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
     """Advance ``state`` over a block of readings ``q`` ``(B, Kc, n)``.
 
     The compiled backend runs the whole block in one kernel call, scenarios in
     parallel when there are several; ``record`` (arrays ``x (B, Kc, 2, n)``,
     ``xd (B, Kc, 2, n)``, ``mode (B, Kc)``, ``qdd (B, Kc, n)``), when given,
-    receives every sample's boxes.
+    receives every sample's boxes.  ``prior`` (arrays ``x (B, Kc, 2, n)``,
+    ``xd (B, Kc, 2, n)``), when given, are boxes known to hold the true pose
+    (m) and velocity (m/s) at each sample: they are intersected with the
+    predicted boxes before the contraction (the passes of
+    :mod:`verifier.window`; an infinite box leaves a sample unconstrained).
     """
     q = np.asarray(q, dtype=np.float64)
     B, Kc = state.batch, q.shape[1]
@@ -553,12 +567,16 @@ def advance(config: StepConfig, state: TrackerState, q, record=None) -> None:
         bad = np.nonzero(~np.all(np.isfinite(q.reshape(B, Kc, -1)), axis=(0, 2)))[0] if q.ndim == 3 else []
         k = state.k + (int(bad[0]) if len(bad) else 0)
         raise InputError(f"sample {k}: expected {B}x{config.model.n} finite joint values, got shape {q.shape[::2]}")
+    if prior is not None:
+        prior = tuple(_kernel_array(a) for a in prior)
+        if any(a.shape != (B, Kc, 2, config.model.n) for a in prior):
+            raise InputError(f"prior boxes must have shape ({B}, {Kc}, 2, {config.model.n})")
     if config.backend is Backend.COMPILED:
-        _compiled_steps(config, state, _kernel_array(q), record)
+        _compiled_steps(config, state, _kernel_array(q), record, prior)
         return
     for kk in range(Kc):
         with I.quiet_fp():
-            _numpy_step(config, state, q[:, kk])
+            _numpy_step(config, state, q[:, kk], None if prior is None else (prior[0][:, kk], prior[1][:, kk]))
         if record is not None:
             record[0][:, kk] = state.x_hull
             record[1][:, kk] = state.xd_hull

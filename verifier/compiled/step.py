@@ -35,7 +35,7 @@ from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 # indices into the constant arrays built by verifier.tracker._Constants
 F_TS, F_REL_TOL, F_SPLIT_TOL, F_SPLIT_MAX_W = range(4)
-I_VMODEL, I_MAX_ITER, I_SPLIT_BOXES, I_KEEP_XI, I_P, I_HAS_QDD, I_RECORD = range(7)
+I_VMODEL, I_MAX_ITER, I_SPLIT_BOXES, I_KEEP_XI, I_P, I_HAS_QDD, I_RECORD, I_PRIOR = range(8)
 V_EPS, V_AMAX, V_VMAX, V_H2A_LO, V_H2A_HI, V_TSA_LO, V_TSA_HI, V_QUANT_LO, V_QUANT_HI, V_QDD = range(10)
 SOUND, JOINT_FD, PAPER = range(3)
 
@@ -124,9 +124,11 @@ def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl,
 
 @jit
 def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad, n_past,
-              fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws):
+              fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws, pri_x, pri_xd):
     """Advance row ``r`` by the reading ``qk`` ``(n,)``; returns its mode.
-    ``QDD`` ``(2, n)`` receives the joint-acceleration bound used."""
+    ``QDD`` ``(2, n)`` receives the joint-acceleration bound used; when
+    ``ipar[I_PRIOR]``, the boxes ``pri_x``, ``pri_xd`` ``(2, n)`` known to hold
+    the truth at this sample are intersected with the prediction."""
     n = qk.shape[0]
     D = past_x.shape[1]
     ts = fpar[F_TS]
@@ -171,6 +173,10 @@ def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, p
             Xr[0, i], Xr[1, i] = ops.add(xl, xh, vec[V_H2A_LO, i], vec[V_H2A_HI, i])
             vl, vh = ops.add(XDr[0, i], XDr[1, i], vec[V_TSA_LO, i], vec[V_TSA_HI, i])
             XDr[0, i], XDr[1, i] = ops.intersect(vl, vh, -vec[V_VMAX, i], vec[V_VMAX, i])
+    if ipar[I_PRIOR]:
+        for i in range(n):
+            Xr[0, i], Xr[1, i] = ops.intersect(Xr[0, i], Xr[1, i], pri_x[0, i], pri_x[1, i])
+            XDr[0, i], XDr[1, i] = ops.intersect(XDr[0, i], XDr[1, i], pri_xd[0, i], pri_xd[1, i])
     for i in range(n):
         Qr[0, i] = Qn[0, i]
         Qr[1, i] = Qn[1, i]
@@ -295,11 +301,12 @@ def _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, s
 
 @jit
 def _one_row(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad, fpar, ipar, vec,
-             base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p):
+             base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p, pri_x, pri_xd):
     # one hypothesis of one sample; its mode and |qdd| bound land in modes[p], row_qdd[p]
     n = qk.shape[0]
     modes[p] = _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-                         min(k, past_x.shape[1]), fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws)
+                         min(k, past_x.shape[1]), fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws,
+                         pri_x, pri_xd)
     for i in range(n):
         row_qdd[p, i] = max(abs(QDD[0, i]), abs(QDD[1, i]))
 
@@ -307,9 +314,10 @@ def _one_row(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, pa
 @jit
 def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
                    init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-                   fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd):
+                   fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd):
     """Advance scenario ``b`` over the readings ``q[b]`` ``(Kc, n)``, samples
-    ``k0 .. k0 + Kc - 1``, its hypotheses one after the other."""
+    ``k0 .. k0 + Kc - 1``, its hypotheses one after the other (``prior_x``,
+    ``prior_xd`` ``(B, Kc, 2, n)``: see :func:`_row_step`)."""
     P = ipar[I_P]
     n = q.shape[2]
     nl, nh, il, ih, ws = scratch(n_nodes, n, XI.shape[2])
@@ -317,20 +325,23 @@ def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, pas
     modes = np.empty(P, np.int64)
     row_qdd = np.empty((P, n))
     record = ipar[I_RECORD] != 0
+    no_prior = np.empty((2, n))
     for kk in range(q.shape[1]):
         k = k0 + kk
+        px = prior_x[b, kk] if ipar[I_PRIOR] else no_prior
+        pxd = prior_xd[b, kk] if ipar[I_PRIOR] else no_prior
         for p in range(P):
             r = b * P + p
             if row_bad[r] < 0:
                 _one_row(code, value, outs, meta, r, k, q[b, kk], X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-                         fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p)
+                         fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p, px, pxd)
         _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, streak, bad_at, mwx, mwv,
                  x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd)
 
 
 def run_hypotheses_parallel(code, value, outs, meta, n_nodes, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
                             init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-                            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd):
+                            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd):
     """As :func:`run_serial`, the geometry hypotheses of each sample spread
     over numba's threads (one scenario online: its latency, not throughput)."""
     B = q.shape[0]
@@ -346,15 +357,18 @@ def run_hypotheses_parallel(code, value, outs, meta, n_nodes, k0, q, X, XD, XI, 
     modes = np.empty((B, P), np.int64)
     row_qdd = np.empty((B, P, n))
     record = ipar[I_RECORD] != 0
+    no_prior = np.empty((2, n))
     for kk in range(q.shape[1]):
         k = k0 + kk
         for b in range(B):
+            px = prior_x[b, kk] if ipar[I_PRIOR] else no_prior
+            pxd = prior_xd[b, kk] if ipar[I_PRIOR] else no_prior
             for p in prange(P):
                 r = b * P + p
                 if row_bad[r] < 0:
                     _one_row(code, value, outs, meta, r, k, q[b, kk], X, XD, XI, Q, past_x, past_q, past_r,
                              row_bad, fpar, ipar, vec, base, diff_err, h, QDD[p], NL[p], NH[p], IL[p], IH[p], WS[p],
-                             modes[b], row_qdd[b], p)
+                             modes[b], row_qdd[b], p, px, pxd)
             _combine(b, k, kk, P, X, XD, row_bad, modes[b], row_qdd[b], init_mode, cur_mode, streak, bad_at, mwx,
                      mwv, x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd)
 
@@ -365,11 +379,11 @@ run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True)(run_hypoth
 def _make_driver(parallel: bool):
     def run(code, value, outs, meta, n_nodes, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
             init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd):
+            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd):
         for b in prange(q.shape[0]):
             scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, past_x, past_q, past_r,
                            row_bad, init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-                           fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd)
+                           fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd)
     run.__name__ = run.__qualname__ = "run_parallel" if parallel else "run_serial"
     return njit(cache=True, nogil=True, parallel=parallel)(run)
 

@@ -1,0 +1,184 @@
+"""Window reasoning (verifier.window): sound on adversarial runs, stronger than the forward tracker.
+
+The tubes of the surviving final-mode hypotheses must hold the true pose and
+velocity at every sample, the true hypothesis must never be refuted, a bounce
+is never ``mode-changed`` and a crossing never ``mode-unchanged``.  The runs
+are those of test_containment (bang-bang at 0.999 a_max, reading errors at the
+edges of +-eps_q, geometries at corners of [xi]) plus crossings slow enough
+that the forward tracker cannot certify them.
+
+Removal checks (each made a test here fail, 2026-12-01): the velocity sign
+flip of the time reversal (``_reverse``), undecided boxes kept in the final
+box of a hypothesis (``m in (mode, 0)``), the velocity prior of the passes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from adversarial import near_scenarios
+from problems import check_contains, interval_model
+from planner.certify import execution_class, tracker_settings
+from planner.plan import derived_a_max, plan_crossing
+from planner.task import PlanningBounds
+from robots import DEXTAR, get_entry
+from robots.errors import InputError
+from verifier.tracker import Verdict, initial_box_from_mode, track
+from verifier.window import HypothesisStatus, Refutation, track_window
+
+N_RUNS = 16  # per family, half crossings and half bounces
+
+
+def _window(sc, settings, backend="compiled", **kw):
+    x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
+    return track_window(interval_model(), sc.q_meas, settings, x0=x0, backend=backend, **kw)
+
+
+def _check_sound(sc, res):
+    """No wrong verdict, the true hypothesis alive, the truth in the tubes."""
+    crossed = sc.mode[0] != sc.mode[-1]
+    assert res.verdict is not Verdict.INCONSISTENT, sc.name
+    if crossed:
+        assert res.verdict is not Verdict.MODE_UNCHANGED, (sc.name, res.summary())
+    else:
+        assert res.verdict is not Verdict.MODE_CHANGED, (sc.name, res.summary())
+    for h in res.hypotheses:
+        if h.final_mode == sc.mode[-1]:
+            assert h.status is HypothesisStatus.CONSISTENT, (sc.name, res.summary())
+    check_contains(res.x_lo, res.x_hi, sc.x, f"{sc.name}: pose tube")
+    check_contains(res.xd_lo, res.xd_hi, sc.xd, f"{sc.name}: velocity tube")
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """Fast (1.3-1.6 m/s) and slow (0.9-1.25 m/s) crossings, and bounces, adversarial in every bound."""
+    return near_scenarios(N_RUNS, 2) + near_scenarios(N_RUNS, 7, v_cross=(0.9, 1.25), v_bounce=(0.9, 1.3))
+
+
+@pytest.fixture(scope="module")
+def results(runs, settings):
+    return [(sc, _window(sc, settings)) for sc in runs]
+
+
+def test_window_is_sound_on_adversarial_runs(results):
+    for sc, res in results:
+        _check_sound(sc, res)
+
+
+def _cut(sc, k):
+    """The run ``sc`` ending at sample ``k``."""
+    return replace(sc, name=f"{sc.name}[:{k + 1}]", t=sc.t[:k + 1], x=sc.x[:k + 1], xd=sc.xd[:k + 1],
+                   q_true=sc.q_true[:k + 1], q_meas=sc.q_meas[:k + 1], mode=sc.mode[:k + 1])
+
+
+def test_window_is_sound_on_runs_ending_at_the_locus(runs, settings):
+    """Recordings that end just past a mode change, where the last reading's poses have no certified mode:
+    the hypotheses must keep those undecided poses."""
+    checked = 0
+    for sc in runs[N_RUNS:N_RUNS + 8]:
+        for k in np.nonzero(np.diff(sc.mode))[0][:1]:
+            for extra in (0, 1, 2):
+                cut = _cut(sc, k + extra)
+                _check_sound(cut, _window(cut, settings, max_geometries=4))
+                checked += 1
+    assert checked >= 6
+
+
+@pytest.mark.parametrize("before", [0, 1, 3, 6])
+def test_recordings_ending_at_the_locus(settings, before):
+    """A bounce cut where it touches the true locus, or a few samples before: the last reading's poses near
+    the truth have no certified mode, and a hypothesis must keep them.  On the locus (mode 0) neither
+    hypothesis is true, so the run is neither inconsistent nor certified; before it, the true mode survives."""
+    from problems import simulate
+
+    run = simulate(1.0, True, 0)
+    k = run.k_sing - before
+    assert run.mode_true[run.k_sing] == 0
+    res = track_window(interval_model(), run.q_meas[:k + 1], settings, initial_mode=int(run.mode_true[0]),
+                       max_geometries=4)
+    assert res.verdict in (Verdict.UNKNOWN, Verdict.MODE_UNCHANGED), res.summary()
+    if before:
+        true = {h.final_mode: h for h in res.hypotheses}[int(run.mode_true[k])]
+        assert true.status is HypothesisStatus.CONSISTENT, res.summary()
+    else:
+        assert res.verdict is Verdict.UNKNOWN, res.summary()
+    check_contains(res.x_lo, res.x_hi, run.x_true[:k + 1], "pose tube")
+
+
+def test_final_boxes_keep_poses_of_undecided_mode(settings):
+    """On the locus the true pose is the limit of both modes: the final box of either hypothesis holds it."""
+    from problems import simulate
+    from verifier.window import _final_box
+
+    run = simulate(1.0, True, 0)
+    k = run.k_sing
+    s = settings.validated(2)
+    for mode in (1, -1):
+        box = _final_box(interval_model(), run.q_meas[k], mode, s, interval_model().xi_box(), "compiled")
+        check_contains(box[0][None], box[1][None], run.x_true[k][None], f"final box of mode {mode:+d}")
+
+
+def test_window_certifies_what_the_forward_tracker_cannot(results, settings):
+    """Not vacuous: some crossings are certified only by the window, and every forward certificate is kept."""
+    gained = 0
+    for sc, res in results:
+        if res.forward_verdict is not Verdict.UNKNOWN:
+            assert res.verdict is res.forward_verdict, (sc.name, res.summary())
+        elif res.verdict is not Verdict.UNKNOWN:
+            gained += 1
+    assert gained >= 3, gained
+    changed = [sc.name for sc, res in results if res.verdict is Verdict.MODE_CHANGED]
+    assert len(changed) >= N_RUNS // 2, changed
+
+
+def test_forward_pass_is_the_tracker(results, settings):
+    """The window's first pass is the tracker: same verdict as ``track``."""
+    for sc, res in results[:4]:
+        fwd = track(interval_model(), sc.q_meas, settings, initial_mode=int(sc.mode[0]))
+        assert res.forward_verdict is fwd.verdict, sc.name
+
+
+@pytest.mark.parametrize("speed, certified", [(1.0, True), (0.8, False)])
+def test_planning_run_at_one_metre_per_second(speed, certified):
+    """The benchmark plan at 1.0 m/s: the forward tracker says unknown, the window certifies the change
+    (below the refutation floor, 0.84 m/s, it must not)."""
+    entry = get_entry("dextar")
+    from planner.task import benchmark_task
+    from robots import KinematicModel
+
+    kin = KinematicModel(DEXTAR)
+    b = PlanningBounds().resolved(DEXTAR)
+    plan = plan_crossing(kin, benchmark_task(entry), speed, b)
+    cls = execution_class(kin, plan, b)
+    s = tracker_settings(DEXTAR, b, derived_a_max(plan, b), cls)
+    res = track_window(interval_model(), plan.q, s, initial_mode=1, xi_box=cls.xi_box, max_geometries=4)
+    assert res.forward_verdict is Verdict.UNKNOWN
+    assert res.verdict is (Verdict.MODE_CHANGED if certified else Verdict.UNKNOWN), res.summary()
+    if certified:
+        wrong = {h.final_mode: h for h in res.hypotheses}[1]
+        assert wrong.refutation is Refutation.EMPTY_TUBE
+
+
+def test_backends_agree(runs, settings):
+    """The numpy reference and the compiled kernels give the same window verdict and the same tubes."""
+    sc = runs[N_RUNS + 2]  # a slow crossing
+    a = _window(sc, settings, "compiled", max_passes=2, max_geometries=4)
+    b = _window(sc, settings, "numpy", max_passes=2, max_geometries=4)
+    assert a.verdict is b.verdict and a.hypotheses == b.hypotheses
+    for name in ("x_lo", "x_hi", "xd_lo", "xd_hi"):
+        np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-12, err_msg=name)
+
+
+def test_bad_arguments_are_refused(runs, settings):
+    sc = runs[0]
+    with pytest.raises(InputError, match="exactly one"):
+        track_window(interval_model(), sc.q_meas, settings)
+    with pytest.raises(InputError, match="max_passes"):
+        _window(sc, settings, max_passes=-1)
+    with pytest.raises(InputError, match="max_geometries"):
+        _window(sc, settings, max_geometries=0)
+    with pytest.raises(InputError, match="shape"):
+        track_window(interval_model(), sc.q_meas[:, :1], settings, initial_mode=1)

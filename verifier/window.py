@@ -1,0 +1,421 @@
+"""Window reasoning: the whole recording as one constraint network, contracted
+forward and backward in time, split on the final assembly mode.
+
+The tracker (:mod:`verifier.step`) is a forward filter: the boxes of sample
+``k`` use the readings up to ``k`` only.  A verdict given at the end of a
+recording may use every reading.  :func:`track_window` does so:
+
+1. **Tubes per geometry hypothesis.**  The calibration box is partitioned as
+   the tracker does (``settings.xi_splits``); each sub-box ``p`` gets its own
+   pose and velocity tubes ``[x]_k^p``, ``[xd]_k^p``, ``k = 0..K-1``.  The true
+   geometry is one constant vector, so it lies in one sub-box for the whole
+   recording: a sub-box refuted in any pass is refuted for good.
+2. **Hypotheses on the final mode.**  For ``m`` in {+1, -1}: "the true pose at
+   the last sample is in assembly mode ``m``".  Under it, the last pose lies
+   in the hull of the forward-kinematics solutions of the last reading whose
+   mode is ``m`` or undecided.
+3. **Passes.**  A forward pass is the tracker with every sample's boxes
+   intersected with the tubes (``verifier.step.advance(prior=...)``); a
+   backward pass is the tracker on the time-reversed recording (readings
+   ``q_{K-1-k}``, velocity ``-xd``, the same acceleration and reading-error
+   bounds, which are symmetric in time), started from the final box of the
+   hypothesis and intersected with the tubes.  Passes alternate, backward
+   first, until the tubes stop shrinking or a hypothesis is refuted.
+4. **Refutation.**  A sub-box whose tubes become empty is refuted; so is one
+   whose boxes certify, at the last sample, a mode other than ``m`` (or, at
+   the first, other than the initial one).  A hypothesis with every sub-box
+   refuted is refuted.  The verdict is certified when exactly one hypothesis
+   survives; both refuted means an assumption was violated (``inconsistent``).
+
+Every pass only removes what cannot hold under the tracker's assumptions and
+the hypothesis, so a refuted hypothesis is false (docs/soundness.md, "Window
+reasoning").  Shapes: ``K`` samples, pose dimension ``n``; SI units.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import numpy as np
+
+from robots.errors import InputError
+
+from . import interval as I
+from .settings import TrackerSettings, Verdict
+from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
+from .tracker import initial_box_from_mode, verdict_of
+
+__all__ = ["HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window", "WINDOW_MAX_PASSES",
+           "WINDOW_MAX_GEOMETRIES"]
+
+#: Default pass budget of a round (backward and forward passes alternate).
+WINDOW_MAX_PASSES = 6
+#: Default budget of geometry sub-boxes per hypothesis (halving surviving ones between rounds).
+WINDOW_MAX_GEOMETRIES = 64
+#: Passes stop once the summed tube widths shrink by less than this fraction in a pass.
+WINDOW_REL_TOL = 0.02
+#: Velocity widths above this (m/s) count as this much when measuring progress (unbounded tubes).
+_WIDTH_CAP = 1e3
+
+
+class HypothesisStatus(str, Enum):
+    """What the window passes concluded about one final-mode hypothesis."""
+
+    REFUTED = "refuted"  #: no admissible motion ends in this mode
+    CONSISTENT = "consistent"  #: not refuted within the pass budget
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class Refutation(str, Enum):
+    """Why a hypothesis was refuted."""
+
+    NONE = "none"  #: not refuted
+    NO_SOLUTION = "no-solution"  #: the last reading has no pose of this mode for any surviving geometry
+    EMPTY_TUBE = "empty-tube"  #: every geometry's tubes became empty
+    OTHER_MODE = "other-mode"  #: every surviving geometry certifies another mode at an end of the recording
+    FORWARD = "forward"  #: the forward tracker alone certified the other final mode
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class HypothesisResult:
+    """One final-mode hypothesis after the window passes.
+
+    Attributes
+    ----------
+    final_mode : int
+        +1 or -1.
+    status : HypothesisStatus
+    refutation : Refutation
+    passes : int
+        Passes run under this hypothesis (0: decided by the forward pass).
+    geometries_alive : int
+        Geometry sub-boxes still consistent at the end.
+    """
+
+    final_mode: int
+    status: HypothesisStatus
+    refutation: Refutation
+    passes: int
+    geometries_alive: int
+
+
+@dataclass(frozen=True, eq=False)
+class WindowResult:
+    """Verdict of a recording from the window passes.
+
+    Attributes
+    ----------
+    verdict : Verdict
+    initial_mode : int
+        Certified mode at the first sample (0: not certified; then ``unknown``).
+    forward_verdict : Verdict
+        What the forward tracker alone concluded (the first pass).
+    hypotheses : tuple of HypothesisResult
+        One per final mode tested.
+    x_lo, x_hi, xd_lo, xd_hi : ndarray, shape (K, n)
+        Hull, over the surviving hypotheses and geometries, of the contracted
+        pose (m) and velocity (m/s) tubes (NaN where none survives).
+    max_width_pose, max_width_velocity : float
+        Largest side of those tubes over the recording, m and m/s.
+    steps : int
+    elapsed_s : float
+    """
+
+    verdict: Verdict
+    initial_mode: int
+    forward_verdict: Verdict
+    hypotheses: tuple
+    x_lo: np.ndarray = field(repr=False)
+    x_hi: np.ndarray = field(repr=False)
+    xd_lo: np.ndarray = field(repr=False)
+    xd_hi: np.ndarray = field(repr=False)
+    max_width_pose: float
+    max_width_velocity: float
+    steps: int
+    elapsed_s: float
+
+    def summary(self) -> dict:
+        """JSON-ready summary (SI units)."""
+        return {
+            "verdict": self.verdict.value,
+            "initial_mode": int(self.initial_mode),
+            "forward_verdict": self.forward_verdict.value,
+            "hypotheses": [
+                {"final_mode": h.final_mode, "status": h.status.value, "refutation": h.refutation.value,
+                 "passes": h.passes, "geometries_alive": h.geometries_alive}
+                for h in self.hypotheses
+            ],
+            "max_width_pose_m": float(self.max_width_pose),
+            "max_width_velocity_mps": float(self.max_width_velocity),
+            "steps": int(self.steps),
+            "elapsed_s": float(self.elapsed_s),
+        }
+
+
+def _reverse(x, xd):
+    """Tubes ``(R, K, 2, n)`` of a motion, as tubes of the time-reversed motion (velocity negated)."""
+    xr = x[:, ::-1]
+    xdr = -xd[:, ::-1, ::-1]  # [-hi, -lo]: negation is exact
+    return np.ascontiguousarray(xr), np.ascontiguousarray(xdr)
+
+
+def _run(config, q, x0, xi_rows, prior):
+    """One pass over readings ``q`` ``(K, n)`` for rows ``R``: tubes ``(R, K, 2, n)``, modes ``(R, K)``, death ``(R,)``."""
+    lo, hi = xi_rows
+    R, (K, n) = lo.shape[0], q.shape
+    st = init_state(config, x0, batch=R, xi_box=(lo, hi))
+    rec = (np.empty((R, K, 2, n)), np.empty((R, K, 2, n)), np.empty((R, K), np.int64), np.empty((R, K, n)))
+    advance(config, st, np.broadcast_to(q, (R, K, n)), rec, prior)
+    return rec[0], rec[1], rec[2], st.bad_at.copy()
+
+
+def _width(x, xd):
+    w = np.minimum(x[..., 1, :] - x[..., 0, :], _WIDTH_CAP).sum() + np.minimum(xd[..., 1, :] - xd[..., 0, :],
+                                                                                 _WIDTH_CAP).sum()
+    return float(w)
+
+
+def _final_box(model, q_last, mode, s, xi_row, backend):
+    """Hull ``(2, n)`` of the pose solutions of the last reading in mode ``mode`` or undecided,
+    ``None`` when there is none (the geometry cannot end in that mode), the search box when they
+    could not be isolated (no restriction)."""
+    eps = s.eps_q
+    Q = I.sub(q_last, q_last, eps, eps)[0], I.add(q_last, q_last, eps, eps)[1]
+    lo, hi = model.robot.x_bounds
+    search = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+    sols = pose_solutions(model, Q, xi_row, search, tol=1e-5, backend=backend)
+    if sols is None:
+        return np.stack(search)
+    mine = [b for b, m in sols if m in (mode, 0)]
+    if not mine:
+        return None
+    return np.stack([np.min([b[0] for b in mine], axis=0), np.max([b[1] for b in mine], axis=0)])
+
+
+def _combined_mode(modes, alive):
+    """Mode common to every live row, 0 if they differ or none lives."""
+    live = modes[alive]
+    if live.size == 0 or not np.all(live == live[0]):
+        return 0
+    return int(live[0])
+
+
+def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None,
+                 max_passes: int = WINDOW_MAX_PASSES, rel_tol: float = WINDOW_REL_TOL,
+                 max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
+                 parallel: bool = True) -> WindowResult:
+    """Verdict of a whole recording by forward-backward window passes (module docstring).
+
+    Parameters
+    ----------
+    model : verifier.model.IntervalModel
+    q_meas : array_like, shape (K, n)
+        Encoder readings, rad, every ``settings.t_s`` seconds.
+    settings : TrackerSettings
+        The tracker's assumptions and settings (``xi_splits`` gives the geometry sub-boxes).
+    x0 : (lo, hi), optional
+        Initial pose box ``(n,)``, m.
+    initial_mode : {+1, -1}, optional
+        Known mode at the first sample (the initial box is then its interval
+        forward kinematics).  Give exactly one of ``x0`` and ``initial_mode``.
+    xi_box : (lo, hi), optional
+        Calibration box ``(m,)``, the robot's by default.
+    max_passes : int
+        Pass budget per hypothesis after the first forward pass.
+    rel_tol : float
+        End a round of passes once a pass shrinks the tubes by less than this fraction.
+    max_geometries : int
+        Budget of geometry sub-boxes per hypothesis: after a round that
+        neither refutes nor confirms, the surviving sub-boxes are halved
+        while their number stays within it (``settings.xi_splits``' count
+        or less: no halving).
+    backend : {"compiled", "numpy"}
+    parallel : bool
+        Compiled backend: geometry sub-boxes in parallel.
+
+    Returns
+    -------
+    WindowResult
+    """
+    t0 = time.perf_counter()
+    s = settings.validated(model.n)
+    q = np.ascontiguousarray(np.asarray(q_meas, dtype=np.float64))
+    n = model.n
+    if q.ndim != 2 or q.shape[1] != n or q.shape[0] < 1:
+        raise InputError(f"q_meas must have shape (K, {n}) with K >= 1, got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise InputError("q_meas must be finite")
+    if isinstance(max_passes, bool) or int(max_passes) != max_passes or max_passes < 0:
+        raise InputError(f"max_passes must be a non-negative integer, got {max_passes!r}")
+    if isinstance(max_geometries, bool) or int(max_geometries) != max_geometries or max_geometries < 1:
+        raise InputError(f"max_geometries must be a positive integer, got {max_geometries!r}")
+    if not (0.0 <= rel_tol < 1.0):
+        raise InputError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
+    if (x0 is None) == (initial_mode is None):
+        raise InputError("give exactly one of x0 and initial_mode")
+    K = q.shape[0]
+    XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
+    sub_lo, sub_hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
+    xi_rows = (np.ascontiguousarray(sub_lo[0]), np.ascontiguousarray(sub_hi[0]))
+    P = xi_rows[0].shape[0]
+    if x0 is None:
+        x0 = initial_box_from_mode(model, q[0], initial_mode, s, xi_box=XI, backend=str(Backend(backend)))
+    x0 = tuple(np.broadcast_to(np.asarray(v, dtype=np.float64), (P, n)).copy() for v in x0)
+    flat = replace(s, xi_splits=None)
+    cfg_f = configure(model, flat, backend, parallel=parallel)
+    cfg_b = configure(model, replace(flat, xd0=None), backend, parallel=parallel)  # final velocity: from the tubes
+
+    fx, fxd, fmode, fbad = _run(cfg_f, q, x0, xi_rows, None)
+    f_alive = fbad < 0
+    m0 = _combined_mode(fmode[:, 0], f_alive)
+    mf = _combined_mode(fmode[:, K - 1], f_alive)
+    forward_verdict = verdict_of(m0, mf, not f_alive.any())
+    tubes, results = [], []
+    if forward_verdict is Verdict.INCONSISTENT or m0 == 0:
+        results = ()
+        verdict = forward_verdict
+        tubes = [(fx[f_alive], fxd[f_alive])]
+    elif mf != 0:
+        # the forward pass decided: the other final mode is refuted by its certified boxes
+        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum())),
+                   HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
+        verdict = forward_verdict
+        tubes = [(fx[f_alive], fxd[f_alive])]
+    else:
+        hyps = [_Hypothesis(model, q, s, cfg_f, cfg_b, xi_rows, fx, fxd, f_alive, m0, m, backend) for m in (m0, -m0)]
+        if not any(h.refuted for h in hyps):
+            _decide(hyps, max_passes, rel_tol, max_geometries)
+        results = tuple(h.result() for h in hyps)
+        tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
+        alive = [h.final_mode for h in results if h.status is HypothesisStatus.CONSISTENT]
+        if not alive:
+            verdict = Verdict.INCONSISTENT
+        elif len(alive) == 2:
+            verdict = Verdict.UNKNOWN
+        else:
+            verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
+    x_lo, x_hi, xd_lo, xd_hi = (np.full((K, n), np.nan) for _ in range(4))
+    tubes = [t for t in tubes if len(t[0])]
+    if tubes:
+        X = np.concatenate([t[0] for t in tubes])
+        XD = np.concatenate([t[1] for t in tubes])
+        x_lo, x_hi = X[:, :, 0].min(0), X[:, :, 1].max(0)
+        xd_lo, xd_hi = XD[:, :, 0].min(0), XD[:, :, 1].max(0)
+    with np.errstate(invalid="ignore"):
+        wx = float(np.nanmax(x_hi - x_lo)) if tubes else 0.0
+        wv = float(np.nanmax(xd_hi - xd_lo)) if tubes else 0.0
+    return WindowResult(verdict=verdict, initial_mode=m0, forward_verdict=forward_verdict, hypotheses=results,
+                        x_lo=x_lo, x_hi=x_hi, xd_lo=xd_lo, xd_hi=xd_hi, max_width_pose=wx, max_width_velocity=wv,
+                        steps=K, elapsed_s=time.perf_counter() - t0)
+
+
+def _bisect(xi_lo, xi_hi, full_w):
+    """Halve each geometry sub-box ``(R, m)`` along the parameter widest relative to the calibration box
+    (widths ``full_w`` ``(m,)``); the two halves share the float split point, so they cover the parent."""
+    rel = np.where(full_w > 0, (xi_hi - xi_lo) / np.where(full_w > 0, full_w, 1.0), 0.0)
+    axis = np.argmax(rel, axis=1)
+    rows = np.arange(len(axis))
+    mid = 0.5 * (xi_lo[rows, axis] + xi_hi[rows, axis])
+    left_hi = xi_hi.copy()
+    left_hi[rows, axis] = mid
+    right_lo = xi_lo.copy()
+    right_lo[rows, axis] = mid
+    return np.concatenate([xi_lo, right_lo]), np.concatenate([left_hi, xi_hi])
+
+
+class _Hypothesis:
+    """The passes under "the last pose is in mode ``m``", one round at a time.
+
+    Rows are geometry sub-boxes with their tubes; a row is dropped once its
+    tubes become empty or certify another mode at an end of the recording.
+    """
+
+    def __init__(self, model, q, s, cfg_f, cfg_b, xi_rows, fx, fxd, f_alive, m0, m, backend):
+        self.model, self.q, self.s, self.cfg_f, self.cfg_b = model, q, s, cfg_f, cfg_b
+        self.q_rev = np.ascontiguousarray(q[::-1])
+        self.m0, self.m, self.backend = m0, m, str(Backend(backend))
+        self.full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
+        keep = np.nonzero(f_alive)[0]
+        self.xlo, self.xhi, self.tx, self.txd = xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep]
+        self.passes = 0
+        self.refutation = Refutation.NONE
+        self._final_boxes()
+
+    @property
+    def refuted(self) -> bool:
+        return self.refutation is not Refutation.NONE
+
+    def _keep(self, live):
+        self.xlo, self.xhi, self.tx, self.txd = self.xlo[live], self.xhi[live], self.tx[live], self.txd[live]
+        self.final = self.final[live] if len(self.final) == len(live) else self.final
+
+    def _final_boxes(self):
+        K = self.q.shape[0]
+        final = [_final_box(self.model, self.q[K - 1], self.m, self.s, (lo, hi), self.backend)
+                 for lo, hi in zip(self.xlo, self.xhi)]
+        ok = np.array([f is not None for f in final], dtype=bool)
+        self.final = np.stack([f for f in final if f is not None]) if ok.any() else np.empty((0, 2, self.model.n))
+        self.xlo, self.xhi, self.tx, self.txd = self.xlo[ok], self.xhi[ok], self.tx[ok], self.txd[ok]
+        if not ok.any():
+            self.refutation = Refutation.NO_SOLUTION if self.passes == 0 else Refutation.EMPTY_TUBE
+
+    def round(self, max_passes, rel_tol):
+        """Alternate backward and forward passes until the tubes stall or the row set empties."""
+        K = self.q.shape[0]
+        width = _width(self.tx, self.txd)
+        for p in range(1, max_passes + 1):
+            self.passes += 1
+            xi = (self.xlo, self.xhi)
+            if p % 2:  # backward, from the hypothesis' final box
+                end = self.tx[:, K - 1]
+                x0 = (np.maximum(self.final[:, 0], end[:, 0]), np.minimum(self.final[:, 1], end[:, 1]))
+                x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(self.tx, self.txd))
+                x, xd = _reverse(x, xd)
+                md = md[:, ::-1]
+            else:
+                x, xd, md, bad = _run(self.cfg_f, self.q, (self.tx[:, 0, 0], self.tx[:, 0, 1]), xi, (self.tx, self.txd))
+            last, first = md[:, K - 1], md[:, 0]
+            other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
+            live = (bad < 0) & ~other
+            self.tx, self.txd = x, xd
+            if not live.any():
+                self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
+                self._keep(live)
+                return
+            self._keep(live)
+            new = _width(self.tx, self.txd)
+            stalled = p >= 2 and not new < (1.0 - rel_tol) * width
+            width = new
+            if stalled:
+                return
+
+    def split(self):
+        """Halve every surviving geometry sub-box; children start from their parent's tubes."""
+        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, self.full_w)
+        self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
+        self._final_boxes()
+
+    def result(self) -> HypothesisResult:
+        status = HypothesisStatus.REFUTED if self.refuted else HypothesisStatus.CONSISTENT
+        return HypothesisResult(self.m, status, self.refutation, self.passes, len(self.xlo))
+
+
+def _decide(hyps, max_passes, rel_tol, max_geometries):
+    """Rounds on both hypotheses in step, halving each one's geometries between its rounds while it
+    stays within ``max_geometries``, until one hypothesis is refuted or none can be halved."""
+    open_ = list(hyps)
+    while open_:
+        for h in open_:
+            h.round(max_passes, rel_tol)
+        if any(h.refuted for h in hyps):
+            return
+        open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
+        for h in open_:
+            h.split()
