@@ -52,6 +52,7 @@ from robots import validators as V
 from robots.errors import InputError
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, TrackResult, Verdict, initial_box_from_mode, track, track_batch
+from verifier.window import Reasoning, WindowResult, track_window
 
 from . import execution as ex_
 from .plan import derived_a_max, plan_crossing
@@ -60,6 +61,8 @@ from .task import ExecutionKind, PlannedTrajectory, PlanningBounds
 __all__ = [
     "SpeedTrial",
     "certify_plan",
+    "certify_plan_window",
+    "CERTIFY_WINDOW_GEOMETRIES",
     "execution_class",
     "tracker_settings",
     "minimal_v_sing",
@@ -68,13 +71,20 @@ __all__ = [
 
 @dataclass(frozen=True)
 class SpeedTrial:
-    """One tried speed: the paper's Table II columns."""
+    """One tried speed: the paper's Table II columns (widths of the forward tracker's boxes),
+    the verdict and the forward tracker's own verdict (they differ where window passes decided)."""
 
     v_sing: float
     verdict: Verdict
     max_width_pose: float  # m
     max_width_velocity: float  # m/s
     certified_at_step: int
+    forward_verdict: Verdict
+
+
+#: Geometry sub-boxes per final-mode hypothesis in the window passes of a certification
+#: (the robot's partition halved up to this count; docs/tracker.md, "Window reasoning").
+CERTIFY_WINDOW_GEOMETRIES = 16
 
 
 # ------------------------------------------------------------------ planning
@@ -111,7 +121,8 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
     (``execution``, derived with :func:`execution_class` when not given; ``kin``
     is then the robot's ``KinematicModel``, built when absent); the initial box
     encloses every start pose of mode ``initial_mode`` for every geometry of
-    the box.  ``MODE_CHANGED`` certifies every admissible execution.
+    the box.  ``MODE_CHANGED`` certifies every admissible execution.  The
+    forward tracker's run; :func:`certify_plan_window` adds the window passes.
     """
     robot = imodel.robot
     b = bounds.resolved(robot)
@@ -119,6 +130,23 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
     s = tracker_settings(robot, b, derived_a_max(plan, b), execution)
     return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box)
+
+
+def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int,
+                        *, execution: ex_.ExecutionClass | None = None, kin=None, a_max=None,
+                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES) -> WindowResult:
+    """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
+
+    ``a_max`` (m/s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
+    certifies every admissible execution, as for :func:`certify_plan`.
+    """
+    robot = imodel.robot
+    b = bounds.resolved(robot)
+    if execution is None:
+        execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
+    s = tracker_settings(robot, b, derived_a_max(plan, b) if a_max is None else a_max, execution)
+    return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
+                        max_geometries=max_geometries)
 
 
 def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6, progress=None):
@@ -189,8 +217,14 @@ def _certify_speeds(kin, imodel, task, b, speeds, progress):
     boxes = [initial_box_from_mode(imodel, p.q[0], m0, s, xi_box=cls.xi_box) for p in plans]
     x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
     res = track_batch(imodel, q, s, x0, xi_box=cls.xi_box, progress=progress)
+    verdicts = list(res.verdict)
+    if b.reasoning is Reasoning.WINDOW:
+        for i, p in enumerate(plans):
+            if verdicts[i] is Verdict.UNKNOWN:
+                verdicts[i] = track_window(imodel, p.q, s, x0=(x0[0][i], x0[1][i]), xi_box=cls.xi_box,
+                                           max_geometries=CERTIFY_WINDOW_GEOMETRIES).verdict
     return [
-        SpeedTrial(float(v), res.verdict[i], float(res.max_width_pose[i]), float(res.max_width_velocity[i]),
-                   int(res.certified_at_step[i]))
+        SpeedTrial(float(v), verdicts[i], float(res.max_width_pose[i]), float(res.max_width_velocity[i]),
+                   int(res.certified_at_step[i]), res.verdict[i])
         for i, v in enumerate(speeds)
     ]

@@ -20,6 +20,7 @@ from robots import validators as V
 from robots.errors import InputError
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
+from verifier.window import Reasoning, track_window
 
 from . import execution as ex_
 from .certify import execution_class
@@ -31,6 +32,8 @@ __all__ = ["RunRecord", "MonteCarloResult", "monte_carlo_confirmation", "monte_c
 
 #: Readings cycle through the encoder models run by run.
 _KINDS = (Quantisation.FLOOR, Quantisation.ROUND, Quantisation.UNIFORM)
+#: Geometry sub-boxes per hypothesis in the window passes of an execution (``window`` reasoning).
+MC_WINDOW_GEOMETRIES = 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,7 +106,8 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     corner), joints by the true IK, readings quantised (floor, round or a
     uniform random error within ``eps_q``, in turn), tracked by the run-time
     tracker (robot defaults, ``a_max`` of the certificate) from the plan's
-    initial mode.  Each execution is checked against the certificate's class
+    initial mode, with window passes where it is undecided when
+    ``bounds.reasoning`` is ``window``.  Each execution is checked against the certificate's class
     ``execution`` (derived from ``bounds`` when not given).  Execution ``r``
     draws from its own generator ``default_rng([seed, r])``, so the result does
     not depend on how the runs are split.
@@ -161,6 +165,13 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
     boxes = [initial_box_from_mode(imodel, q[i, 0], m0, settings) for i in range(len(qs))]
     x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
     res, rec = track_batch(imodel, q, settings, x0, record=True, progress=progress)
+    verdicts = list(res.verdict)
+    if b.reasoning is Reasoning.WINDOW:
+        # the forward boxes are checked for containment below; the window decides what they left open
+        for i in range(len(qs)):
+            if verdicts[i] is Verdict.UNKNOWN:
+                verdicts[i] = track_window(imodel, q[i], settings, x0=(x0[0][i], x0[1][i]),
+                                           max_geometries=MC_WINDOW_GEOMETRIES).verdict
     misses, failures, wrong = [], [], []
     for i, r in enumerate(range(start, stop)):
         inside = (np.all(rec["x_lo"][i] <= plan.x) and np.all(plan.x <= rec["x_hi"][i])
@@ -171,17 +182,20 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
         certified = rec["mode"][i] != 0
         true_changed = modes[-1] != modes[0]
         bad_mode = bool(np.any(rec["mode"][i][certified] != modes[certified]))
-        if bad_mode or (res.verdict[i] is Verdict.MODE_CHANGED and not true_changed):
-            wrong.append(RunRecord(r, res.verdict[i], truths[i][0]))
-        elif res.verdict[i] is not Verdict.MODE_CHANGED:
-            failures.append(RunRecord(r, res.verdict[i], truths[i][0]))
+        wrong_verdict = ((verdicts[i] is Verdict.MODE_CHANGED and not true_changed)
+                         or (verdicts[i] is Verdict.MODE_UNCHANGED and true_changed)
+                         or verdicts[i] is Verdict.INCONSISTENT)
+        if bad_mode or wrong_verdict:
+            wrong.append(RunRecord(r, verdicts[i], truths[i][0]))
+        elif verdicts[i] is not Verdict.MODE_CHANGED:
+            failures.append(RunRecord(r, verdicts[i], truths[i][0]))
     admissible = [i for i in range(len(qs)) if truths[i][2]]
     return MonteCarloResult(
         runs=stop - start,
         seed=seed,
-        detected=int(sum(v is Verdict.MODE_CHANGED for v in res.verdict)),
+        detected=int(sum(v is Verdict.MODE_CHANGED for v in verdicts)),
         in_class=len(admissible),
-        detected_in_class=int(sum(res.verdict[i] is Verdict.MODE_CHANGED for i in admissible)),
+        detected_in_class=int(sum(verdicts[i] is Verdict.MODE_CHANGED for i in admissible)),
         outside_class=tuple(r for i, r in enumerate(range(start, stop)) if not truths[i][2]),
         containment_failures=tuple(misses),
         wrong_verdicts=tuple(wrong),

@@ -22,10 +22,11 @@ from robots import validators as V
 from robots.errors import InputError, SimulationError
 from verifier.model import IntervalModel
 from verifier.tracker import TrackResult, Verdict
+from verifier.window import Reasoning, WindowResult
 
 from . import execution as ex_
 from . import refute
-from .certify import certify_plan, execution_class, minimal_v_sing
+from .certify import certify_plan, certify_plan_window, execution_class, minimal_v_sing
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .plan import derived_a_max, plan_crossing, speed_ceiling
 from .simulate import random_geometry
@@ -55,7 +56,10 @@ class CrossingCertificate:
     phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``, and
     ``refutation``: the wait for the background searches left after the
     Monte Carlo run).  ``robot_name``, ``param_names`` (of the geometry
-    vector ``xi``) and ``task`` say what was certified.
+    vector ``xi``) and ``task`` say what was certified.  ``enclosures`` is the
+    forward tracker's run at ``v_min``; ``window`` the window passes on the
+    same inputs when the forward run alone did not certify (their verdict is
+    then the certificate's).
     """
 
     verdict: Verdict
@@ -75,6 +79,7 @@ class CrossingCertificate:
     robot_name: str = ""
     param_names: tuple = ()
     task: CrossingTask | None = field(default=None, repr=False)
+    window: WindowResult | None = field(default=None, repr=False)
 
     @property
     def certified_below_v_min(self) -> list:
@@ -114,6 +119,7 @@ class CrossingCertificate:
                 "a_peak_mps2": b.a_peak, "a_max_mps2": None if b.a_max is None else list(b.a_max),
                 "a_margin": b.a_margin, "xi_splits": None if b.xi_splits is None else list(b.xi_splits),
                 "execution": b.execution.value, "qd_max_radps": b.qd_max, "qdd_max_radps2": b.qdd_max,
+                "reasoning": b.reasoning.value,
             },
             "verdict": self.verdict.value,
             "v_min_mps": self.v_min,
@@ -124,7 +130,8 @@ class CrossingCertificate:
             "a_max_used_mps2": None if self.a_max_used is None else list(self.a_max_used),
             "execution": execution,
             "trials": [
-                {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "max_width_pose_m": r.max_width_pose,
+                {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "forward_verdict": r.forward_verdict.value,
+                 "max_width_pose_m": r.max_width_pose,
                  "max_width_velocity_mps": r.max_width_velocity,
                  "certified_at_step": None if r.certified_at_step < 0 else r.certified_at_step}
                 for r in self.trials
@@ -134,6 +141,7 @@ class CrossingCertificate:
                  "solver_status": r.status, "geometry": self._named(r.geometry)}
                 for r in self.refutation
             ],
+            "window": None if self.window is None else self.window.summary(),
             "monte_carlo": None if self.monte_carlo is None else self.monte_carlo.summary(),
             "versions": self.versions,
             "elapsed_s": self.elapsed_s,
@@ -224,7 +232,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         t1 = time.perf_counter()
         v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
         t1 = lap("search", t1)
-        plan = enc = mc = a_used = cls = None
+        plan = enc = win = mc = a_used = cls = None
         # the batched search pads shorter plans with rest samples: re-certify the
         # candidate alone, on its own samples; if it fails, try the next faster
         # certified speed (the certificate's verdict is this run's verdict)
@@ -233,12 +241,15 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             plan = plan_crossing(kin, task, cand, b)
             cls = execution_class(kin, plan, b)
             enc = certify_plan(imodel, plan, b, m0, execution=cls)
-            if enc.verdict is Verdict.MODE_CHANGED:
+            win = None
+            if enc.verdict is not Verdict.MODE_CHANGED and b.reasoning is Reasoning.WINDOW:
+                win = certify_plan_window(imodel, plan, b, m0, execution=cls)
+            if (win or enc).verdict is Verdict.MODE_CHANGED:
                 v_min = cand
                 a_used = derived_a_max(plan, b)
                 break
         else:
-            v_min = plan = enc = cls = None
+            v_min = plan = enc = win = cls = None
         t1 = lap("certificate", t1)
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
         ref_job = None
@@ -264,7 +275,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         if refuter is not None:
             refuter.close()
     return CrossingCertificate(
-        verdict=enc.verdict if enc is not None else Verdict.UNKNOWN,
+        verdict=(win or enc).verdict if enc is not None else Verdict.UNKNOWN,
         v_min=v_min,
         refutation_bound=ref_bound,
         trials=tuple(trials),
@@ -281,6 +292,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         robot_name=robot.name,
         param_names=tuple(robot.param_names),
         task=task,
+        window=win,
     )
 
 

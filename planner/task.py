@@ -24,6 +24,7 @@ from robots import validators as V
 from robots.errors import InputError, SimulationError
 from robots.registry import RobotEntry
 from verifier.trajectory import Trajectory
+from verifier.window import Reasoning
 
 from .execution import ExecutionKind
 from .locus import LineScan, locate_crossing, sign_changes
@@ -145,6 +146,11 @@ class PlanningBounds:
         (:mod:`planner.execution`): ``cartesian`` (default; the end-effector
         follows the planned path, any geometry in ``[xi]``) or ``joint``
         (joints within ``eps_q + tracking_error`` of the planned joints).
+    reasoning : Reasoning or str
+        How certifying runs and the Monte Carlo confirmation reach a verdict
+        (:class:`verifier.window.Reasoning`): ``window`` (default; forward
+        tracker, then window passes over the whole run when it is undecided)
+        or ``forward`` (the tracker alone).
     """
 
     eps_q: float | None = None
@@ -160,6 +166,7 @@ class PlanningBounds:
     qd_max: float | None = None
     qdd_max: float | None = None
     execution: ExecutionKind = ExecutionKind.CARTESIAN
+    reasoning: Reasoning = Reasoning.WINDOW
 
     def resolved(self, robot) -> PlanningBounds:
         """These bounds with the robot's defaults filled in and every value checked."""
@@ -174,10 +181,11 @@ class PlanningBounds:
         splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
         method = parse_option(Method, "planning method", self.method)
         execution = parse_option(ExecutionKind, "execution class", self.execution)
+        reasoning = parse_option(Reasoning, "reasoning", self.reasoning)
         if method is Method.DYNAMIC and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
         return PlanningBounds(eps, tracking, amax, margin, a_peak, ts, rest, splits, method, self.dynamics,
-                              self.qd_max, self.qdd_max, execution)
+                              self.qd_max, self.qdd_max, execution, reasoning)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -14,6 +14,7 @@ from planner import (
     speed_ceiling,
 )
 from planner.cli import main
+from planner.certify import certify_plan_window
 from planner.task import CrossingTask, PlanningBounds
 from problems import PLANNING, check_certified_speed, check_contains, check_plan_limits
 from robots import DEXTAR, DEXTAR_DYNAMICS
@@ -86,12 +87,17 @@ def test_minimal_speed_and_monte_carlo_confirmation(task, kin, imodel):
     assert all(v is Verdict.MODE_CHANGED for s, v in by_v.items() if s >= v_min)
     below = [s for s in by_v if s < v_min]
     assert below and by_v[max(below)] is not Verdict.MODE_CHANGED and v_min - max(below) <= 0.05
-    # the coarse search lands within its resolution of the default certification's v_min (1.198 m/s),
-    # and never at or below the refutation bound
+    # the coarse search lands within its resolution of the default certification's v_min (0.999 m/s
+    # with window reasoning), and never at or below the refutation bound
     check_certified_speed(v_min, BENCHMARK.expected, tol=0.05 + BENCHMARK.expected.v_min_tol)
     assert all(s > BENCHMARK.expected.refutation_bound for s, v in by_v.items() if v is Verdict.MODE_CHANGED)
+    # the forward tracker alone: the DexTAR's number before window reasoning (1.198 m/s)
+    fwd = PlanningBounds(reasoning="forward")
+    v_fwd, trials_fwd = minimal_v_sing(kin, im, task, fwd, 0.9, 1.6, tol=0.05, grid=4)
+    check_certified_speed(v_fwd, BENCHMARK.expected, tol=0.05 + BENCHMARK.expected.v_min_tol, forward=True)
+    assert all(t.verdict is t.forward_verdict for t in trials_fwd)
     plan = plan_crossing(kin, task, v_min, b)
-    assert certify_plan(im, plan, b, 1).verdict is Verdict.MODE_CHANGED
+    assert certify_plan_window(im, plan, b, 1).verdict is Verdict.MODE_CHANGED
     mc = monte_carlo_confirmation(kin, im, plan, b, runs=50, seed=7)
     assert mc.runs == 50 and mc.in_class == 50 and mc.outside_class == ()
     assert mc.containment_failures == () and mc.wrong_verdicts == () and mc.not_detected == ()

@@ -47,7 +47,7 @@ from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import initial_box_from_mode, verdict_of
 
-__all__ = ["HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window", "WINDOW_MAX_PASSES",
+__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window", "WINDOW_MAX_PASSES",
            "WINDOW_MAX_GEOMETRIES"]
 
 #: Default pass budget of a round (backward and forward passes alternate).
@@ -58,6 +58,16 @@ WINDOW_MAX_GEOMETRIES = 64
 WINDOW_REL_TOL = 0.02
 #: Velocity widths above this (m/s) count as this much when measuring progress (unbounded tubes).
 _WIDTH_CAP = 1e3
+
+
+class Reasoning(str, Enum):
+    """How a recording's verdict is reached."""
+
+    FORWARD = "forward"  #: the tracker alone: each box from the readings up to its sample
+    WINDOW = "window"  #: the tracker, then window passes over the whole recording when it is not decided
+
+    def __str__(self) -> str:
+        return self.value
 
 
 class HypothesisStatus(str, Enum):
