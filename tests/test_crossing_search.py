@@ -28,9 +28,10 @@ from planner.refute import (
     crossing_floor,
     fk_crossing_guess,
     search_bounce,
+    search_counterexample,
     search_crossing,
-    verify,
     verify_bounce,
+    verify_counterexample,
     verify_crossing,
 )
 from planner.simulate import simulate_bounce
@@ -152,9 +153,9 @@ def test_verification_rejects_a_crossing_starting_in_the_other_mode(on_locus):
 def test_untampered_crossing_passes_again(on_locus):
     kin, rb, res = on_locus
     assert verify_crossing(kin, res.counterexample, rb, dense=16).ok
-    assert verify(kin, res.counterexample, rb, "crossing").ok
+    assert verify_counterexample(kin, res.counterexample, rb, "crossing").ok
     with pytest.raises(InputError):
-        verify(kin, res.counterexample, rb, "sideways")
+        verify_counterexample(kin, res.counterexample, rb, "sideways")
 
 
 def test_the_tracker_agrees_with_the_crossing_search(on_locus):
@@ -231,5 +232,7 @@ def test_input_errors(on_locus):
         crossing_floor(kin, "not callable", [0.0])
     with pytest.raises(InputError):
         search_crossing(kin, rb, xi_start=DEXTAR.xi_hi_array + 1.0)
+    with pytest.raises(InputError):
+        search_counterexample(kin, rb, "sideways")
     with pytest.raises(InputError):
         dataclasses.replace(res.counterexample, kind="sideways")

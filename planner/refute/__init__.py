@@ -24,7 +24,7 @@ counterexample exists.  SI units throughout (m, rad, s).
 Explicit re-exports (no star imports).
 """
 
-from .nlp import fk_branch_guess, fk_crossing_guess, search, search_bounce, search_crossing
+from .nlp import fk_branch_guess, fk_crossing_guess, search_bounce, search_counterexample, search_crossing
 from .problem import (
     ACCEL_MARGIN,
     JOINT_MARGIN,
@@ -38,7 +38,7 @@ from .problem import (
 )
 from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, Verification
 from .search import crossing_floor, refutation_bound
-from .verify import BRANCH_TOL, STATE_TOL, verify, verify_bounce, verify_crossing
+from .verify import BRANCH_TOL, STATE_TOL, verify_bounce, verify_counterexample, verify_crossing
 
 __all__ = [
     "ACCEL_MARGIN",
@@ -62,10 +62,10 @@ __all__ = [
     "fk_crossing_guess",
     "ipopt_outcome",
     "refutation_bound",
-    "search",
     "search_bounce",
+    "search_counterexample",
     "search_crossing",
-    "verify",
     "verify_bounce",
+    "verify_counterexample",
     "verify_crossing",
 ]

@@ -42,9 +42,9 @@ from .problem import (
     ipopt_outcome,
 )
 from .results import BounceSearch
-from .verify import DENSE_POINTS, verify
+from .verify import DENSE_POINTS, verify_counterexample
 
-__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "search", "search_bounce",
+__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "search_bounce", "search_counterexample",
            "search_crossing"]
 
 #: Default IPOPT iteration cap per attempt: on the benchmark crossing IPOPT
@@ -263,7 +263,7 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     return ce, status, iters, elapsed, nv, ng
 
 
-def search(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *, xi_start=None,
+def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *, xi_start=None,
            max_iter: int = MAX_ITER, max_cpu_time: float = MAX_CPU_TIME, print_level: int = 0,
            dense: int = DENSE_POINTS) -> BounceSearch:
     """Search one counterexample of ``kind`` from one starting geometry, and verify it.
@@ -297,7 +297,7 @@ def search(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *
         kin, rb, xs, kind, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level)
     if ce is None:
         return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs, kind=kind)
-    ver = verify(kin, ce, rb, kind, dense=dense)
+    ver = verify_counterexample(kin, ce, rb, kind, dense=dense)
     return BounceSearch(True, ver.ok, status, iters, elapsed, nv, ng, xs, ce, ver, kind=kind)
 
 
@@ -349,7 +349,7 @@ def search_bounce(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, ma
     SimulationError
         If no sample has an FK solution of mode ``m0`` with ``xi_start``.
     """
-    return search(kin, rb, CounterexampleKind.BOUNCE, xi_start=xi_start, max_iter=max_iter,
+    return search_counterexample(kin, rb, CounterexampleKind.BOUNCE, xi_start=xi_start, max_iter=max_iter,
                   max_cpu_time=max_cpu_time, print_level=print_level, dense=dense)
 
 
@@ -399,5 +399,5 @@ def search_crossing(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, 
     SimulationError
         If no sample has an FK solution of mode ``m0``, or none of mode ``-m0``, with ``xi_start``.
     """
-    return search(kin, rb, CounterexampleKind.CROSSING, xi_start=xi_start, max_iter=max_iter,
+    return search_counterexample(kin, rb, CounterexampleKind.CROSSING, xi_start=xi_start, max_iter=max_iter,
                   max_cpu_time=max_cpu_time, print_level=print_level, dense=dense)

@@ -17,7 +17,7 @@ from robots import validators as V
 from robots.errors import InputError
 from robots.kinematics import KinematicModel
 
-from .nlp import MAX_CPU_TIME, MAX_ITER, search
+from .nlp import MAX_CPU_TIME, MAX_ITER, search_counterexample
 from .problem import CounterexampleKind, RecordingBounds
 from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, deciding_attempt
 from .verify import DENSE_POINTS
@@ -37,7 +37,7 @@ def _search_recording(kin, make_recording, value, kind, *, m0, xi_starts, bounds
     starts = [None] if not xi_starts else list(xi_starts)
     attempts: list[BounceSearch] = []
     for xs in starts:
-        att = search(kin, rb, kind, xi_start=xs, max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense)
+        att = search_counterexample(kin, rb, kind, xi_start=xs, max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense)
         attempts.append(att)
         if att.verified:
             break

@@ -36,7 +36,7 @@ from robots.kinematics import KinematicModel
 from .problem import Counterexample, CounterexampleKind, RecordingBounds, integrate_states
 from .results import Verification
 
-__all__ = ["BRANCH_TOL", "DENSE_POINTS", "STATE_TOL", "verify", "verify_bounce", "verify_crossing"]
+__all__ = ["BRANCH_TOL", "DENSE_POINTS", "STATE_TOL", "verify_bounce", "verify_counterexample", "verify_crossing"]
 
 #: Largest disagreement (m) between the NLP's sample poses and the trajectory
 #: re-integrated from ``x_0, v_0`` and the accelerations (velocities: divided by ``t_s``).
@@ -98,7 +98,7 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
     InputError
         If ``ce`` is not a Counterexample or its arrays do not match the recording's shape.
     """
-    return verify(kin, ce, rb, CounterexampleKind.BOUNCE, dense=dense, require_dense_mode=require_dense_mode)
+    return verify_counterexample(kin, ce, rb, CounterexampleKind.BOUNCE, dense=dense, require_dense_mode=require_dense_mode)
 
 
 def verify_crossing(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, *,
@@ -137,10 +137,10 @@ def verify_crossing(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds
     InputError
         If ``ce`` is not a Counterexample or its arrays do not match the recording's shape.
     """
-    return verify(kin, ce, rb, CounterexampleKind.CROSSING, dense=dense)
+    return verify_counterexample(kin, ce, rb, CounterexampleKind.CROSSING, dense=dense)
 
 
-def verify(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, kind: CounterexampleKind, *,
+def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, kind: CounterexampleKind, *,
            dense: int = DENSE_POINTS, require_dense_mode: bool = True) -> Verification:
     """Check a candidate of either kind: :func:`verify_bounce` or :func:`verify_crossing` by ``kind``.
 
