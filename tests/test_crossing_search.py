@@ -34,11 +34,11 @@ from planner.refute import (
     verify_counterexample,
     verify_crossing,
 )
-from planner.simulate import simulate_bounce
+from planner.simulate import max_v_sing, simulate_bounce
 from planner.sweep import cruise_for
 from problems import default_settings, interval_model, kinematics
 from robots import DEXTAR, benchmark_crossing
-from robots.errors import InputError
+from robots.errors import InputError, SimulationError
 from verifier.tracker import Verdict, track
 
 SPEED = 1.2  # m/s, approach speed of the bounces
@@ -217,6 +217,18 @@ def test_short_bounce_turns_back_before_the_locus():
     a = simulate_bounce(kinematics(), bench.point, bench.direction, SPEED, **kw)
     b = simulate_bounce(kinematics(), bench.point, bench.direction, SPEED, short=0.0, **kw)
     np.testing.assert_array_equal(a.q_meas, b.q_meas)
+
+
+def test_fastest_short_bounce():
+    """A bounce turning back farther from the locus starts farther back: a lower top speed."""
+    bench = benchmark_crossing()
+    kw = dict(working_guess=bench.q_point, bounce=True, cruise=5e-3)
+    v0 = max_v_sing(kinematics(), bench.point, bench.direction, **kw)
+    v1 = max_v_sing(kinematics(), bench.point, bench.direction, short=FAR, **kw)
+    assert 0.0 < v1 < v0
+    _bounce(FAR, v1 * 0.999)  # simulable just below it
+    with pytest.raises(SimulationError):
+        _bounce(FAR, v1 * 1.01)
 
 
 def test_input_errors(on_locus):

@@ -351,19 +351,21 @@ def simulate_bounce(model: KinematicModel, crossing_point, direction, v_sing: fl
 
 def max_v_sing(model: KinematicModel, crossing_point, direction, *, xi_true=None,
                a_peak: float = 60.0, cruise: float = 5e-3, working_guess=None,
-               bounce: bool = False, strict_xi: bool = True) -> float:
+               bounce: bool = False, strict_xi: bool = True, short: float = 0.0) -> float:
     """Largest ``v_sing`` (m/s) whose crossing (or bounce) path stays valid.
 
     The path must keep valid IK (in ``x_bounds``, joint limits, ``J_q``
     regular) and meet no other Type 2 singularity.  The valid extent is found
     by IK continuation on a grid of step ``h = min(x_bounds side) / 256``,
     its ends refined by bisection (or Brent's method for another singularity)
-    and pulled in by ``h / 1000``.  Arguments as in :func:`simulate_crossing`.
+    and pulled in by ``h / 1000``.  Arguments as in :func:`simulate_crossing`;
+    ``short`` (m) as in :func:`simulate_bounce` (used with ``bounce``).
     """
+    short = V.positive("short", short, allow_zero=True)
     p, u, _v, a_peak, cruise, _tr, _te, _ts, _eq, xi, qg = _prepare(
         model, crossing_point, direction, 1.0, xi_true, None, None, 0.0, 0.0, a_peak, cruise,
         working_guess, "floor", strict_xi)
     s_true, e_lo, e_hi = valid_extent(model, p, u, xi, qg, cruise, _scan_step(model.robot))
     if bounce:
-        return _v_from_distance((s_true - e_lo) / 2.0 - cruise, a_peak)
+        return _v_from_distance((s_true - short - e_lo) / 2.0 - cruise, a_peak)
     return _v_from_distance(min(-e_lo, e_hi) - cruise, a_peak)
