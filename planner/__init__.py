@@ -8,7 +8,7 @@ Layout, along the method:
   (time-optimal) and :mod:`planner.generate` (dynamic);
 * :mod:`planner.certify` — certification of plans and the speed search;
 * :mod:`planner.montecarlo` — simulated executions tracked at run time;
-* :mod:`planner.refute` — verified counterexamples (the refutation floor);
+* :mod:`planner.refute` — verified counterexamples (the refutation bound, the crossing floor);
 * :mod:`planner.pipeline` — all of it, on an executor;
 * :mod:`planner.simulate`, :mod:`planner.sweep` — simulated runs and the
   paper's speed sweep; :mod:`planner.cli` — the ``crosscert`` command.
@@ -24,7 +24,17 @@ from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .pipeline import CrossingCertificate, certify_crossing
 from .plan import plan_crossing, speed_ceiling
-from .refute import RecordingBounds, RefutationBound, refutation_bound, search_bounce, verify_bounce
+from .refute import (
+    CrossingFloor,
+    RecordingBounds,
+    RefutationBound,
+    crossing_floor,
+    refutation_bound,
+    search_bounce,
+    search_crossing,
+    verify_bounce,
+    verify_crossing,
+)
 from .simulate import Quantisation, SimulatedRun, max_v_sing, quantise, random_geometry, simulate_bounce, simulate_crossing
 from .sweep import SweepRow, cruise_for, sweep
 from .task import CrossingTask, ExecutionKind, Method, PlannedTrajectory, PlanningBounds, benchmark_task
@@ -58,6 +68,10 @@ __all__ = [
     "refutation_bound",
     "search_bounce",
     "verify_bounce",
+    "CrossingFloor",
+    "crossing_floor",
+    "search_crossing",
+    "verify_crossing",
     "Quantisation",
     "quantise",
     "SimulatedRun",

@@ -1,16 +1,20 @@
-"""Refutation bound: search for "bounce" motions that explain a crossing's encoder data.
+"""Refutation searches: motions that explain a recording's encoder data yet contradict a verdict.
 
 A sound tracker may certify that a recording changed the assembly mode only if
 *no* motion compatible with its assumptions explains the same data without a
-mode change.  This package searches for such a motion, a counterexample, with
-CasADi's NLP interface and IPOPT, and checks every candidate independently.
+mode change (a *bounce*), and that it did not change only if no such motion
+ends in the other mode (a *crossing*).  This package searches for such a
+motion, a counterexample, with CasADi's NLP interface and IPOPT, and checks
+every candidate independently.
 
 * :mod:`.problem` — the bounds of a recording, a candidate, the outcome words;
 * :mod:`.results` — what a search returns;
-* :mod:`.nlp` — the NLP and its solution (:func:`search_bounce`);
-* :mod:`.verify` — the trusted check of a candidate (:func:`verify_bounce`),
-  which builds no optimisation problem;
-* :mod:`.search` — the sweep over speeds (:func:`refutation_bound`).
+* :mod:`.nlp` — the NLP and its solution (:func:`search_bounce`,
+  :func:`search_crossing`);
+* :mod:`.verify` — the trusted check of a candidate (:func:`verify_bounce`,
+  :func:`verify_crossing`), which builds no optimisation problem;
+* :mod:`.search` — the sweeps over a family of recordings: crossings by speed
+  (:func:`refutation_bound`), bounces by turn-back distance (:func:`crossing_floor`).
 
 Non-convergence of IPOPT is never a counterexample; an unverified candidate is
 never reported as one.  Only :attr:`BounceSearch.verified` results
@@ -20,20 +24,21 @@ counterexample exists.  SI units throughout (m, rad, s).
 Explicit re-exports (no star imports).
 """
 
-from .nlp import fk_branch_guess, search_bounce
+from .nlp import fk_branch_guess, fk_crossing_guess, search_bounce, search_counterexample, search_crossing
 from .problem import (
     ACCEL_MARGIN,
     JOINT_MARGIN,
     MODE_MARGIN,
     XI_MARGIN,
     Counterexample,
+    CounterexampleKind,
     RecordingBounds,
     SearchOutcome,
     ipopt_outcome,
 )
-from .results import BounceSearch, RefutationBound, SpeedRefutation, Verification
-from .search import refutation_bound
-from .verify import BRANCH_TOL, STATE_TOL, verify_bounce
+from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, Verification
+from .search import crossing_floor, refutation_bound
+from .verify import BRANCH_TOL, STATE_TOL, verify_bounce, verify_counterexample, verify_crossing
 
 __all__ = [
     "ACCEL_MARGIN",
@@ -44,14 +49,23 @@ __all__ = [
     "XI_MARGIN",
     "BounceSearch",
     "Counterexample",
+    "CounterexampleKind",
+    "CrossingFloor",
     "RecordingBounds",
+    "RecordingRefutation",
     "RefutationBound",
     "SearchOutcome",
     "SpeedRefutation",
     "Verification",
+    "crossing_floor",
     "fk_branch_guess",
+    "fk_crossing_guess",
     "ipopt_outcome",
     "refutation_bound",
     "search_bounce",
+    "search_counterexample",
+    "search_crossing",
     "verify_bounce",
+    "verify_counterexample",
+    "verify_crossing",
 ]

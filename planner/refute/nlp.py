@@ -8,9 +8,14 @@ K = 250..400 samples, 2000..3200 variables, 0.1..0.4 s to converge,
 0.3..1 s to report infeasibility).  To study a window, pass the slice
 of the recording; the result then refutes only trackers fed that slice.
 
+One NLP serves both kinds of counterexample
+(:class:`~planner.refute.problem.CounterexampleKind`): :func:`search_bounce`
+constrains the mode at every sample, :func:`search_crossing` at the first
+and the last sample only; everything else is shared.
+
 Non-convergence of IPOPT is never a counterexample; an unverified candidate is
 never reported as one: every converged candidate goes through
-:func:`~planner.refute.verify.verify_bounce`, and only
+:func:`~planner.refute.verify.verify_bounce` (or ``verify_crossing``), and only
 :attr:`BounceSearch.verified` results count.  SI units throughout (m, rad, s).
 """
 
@@ -31,14 +36,16 @@ from .problem import (
     MODE_MARGIN,
     XI_MARGIN,
     Counterexample,
+    CounterexampleKind,
     RecordingBounds,
     SearchOutcome,
     ipopt_outcome,
 )
 from .results import BounceSearch
-from .verify import DENSE_POINTS, verify_bounce
+from .verify import DENSE_POINTS, verify_counterexample
 
-__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "search_bounce"]
+__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "search_bounce", "search_counterexample",
+           "search_crossing"]
 
 #: Default IPOPT iteration cap per attempt: on the benchmark crossing IPOPT
 #: converges or reports infeasibility within 24..76 iterations.
@@ -111,16 +118,73 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
     return X, solved
 
 
+def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, int]:
+    """A crossing through the readings: mode-``m0`` FK up to the sample nearest the locus, mode ``-m0`` after.
+
+    For a bounce recording this is its own path up to the turning point and
+    the reflection of the way back (the other FK solution): the crossing the
+    NLP starts from.  The switch sample is where the two branches
+    (:func:`fk_branch_guess` of each mode) come closest, i.e. where the
+    readings come nearest the locus of ``xi``; if that is not on the locus
+    the guess jumps there, and IPOPT has to move ``xi`` and the path.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+        The robot's kinematics.
+    q_meas : array_like, shape (K, n)
+        Joints, rad.
+    xi : array_like, shape (m,)
+        Geometry, SI.
+    m0 : int
+        Initial assembly mode, +1 or -1.
+
+    Returns
+    -------
+    X : ndarray, shape (K, n)
+        Poses, m.
+    k_switch : int
+        Last sample taken from the mode-``m0`` branch.
+
+    Raises
+    ------
+    SimulationError
+        If no sample has an FK solution of mode ``m0``, or none of mode ``-m0``.
+    """
+    Xa, ok_a = fk_branch_guess(kin, q_meas, xi, m0)
+    Xb, ok_b = fk_branch_guess(kin, q_meas, xi, -m0)
+    gap = np.max(np.abs(Xa - Xb), axis=1)
+    # Samples where neither branch was solved lie beyond the fold, where the
+    # readings pass the locus of xi; else the branches come closest at the
+    # turn, often over a run of equal readings (the joints stop there):
+    # switch in the middle of the first such run.
+    none = ~(ok_a | ok_b)
+    if none.any():
+        at = none
+    else:
+        g = np.where(ok_a & ok_b, gap, np.inf)
+        at = g <= np.min(g)
+    k0 = int(np.argmax(at))
+    k1 = k0 + int(np.argmin(at[k0:])) if not at[k0:].all() else at.size
+    k_switch = (k0 + k1 - 1) // 2
+    X = np.concatenate([Xa[:k_switch + 1], Xb[k_switch + 1:]])
+    return X, k_switch
+
+
 # --------------------------------------------------------------------- NLP
-def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, *,
+def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, kind: CounterexampleKind, *,
                      max_iter: int, max_cpu_time: float, print_level: int):
-    """Set up and solve the bounce NLP; returns (Counterexample or None, status, iters, time, nv, ng)."""
+    """Set up and solve the NLP of ``kind``; returns (Counterexample or None, status, iters, time, nv, ng)."""
     K, n, m = rb.n_samples, kin.n, kin.m
     ts, qm, eps, amax = rb.t_s, rb.q_meas, rb.eps_q, rb.a_max
     xc, xh = 0.5 * (rb.xi_lo + rb.xi_hi), 0.5 * (rb.xi_hi - rb.xi_lo)
 
-    # Initial guess: mode-m0 FK of the samples with the starting geometry.
-    X0, _solved = fk_branch_guess(kin, qm, xi_start, rb.m0)
+    # Initial guess: the FK of the samples with the starting geometry, in mode
+    # m0 (bounce), or in m0 then -m0 (crossing).
+    if kind is CounterexampleKind.BOUNCE:
+        X0, _solved = fk_branch_guess(kin, qm, xi_start, rb.m0)
+    else:
+        X0, _k = fk_crossing_guess(kin, qm, xi_start, rb.m0)
     V0 = np.gradient(X0, ts, axis=0)
     U0 = np.clip(np.diff(V0, axis=0) / ts, -amax, amax)
     # Scales: f in "eps_q-equivalents" (row norm of J_q times eps_q), the
@@ -145,11 +209,19 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     dyn_x = ((Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U)
              / ca.repmat(ca.DM(0.5 * ts * ts * amax), 1, K - 1))
     dyn_v = (Vs[:, 1:] - Vs[:, :-1] - ts * U) / ca.repmat(ca.DM(ts * amax), 1, K - 1)
-    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), ca.vec(M))
+    # The only difference between the kinds: which samples' modes are constrained.
+    # A bounce keeps m0 at every sample; a crossing starts in m0 and ends in -m0
+    # (M is already multiplied by m0, so the last row is -M >= margin).
+    if kind is CounterexampleKind.BOUNCE:
+        mode_rows = ca.vec(M)
+    else:
+        mode_rows = ca.vertcat(M[0], -M[K - 1])
+    n_mode = int(mode_rows.numel())
+    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), mode_rows)
     z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds))
     n_eq = 2 * n * (K - 1) + n * K
-    lbg = np.concatenate([np.zeros(n_eq), np.full(K, MODE_MARGIN)])
-    ubg = np.concatenate([np.zeros(n_eq), np.full(K, np.inf)])
+    lbg = np.concatenate([np.zeros(n_eq), np.full(n_mode, MODE_MARGIN)])
+    ubg = np.concatenate([np.zeros(n_eq), np.full(n_mode, np.inf)])
 
     inf = np.inf
     x_lo = np.full((n, K), -inf) if rb.x_lo is None else np.repeat(rb.x_lo[:, None], K, axis=1)
@@ -173,7 +245,7 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
 
     # Feasibility problem; the small smoothness objective picks a regular point.
     obj = ca.sumsqr(Ws) / (n * (K - 1))
-    run = solve_with_ipopt("bounce", z, obj, g, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
+    run = solve_with_ipopt(kind.value, z, obj, g, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
                            ipopt={"print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
                                   "tol": IPOPT_TOL, "constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
                                   "acceptable_constr_viol_tol": IPOPT_CONSTR_VIOL_TOL})
@@ -187,8 +259,46 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     Xv, Vv, Dv = (a.reshape((n, K), order="F").T for a in (xv, vv, dv))
     Wv = wv.reshape((n, K - 1), order="F").T
     ce = Counterexample(xi=xc + xh * s_v, x=Xv, v=Vv, u=amax[None, :] * Wv,
-                        q=qm + eps[None, :] * Dv, t_s=ts, m0=rb.m0)
+                        q=qm + eps[None, :] * Dv, t_s=ts, m0=rb.m0, kind=kind)
     return ce, status, iters, elapsed, nv, ng
+
+
+def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *, xi_start=None,
+           max_iter: int = MAX_ITER, max_cpu_time: float = MAX_CPU_TIME, print_level: int = 0,
+           dense: int = DENSE_POINTS) -> BounceSearch:
+    """Search one counterexample of ``kind`` from one starting geometry, and verify it.
+
+    :func:`search_bounce` and :func:`search_crossing` are this function with
+    ``kind`` fixed; their docstrings describe the NLP.
+
+    Raises
+    ------
+    InputError
+        If ``rb`` does not match ``kin``, ``xi_start`` lies outside the box or
+        ``kind`` is not a :class:`CounterexampleKind`.
+    SimulationError
+        If no sample has an FK solution of the required mode(s) with ``xi_start``.
+    """
+    if not isinstance(kin, KinematicModel):
+        raise InputError(f"kin must be a KinematicModel, got {type(kin).__name__}")
+    if not isinstance(rb, RecordingBounds):
+        raise InputError(f"rb must be RecordingBounds, got {type(rb).__name__}")
+    try:
+        kind = CounterexampleKind(kind)
+    except ValueError:
+        raise InputError(f"kind must be one of {[k.value for k in CounterexampleKind]}, got {kind!r}") from None
+    if rb.q_meas.shape[1] != kin.n or rb.xi_lo.shape != (kin.m,):
+        raise InputError(f"recording has {rb.q_meas.shape[1]} joints and {rb.xi_lo.size} parameters; "
+                         f"{kin.robot.name} needs {kin.n} and {kin.m}")
+    xs = 0.5 * (rb.xi_lo + rb.xi_hi) if xi_start is None else V.vector("xi_start", xi_start, kin.m, broadcast=True)
+    if np.any(xs < rb.xi_lo) or np.any(xs > rb.xi_hi):
+        raise InputError(f"xi_start = {xs.tolist()} lies outside the calibration box")
+    ce, status, iters, elapsed, nv, ng = _build_and_solve(
+        kin, rb, xs, kind, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level)
+    if ce is None:
+        return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs, kind=kind)
+    ver = verify_counterexample(kin, ce, rb, kind, dense=dense)
+    return BounceSearch(True, ver.ok, status, iters, elapsed, nv, ng, xs, ce, ver, kind=kind)
 
 
 def search_bounce(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, max_iter: int = MAX_ITER,
@@ -239,19 +349,55 @@ def search_bounce(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, ma
     SimulationError
         If no sample has an FK solution of mode ``m0`` with ``xi_start``.
     """
-    if not isinstance(kin, KinematicModel):
-        raise InputError(f"kin must be a KinematicModel, got {type(kin).__name__}")
-    if not isinstance(rb, RecordingBounds):
-        raise InputError(f"rb must be RecordingBounds, got {type(rb).__name__}")
-    if rb.q_meas.shape[1] != kin.n or rb.xi_lo.shape != (kin.m,):
-        raise InputError(f"recording has {rb.q_meas.shape[1]} joints and {rb.xi_lo.size} parameters; "
-                         f"{kin.robot.name} needs {kin.n} and {kin.m}")
-    xs = 0.5 * (rb.xi_lo + rb.xi_hi) if xi_start is None else V.vector("xi_start", xi_start, kin.m, broadcast=True)
-    if np.any(xs < rb.xi_lo) or np.any(xs > rb.xi_hi):
-        raise InputError(f"xi_start = {xs.tolist()} lies outside the calibration box")
-    ce, status, iters, elapsed, nv, ng = _build_and_solve(
-        kin, rb, xs, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level)
-    if ce is None:
-        return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs)
-    ver = verify_bounce(kin, ce, rb, dense=dense)
-    return BounceSearch(True, ver.ok, status, iters, elapsed, nv, ng, xs, ce, ver)
+    return search_counterexample(kin, rb, CounterexampleKind.BOUNCE, xi_start=xi_start, max_iter=max_iter,
+                  max_cpu_time=max_cpu_time, print_level=print_level, dense=dense)
+
+
+def search_crossing(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, max_iter: int = MAX_ITER,
+                    max_cpu_time: float = MAX_CPU_TIME, print_level: int = 0,
+                    dense: int = DENSE_POINTS) -> BounceSearch:
+    """Search one *crossing* counterexample with IPOPT from one starting geometry, and verify it.
+
+    The NLP of :func:`search_bounce` (same unknowns, dynamics, joint
+    intervals, ``a_max``, ``[xi]``, velocity and workspace bounds, margins)
+    with the mode constrained at two samples only: ``m0`` at the first and
+    ``-m0`` at the last (normalised ``m0 det J_x >= MODE_MARGIN`` and
+    ``<= -MODE_MARGIN``), so ``m + n (4K - 1)`` variables and
+    ``2 n (K - 1) + n K + 2`` constraints.  A verified solution explains the
+    readings by a motion that changed the assembly mode: no sound tracker may
+    certify ``mode-unchanged`` on them.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+        The robot's kinematics (its CasADi expressions build the NLP).
+    rb : RecordingBounds
+        The recording (e.g. a bounce) and the bounds; ``rb.m0`` is the initial mode.
+    xi_start : array_like, shape (m,), optional
+        Starting geometry (default: centre of the box); it only seeds the
+        initial guess (:func:`fk_crossing_guess` with it), ``xi`` is free.
+    max_iter : int
+        IPOPT iteration cap.
+    max_cpu_time : float
+        IPOPT time cap, s.
+    print_level : int
+        IPOPT verbosity (0 silent).
+    dense : int
+        IK continuation points per interval of the verification (:func:`verify_crossing`).
+
+    Returns
+    -------
+    BounceSearch
+        ``kind`` :attr:`CounterexampleKind.CROSSING`; ``outcome`` is
+        :attr:`SearchOutcome.FOUND` only for a verified counterexample, and
+        no other outcome means that none exists.
+
+    Raises
+    ------
+    InputError
+        If ``rb`` does not match ``kin`` or ``xi_start`` lies outside the box.
+    SimulationError
+        If no sample has an FK solution of mode ``m0``, or none of mode ``-m0``, with ``xi_start``.
+    """
+    return search_counterexample(kin, rb, CounterexampleKind.CROSSING, xi_start=xi_start, max_iter=max_iter,
+                  max_cpu_time=max_cpu_time, print_level=print_level, dense=dense)

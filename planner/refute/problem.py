@@ -16,6 +16,11 @@ mode of its first sample:
 * optionally ``|x'(0)| <= v0_max``, ``|x'(t)| <= v_max``, ``x(t)`` in the
   robot's workspace box (the tracker's other assumptions).
 
+A *crossing* counterexample, for a recording a tracker might certify
+``mode-unchanged`` (e.g. a bounce), satisfies the same assumptions except the
+one on the modes: mode ``m0`` at the first sample and ``-m0`` at the last
+(anything in between).  :class:`CounterexampleKind` names the two.
+
 This module holds the types of that problem (:class:`RecordingBounds`) and of
 a candidate (:class:`Counterexample`, with the motion it stands for,
 :func:`integrate_states`), the NLP's safety margins, and the words for how a
@@ -42,6 +47,7 @@ __all__ = [
     "MODE_MARGIN",
     "XI_MARGIN",
     "Counterexample",
+    "CounterexampleKind",
     "RecordingBounds",
     "SearchOutcome",
     "integrate_states",
@@ -61,6 +67,29 @@ XI_MARGIN = 1e-6
 MODE_MARGIN = 1e-6
 
 
+# ------------------------------------------------------------------ kinds
+class CounterexampleKind(StrEnum):
+    """Which verdict a counterexample refutes, i.e. what it requires of the modes at the samples.
+
+    Both kinds start in the recording's initial mode ``m0`` and share every
+    other assumption (geometry box, ``a_max``, joint intervals, ...).
+    """
+
+    #: Mode ``m0`` at every sample: the readings are explained without a mode
+    #: change, so no sound tracker may certify ``mode-changed`` on them.
+    BOUNCE = "bounce"
+    #: Mode ``m0`` at the first sample and ``-m0`` at the last: the readings are
+    #: explained by a motion that changed mode, so no sound tracker may certify
+    #: ``mode-unchanged`` on them (a tracker's verdict compares the first and
+    #: last samples' modes, ``verifier.tracker.verdict_of``).
+    CROSSING = "crossing"
+
+    @property
+    def refutes(self) -> str:
+        """The verdict (``verifier.Verdict`` value) this kind of counterexample rules out."""
+        return "mode-changed" if self is CounterexampleKind.BOUNCE else "mode-unchanged"
+
+
 # ------------------------------------------------------------------ outcome
 class SearchOutcome(StrEnum):
     """How one counterexample search ended, in our words rather than IPOPT's.
@@ -71,7 +100,8 @@ class SearchOutcome(StrEnum):
     the neighbourhood IPOPT explored from its starting point, not a proof.
     """
 
-    #: IPOPT converged and the independent check (``verify_bounce``) accepted the candidate.
+    #: IPOPT converged and the independent check (``verify_bounce`` or
+    #: ``verify_crossing``) accepted the candidate.
     FOUND = "counterexample-found"
     #: IPOPT converged but the independent check refused the candidate.
     REJECTED = "candidate-rejected"
@@ -276,7 +306,7 @@ def integrate_states(x0, v0, u, t_s: float) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True, eq=False)
 class Counterexample:
-    """A candidate bounce: one geometry and a piecewise-quadratic pose with its joints.
+    """A candidate bounce or crossing: one geometry and a piecewise-quadratic pose with its joints.
 
     Attributes
     ----------
@@ -291,7 +321,9 @@ class Counterexample:
     t_s : float
         Sampling period, s.
     m0 : int
-        The assembly mode kept throughout.
+        The initial assembly mode (kept throughout by a bounce, left by a crossing).
+    kind : CounterexampleKind
+        What the candidate claims about the modes (default: a bounce).
     """
 
     xi: np.ndarray
@@ -301,12 +333,17 @@ class Counterexample:
     q: np.ndarray
     t_s: float
     m0: int
+    kind: CounterexampleKind = CounterexampleKind.BOUNCE
 
     def __post_init__(self) -> None:
         for nm in ("xi", "x", "v", "u", "q"):
             a = np.array(getattr(self, nm), dtype=float)  # own copy, read-only
             a.setflags(write=False)
             object.__setattr__(self, nm, a)
+        try:
+            object.__setattr__(self, "kind", CounterexampleKind(self.kind))
+        except ValueError:
+            raise InputError(f"kind must be one of {[k.value for k in CounterexampleKind]}, got {self.kind!r}") from None
 
     def trajectory(self, t) -> np.ndarray:
         """Pose ``x(t)`` (m), shape ``(len(t), n)``, of the piecewise quadratic re-integrated

@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .problem import Counterexample, SearchOutcome, ipopt_outcome
+from .problem import Counterexample, CounterexampleKind, SearchOutcome, ipopt_outcome
 
-__all__ = ["BounceSearch", "RefutationBound", "SpeedRefutation", "Verification", "deciding_attempt"]
+__all__ = ["BounceSearch", "CrossingFloor", "RecordingRefutation", "RefutationBound", "SpeedRefutation", "Verification",
+           "deciding_attempt"]
 
 @dataclass(frozen=True)
 class Verification:
@@ -35,9 +36,12 @@ class Verification:
     xi_excess : float
         Largest distance (SI) of ``xi`` outside the box; ``0`` required.
     mode_margin : float
-        ``min_k m0 * mode_sign * det J_x / prod |rows of J_x|`` at the samples; ``> 0`` required.
+        ``min_k m0 * mode_sign * det J_x / prod |rows of J_x|`` over the
+        samples whose mode is constrained (a bounce: all, ``m0`` each; a
+        crossing: the first, ``m0``, and the last, ``-m0``, so the sign of
+        the last term flips); ``> 0`` required.
     dense_mode_violations : int
-        Dense points (between samples) whose mode is not ``m0``.
+        Dense points (between samples) whose mode is not ``m0`` (a bounce; 0 for a crossing).
     dense_ik_failures : int
         Dense points where the IK continuation failed, left the workspace box,
         or landed on another leg branch at the next sample.
@@ -61,12 +65,16 @@ class Verification:
 class BounceSearch:
     """One NLP solve from one starting geometry, and the verification of its result.
 
+    The record of both kinds of search (:func:`~planner.refute.search_bounce`,
+    :func:`~planner.refute.search_crossing`); ``kind`` says which.
+
     Attributes
     ----------
     found : bool
         IPOPT converged (its status maps to :attr:`SearchOutcome.CONVERGED`).
     verified : bool
-        ``found`` and :func:`~planner.refute.verify_bounce` accepted the candidate: a counterexample.
+        ``found`` and the independent check (:func:`~planner.refute.verify_bounce`
+        or :func:`~planner.refute.verify_crossing`) accepted the candidate: a counterexample.
     status : str
         IPOPT's raw return status, for diagnostics.
     iterations : int
@@ -80,6 +88,8 @@ class BounceSearch:
         The candidate (``None`` unless ``found``).
     verification : Verification or None
         Its check (``None`` unless ``found``).
+    kind : CounterexampleKind
+        The kind of counterexample searched (default: a bounce).
     outcome : SearchOutcome
         Derived from ``status`` and ``verification``: FOUND or REJECTED once a
         converged candidate has been checked, else :func:`ipopt_outcome` of the status.
@@ -95,6 +105,7 @@ class BounceSearch:
     xi_start: np.ndarray
     counterexample: Counterexample | None = field(default=None, repr=False)
     verification: Verification | None = None
+    kind: CounterexampleKind = CounterexampleKind.BOUNCE
     outcome: SearchOutcome = field(init=False)
 
     def __post_init__(self) -> None:
@@ -183,3 +194,85 @@ class RefutationBound:
 
     rows: tuple[SpeedRefutation, ...]
     bound: float | None
+
+
+@dataclass(frozen=True, eq=False)
+class RecordingRefutation:
+    """Search result for one recording of a family indexed by one parameter (with its unit).
+
+    The general form of :class:`SpeedRefutation` (which is kept, indexed by
+    speed, for the bounce searches over planned speeds): e.g. the bounce
+    recordings of :func:`~planner.refute.crossing_floor`, indexed by the
+    distance (m) before the locus at which they turn back.
+
+    Attributes
+    ----------
+    parameter : float
+        The value passed to ``make_recording``, in ``unit``.
+    unit : str
+        Unit of ``parameter`` (SI symbol, e.g. ``"m"`` or ``"m/s"``).
+    kind : CounterexampleKind
+        The kind of counterexample searched.
+    n_samples : int
+        Samples of the recording.
+    found : bool
+        Some start converged.
+    verified : bool
+        Some start gave a verified counterexample.
+    geometry : ndarray (m,) or None
+        Geometry of the verified counterexample (else of the last converged candidate, else ``None``).
+    joint_ratio, accel_ratio, mode_margin : float
+        The deciding candidate's :class:`Verification` figures (``nan`` if none converged).
+    status : str
+        Raw status of the deciding attempt, for diagnostics.
+    solve_time : float
+        Total solver wall time over the attempts, s.
+    attempts : tuple of BounceSearch
+    outcome : SearchOutcome
+        Derived as in :class:`SpeedRefutation`.
+    """
+
+    parameter: float
+    unit: str
+    kind: CounterexampleKind
+    n_samples: int
+    found: bool
+    verified: bool
+    geometry: np.ndarray | None
+    joint_ratio: float
+    accel_ratio: float
+    mode_margin: float
+    status: str
+    solve_time: float
+    attempts: tuple[BounceSearch, ...] = field(repr=False)
+    outcome: SearchOutcome = field(init=False)
+
+    def __post_init__(self) -> None:
+        dec = deciding_attempt(self.attempts)
+        if self.verified:
+            out = SearchOutcome.FOUND
+        else:
+            out = SearchOutcome.NOT_SEARCHED if dec is None else dec.outcome
+        object.__setattr__(self, "outcome", out)
+
+
+@dataclass(frozen=True)
+class CrossingFloor:
+    """Crossing-counterexample search over bounce recordings indexed by turn-back distance.
+
+    Attributes
+    ----------
+    rows : tuple of RecordingRefutation
+        One per distance (``parameter`` in m, ``kind`` CROSSING), in the order given.
+    floor : float or None
+        Largest turn-back distance (m) with a verified crossing counterexample,
+        ``None`` if none.  The bounce turning back that far before the locus
+        is equally explained by a motion that changed mode, so no sound
+        tracker can certify it ``mode-unchanged`` under the same bounds;
+        certifying a bounce of this family needs it to turn back farther than
+        ``floor`` (or the family is not monotone in the distance —
+        :attr:`rows` shows which distances were refuted).
+    """
+
+    rows: tuple[RecordingRefutation, ...]
+    floor: float | None

@@ -16,6 +16,12 @@ densely between samples, and by default it also requires the mode to stay
 evaluation at finitely many points is a numerical check, not a proof that the
 mode never flips between two of them; it is stricter than the claim needs,
 not weaker.
+
+A *crossing* (:func:`verify_crossing`) must be in mode ``m0`` at the first
+sample and in ``-m0`` at the last: a tracker's verdict compares those two
+modes.  What happens in between is free (by continuity the motion meets the
+locus somewhere); the dense check still follows the IK between every two
+samples, so the motion is a real one on the measured leg branches.
 """
 
 from __future__ import annotations
@@ -27,10 +33,10 @@ import numpy as np
 from robots.errors import InputError
 from robots.kinematics import KinematicModel
 
-from .problem import Counterexample, RecordingBounds, integrate_states
+from .problem import Counterexample, CounterexampleKind, RecordingBounds, integrate_states
 from .results import Verification
 
-__all__ = ["BRANCH_TOL", "DENSE_POINTS", "STATE_TOL", "verify_bounce"]
+__all__ = ["BRANCH_TOL", "DENSE_POINTS", "STATE_TOL", "verify_bounce", "verify_counterexample", "verify_crossing"]
 
 #: Largest disagreement (m) between the NLP's sample poses and the trajectory
 #: re-integrated from ``x_0, v_0`` and the accelerations (velocities: divided by ``t_s``).
@@ -52,7 +58,8 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
     each interval by construction); the candidate's own states must agree with
     it to ``STATE_TOL``.  Then, with no tolerance beyond what is stated:
 
-    0. every value is finite, ``ce.m0`` and ``ce.t_s`` are the recording's;
+    0. every value is finite, ``ce.m0`` and ``ce.t_s`` are the recording's,
+       ``ce.kind`` is :attr:`CounterexampleKind.BOUNCE`;
     1. ``xi`` lies in ``[xi_lo, xi_hi]`` and ``|u_k,i| <= a_max_i``; ``|v_0| <= v0_max``
        and ``|v_k| <= v_max`` (velocity is linear per interval: samples suffice);
        the sample poses lie in ``[x_lo, x_hi]``;
@@ -91,6 +98,67 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
     InputError
         If ``ce`` is not a Counterexample or its arrays do not match the recording's shape.
     """
+    return verify_counterexample(kin, ce, rb, CounterexampleKind.BOUNCE, dense=dense, require_dense_mode=require_dense_mode)
+
+
+def verify_crossing(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, *,
+                    dense: int = DENSE_POINTS) -> Verification:
+    """Check a candidate *crossing* independently of the NLP (numpy and the robot's numeric kinematics).
+
+    The same checks as :func:`verify_bounce` (re-integrated piecewise
+    quadratic, finite values, geometry in ``[xi]``, ``|u| <= a_max``, velocity
+    and workspace bounds, re-solved joints within ``eps_q`` at every sample,
+    IK continuation on the same leg branches between samples), except for the
+    modes: ``KinematicModel.mode_batch`` must give ``m0`` at the first sample
+    and ``-m0`` at the last, both nonzero (``|normalised mode| >=
+    robots.kinematics.MODE_RTOL``); ``ce.kind`` must be
+    :attr:`CounterexampleKind.CROSSING`.
+
+    Parameters
+    ----------
+    kin : KinematicModel
+        The robot's kinematics.
+    ce : Counterexample
+        The candidate: ``xi`` (m,), ``x``, ``v``, ``q`` (K, n), ``u`` (K - 1, n), SI.
+    rb : RecordingBounds
+        The recording and the bounds the candidate must respect.
+    dense : int
+        IK continuation points per interval (``0`` skips that check).
+
+    Returns
+    -------
+    Verification
+        ``ok`` when every check passed; ``mode_margin`` is
+        ``min(m0 n_0, -m0 n_{K-1})`` of the normalised modes ``n_k``;
+        ``dense_mode_violations`` is 0 (not counted for a crossing).
+
+    Raises
+    ------
+    InputError
+        If ``ce`` is not a Counterexample or its arrays do not match the recording's shape.
+    """
+    return verify_counterexample(kin, ce, rb, CounterexampleKind.CROSSING, dense=dense)
+
+
+def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, kind: CounterexampleKind, *,
+           dense: int = DENSE_POINTS, require_dense_mode: bool = True) -> Verification:
+    """Check a candidate of either kind: :func:`verify_bounce` or :func:`verify_crossing` by ``kind``.
+
+    Check 3 of :func:`verify_bounce` (the modes at the samples) is the only one
+    that depends on ``kind``; for a crossing it is replaced by "mode ``m0`` at
+    the first sample and ``-m0`` at the last" and no mode is required between
+    samples (``require_dense_mode`` then has no effect).
+
+    Raises
+    ------
+    InputError
+        If ``ce`` is not a Counterexample, its arrays do not match the
+        recording's shape, or ``kind`` is not a :class:`CounterexampleKind`.
+    """
+    try:
+        kind = CounterexampleKind(kind)
+    except ValueError:
+        raise InputError(f"kind must be one of {[k.value for k in CounterexampleKind]}, got {kind!r}") from None
     if not isinstance(ce, Counterexample):
         raise InputError(f"ce must be a Counterexample, got {type(ce).__name__}")
     K, n = rb.n_samples, kin.n
@@ -104,6 +172,8 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
                             K * dense, K * dense, math.inf)
     if ce.m0 != rb.m0 or abs(ce.t_s - rb.t_s) > 0:
         fails.append("mode or sampling period differs from the recording's")
+    if ce.kind is not kind:
+        fails.append(f"candidate is a {ce.kind.value}, checked as a {kind.value}")
 
     # 1. geometry, acceleration, velocity and workspace bounds.
     xi_excess = float(max(np.max(rb.xi_lo - xi), np.max(xi - rb.xi_hi), 0.0))
@@ -141,11 +211,20 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
     if np.max(np.abs(q - q_ik)) > BRANCH_TOL:
         fails.append("candidate joints are not the IK of its poses")
 
-    # 3. mode at the samples.
+    # 3. mode at the samples: every sample's for a bounce, the first and last for a crossing.
     modes = kin.mode_batch(xs, q_ik, xi)
-    mode_margin = float(np.min(rb.m0 * kin.normalised_mode_batch(xs, q_ik, xi)))
-    if np.any(modes != rb.m0):
-        fails.append(f"mode differs from {rb.m0:+d} at {int(np.count_nonzero(modes != rb.m0))} samples")
+    signed = rb.m0 * kin.normalised_mode_batch(xs, q_ik, xi)
+    if kind is CounterexampleKind.BOUNCE:
+        mode_margin = float(np.min(signed))
+        if np.any(modes != rb.m0):
+            fails.append(f"mode differs from {rb.m0:+d} at {int(np.count_nonzero(modes != rb.m0))} samples")
+    else:
+        mode_margin = float(min(signed[0], -signed[-1]))
+        if modes[0] != rb.m0:
+            fails.append(f"mode at the first sample is {int(modes[0]):+d}, not {rb.m0:+d}")
+        if modes[-1] != -rb.m0:
+            fails.append(f"mode at the last sample is {int(modes[-1]):+d}, not {-rb.m0:+d}")
+    dense_mode = require_dense_mode and kind is CounterexampleKind.BOUNCE
 
     # 4. dense continuation between samples (all intervals advance together).
     dense_mode_bad = dense_ik_bad = 0
@@ -160,14 +239,14 @@ def verify_bounce(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, 
                 okj &= np.all((xd >= rb.x_lo) & (xd <= rb.x_hi), axis=1)
             live &= okj
             qc = np.where(okj[:, None], qn, qc)
-            if j < dense:
+            if dense_mode and j < dense:
                 mj = kin.mode_batch(xd, qc, xi)
                 dense_mode_bad += int(np.count_nonzero(live & (mj != rb.m0)))
         live &= np.max(np.abs(qc - q_ik[1:]), axis=1) <= BRANCH_TOL
         dense_ik_bad = int(np.count_nonzero(~live))
         if dense_ik_bad:
             fails.append(f"IK continuation fails or switches branch in {dense_ik_bad} intervals")
-        if require_dense_mode and dense_mode_bad:
+        if dense_mode_bad:
             fails.append(f"mode differs from {rb.m0:+d} at {dense_mode_bad} points between samples")
     elif dense > 0:
         dense_ik_bad = K - 1

@@ -47,12 +47,14 @@ class SimulatedRun(Trajectory):
     xi_true : ndarray (m,)
         True geometry.
     k_sing : int
-        Sample at the singular instant (crossing or touching); the time law is
-        shifted so that this instant is exactly ``t[k_sing]``.
+        Sample at the singular instant (crossing, touching, or turning back
+        ``short`` before the locus); the time law is shifted so that this
+        instant is exactly ``t[k_sing]``.
     t_sing : float
         Singular instant, s.
     x_sing : ndarray (n,)
-        Where the path meets the true singular locus, m.
+        Where the path (extended) meets the true singular locus, m; a bounce
+        turns back at ``x_sing - short * direction``.
     s_sing : float
         Signed distance (m) from the nominal crossing point to ``x_sing`` along
         ``direction``.
@@ -60,6 +62,9 @@ class SimulatedRun(Trajectory):
         Speed at the crossing (for a bounce: the approach speed), m/s.
     bounce : bool
         True for a bounce (no mode change), False for a crossing.
+    short : float
+        For a bounce: how far (m) before the true locus it turns back, along
+        ``direction`` (0: it touches the locus).  0 for a crossing.
     crossing_point, direction : ndarray (n,)
         Nominal crossing point (m) and unit direction of the path.
     eps_q, a_peak : float
@@ -85,6 +90,7 @@ class SimulatedRun(Trajectory):
     a_peak: float
     quantisation: Quantisation
     time_law: TimeLaw = field(repr=False)
+    short: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -164,28 +170,30 @@ def _aligned(law_fn, t_sing_rel: float, t_rest: float, t_s: float):
 
 
 def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s, eps_q, t_rest,
-              t_rest_end, a_peak, cruise, working_guess, seed, quantisation, strict_xi):
+              t_rest_end, a_peak, cruise, working_guess, seed, quantisation, strict_xi, short=0.0):
     p, u, v_sing, a_peak, cruise, t_rest, t_rest_end, t_s, eps_q, xi, qg = _prepare(
         model, crossing_point, direction, v_sing, xi_true, t_s, eps_q, t_rest, t_rest_end,
         a_peak, cruise, working_guess, quantisation, strict_xi)
+    short = V.positive("short", short, allow_zero=True)
     name = model.robot.name
     T, D = ramp_length(v_sing, a_peak)
     h = _scan_step(model.robot)
     # Scan exactly the arc lengths the motion needs (grid ends on the path ends);
-    # a bounce starts 2 (D + cruise) before the true locus, found first.
+    # a bounce starts 2 (D + cruise) before its turning point, short before the
+    # true locus (found first).
     if bounce:
         near = scan_line(model, p, u, xi, qg, -cruise, cruise, h)
         if near.s.size < 2:
             raise SimulationError(f"{name}: no valid IK next to the crossing point {p.tolist()}")
         s_touch, _j = nearest_crossing(model, p, u, xi, near, cruise)
-        scan = scan_line(model, p, u, xi, qg, s_touch - 2.0 * (D + cruise), cruise, h)
+        scan = scan_line(model, p, u, xi, qg, s_touch - short - 2.0 * (D + cruise), cruise, h)
     else:
         scan = scan_line(model, p, u, xi, qg, -(D + cruise), D + cruise, h)
 
     def too_fast(reason: str):
         s_true, e_lo, e_hi = valid_extent(model, p, u, xi, qg, cruise, h)
         if bounce:
-            vmax = _v_from_distance((s_true - e_lo) / 2.0 - cruise, a_peak)
+            vmax = _v_from_distance((s_true - short - e_lo) / 2.0 - cruise, a_peak)
         else:
             vmax = _v_from_distance(min(-e_lo, e_hi) - cruise, a_peak)
         return SimulationError(
@@ -197,8 +205,9 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
     if scan.s.size < 2:
         raise too_fast("poses beyond the reachable/valid segment")
     s_true, j = nearest_crossing(model, p, u, xi, scan, cruise)
-    s_start = s_true - 2.0 * (D + cruise) if bounce else -(D + cruise)
-    s_end = s_true if bounce else D + cruise
+    s_turn = s_true - short  # a bounce turns back here (on the locus when short = 0)
+    s_start = s_turn - 2.0 * (D + cruise) if bounce else -(D + cruise)
+    s_end = s_turn if bounce else D + cruise
     if not scan.lo_done and scan.s[0] > s_start:
         raise too_fast(f"a start pose {-s_start * 1e3:.1f} mm before the crossing point, which is "
                        "outside the workspace or unreachable")
@@ -207,13 +216,13 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
                        "the workspace or unreachable")
     ka, kb = sign_changes(scan.det)
     inside = (scan.s[kb] > s_start) & (scan.s[ka] < s_end)
-    inside[j] = False
+    inside[j] = False  # the locus the path is meant to meet (at s_true, beyond a short bounce's end)
     if inside.any():
         raise too_fast("a path that meets another Type 2 singularity")
 
     if bounce:
         law, k_sing, n_samp = _aligned(
-            lambda tr: bounce_time_law(v_sing, a_peak, cruise, tr, t_rest_end, s_true),
+            lambda tr: bounce_time_law(v_sing, a_peak, cruise, tr, t_rest_end, s_turn),
             2.0 * T + 2.0 * cruise / v_sing, t_rest, t_s)
     else:
         law, k_sing, n_samp = _aligned(
@@ -221,7 +230,7 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
             T + (s_true + cruise) / v_sing, t_rest, t_s)
     t = np.arange(n_samp) * t_s
     s, v, a = law.evaluate(t)
-    s[k_sing] = s_true  # the singular sample lies exactly on the true locus
+    s[k_sing] = s_turn if bounce else s_true  # the singular sample: exactly on the locus, or short of it
     if bounce:
         v[k_sing] = a[k_sing] = 0.0  # the touching instant, exactly
     X = p + s[:, None] * u
@@ -248,7 +257,7 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
         qd=QD, qdd=QDD, mode_true=modes, xi_true=np.array(xi), k_sing=int(k_sing),
         t_sing=float(t[k_sing]), x_sing=p + s_true * u, s_sing=float(s_true), v_sing=v_sing,
         bounce=bounce, crossing_point=p, direction=u, t_s=t_s, eps_q=eps_q, a_peak=a_peak,
-        quantisation=quantisation, time_law=law,
+        quantisation=quantisation, time_law=law, short=short if bounce else 0.0,
     )
 
 
@@ -316,38 +325,47 @@ def simulate_bounce(model: KinematicModel, crossing_point, direction, v_sing: fl
                     xi_true=None, t_s: float | None = None, eps_q: float | None = None,
                     t_rest: float = 0.5, t_rest_end: float = 0.1, a_peak: float = 60.0,
                     cruise: float = 5e-3, working_guess=None, seed=None,
-                    quantisation: str = "floor", strict_xi: bool = True) -> SimulatedRun:
-    """Simulate a failed crossing: the end-effector stops on the true locus and comes back.
+                    quantisation: str = "floor", strict_xi: bool = True, short: float = 0.0) -> SimulatedRun:
+    """Simulate a failed crossing: the end-effector stops on (or ``short`` before) the true locus and comes back.
 
     Rest, ramp to ``v_sing``, constant speed over ``2 cruise``, smoothstep
     deceleration to rest exactly on the true singular locus (``|a| <= a_peak``),
-    then the mirror image in time back to the start, rest.  The start lies
-    ``2 (D + cruise)`` before the true locus, ``D`` the ramp length.  The mode
-    never changes (it is 0 at the touching sample ``k_sing``).  Parameters,
-    returns and errors as in :func:`simulate_crossing` (``v_sing`` is the
-    approach speed).
+    or ``short`` metres before it along ``direction``, then the mirror image in
+    time back to the start, rest.  The start lies ``2 (D + cruise)`` before the
+    turning point, ``D`` the ramp length.  The mode never changes (it is 0 at
+    the touching sample ``k_sing`` when ``short = 0``).  Parameters, returns
+    and errors as in :func:`simulate_crossing` (``v_sing`` is the approach
+    speed), and:
+
+    Parameters
+    ----------
+    short : float
+        Distance (m, >= 0) before the true locus at which the motion turns
+        back; 0 (default) touches it.
     """
     return _simulate(True, model, crossing_point, direction, v_sing, xi_true=xi_true, t_s=t_s,
                      eps_q=eps_q, t_rest=t_rest, t_rest_end=t_rest_end, a_peak=a_peak,
                      cruise=cruise, working_guess=working_guess, seed=seed,
-                     quantisation=quantisation, strict_xi=strict_xi)
+                     quantisation=quantisation, strict_xi=strict_xi, short=short)
 
 
 def max_v_sing(model: KinematicModel, crossing_point, direction, *, xi_true=None,
                a_peak: float = 60.0, cruise: float = 5e-3, working_guess=None,
-               bounce: bool = False, strict_xi: bool = True) -> float:
+               bounce: bool = False, strict_xi: bool = True, short: float = 0.0) -> float:
     """Largest ``v_sing`` (m/s) whose crossing (or bounce) path stays valid.
 
     The path must keep valid IK (in ``x_bounds``, joint limits, ``J_q``
     regular) and meet no other Type 2 singularity.  The valid extent is found
     by IK continuation on a grid of step ``h = min(x_bounds side) / 256``,
     its ends refined by bisection (or Brent's method for another singularity)
-    and pulled in by ``h / 1000``.  Arguments as in :func:`simulate_crossing`.
+    and pulled in by ``h / 1000``.  Arguments as in :func:`simulate_crossing`;
+    ``short`` (m) as in :func:`simulate_bounce` (used with ``bounce``).
     """
+    short = V.positive("short", short, allow_zero=True)
     p, u, _v, a_peak, cruise, _tr, _te, _ts, _eq, xi, qg = _prepare(
         model, crossing_point, direction, 1.0, xi_true, None, None, 0.0, 0.0, a_peak, cruise,
         working_guess, "floor", strict_xi)
     s_true, e_lo, e_hi = valid_extent(model, p, u, xi, qg, cruise, _scan_step(model.robot))
     if bounce:
-        return _v_from_distance((s_true - e_lo) / 2.0 - cruise, a_peak)
+        return _v_from_distance((s_true - short - e_lo) / 2.0 - cruise, a_peak)
     return _v_from_distance(min(-e_lo, e_hi) - cruise, a_peak)
