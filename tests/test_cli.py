@@ -75,6 +75,23 @@ def test_simulate_then_check_bounce(tmp_path, capsys):
     assert out["verdict"] in ("mode-unchanged", "unknown"), out
 
 
+def test_check_window_reasoning_decides_what_the_forward_tracker_leaves_open(tmp_path, capsys):
+    """A simulated crossing at 1.1 m/s: the forward tracker says unknown, the window passes certify the change."""
+    rec = tmp_path / "slow.csv"
+    assert main(["simulate", "--v-sing", "1.1", "--t-rest", "0.05", "-o", str(rec)]) == 0
+    capsys.readouterr()
+    reports = {}
+    for reasoning in ("forward", "window"):
+        assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", reasoning]) == 0
+        reports[reasoning] = json.loads(capsys.readouterr().out)
+    assert reports["forward"]["verdict"] == "unknown" and reports["forward"]["window"] is None
+    win = reports["window"]
+    assert win["forward_verdict"] == "unknown" and win["verdict"] == "mode-changed" and win["final_mode"] == -1
+    assert {h["final_mode"]: h["status"] for h in win["window"]["hypotheses"]} == {1: "refuted", -1: "consistent"}
+    assert main(["check", str(rec), "--initial-mode", "1", "--reasoning", "window"]) == 0
+    assert "window passes: mode-changed" in capsys.readouterr().out
+
+
 GOOD_HEAD = "t,q1,q2\n0.000,2.0,1.1\n0.001,2.0,1.1\n0.002,2.0,1.1\n"
 
 

@@ -78,6 +78,7 @@ CASES = [
     (CHECK + ["--plot", "/dev/full"], "must end in .png"),
     (["check", "{rec}", "--x0=0,1,2"], "expected 4 comma-separated numbers"),
     (CHECK + ["--initial-mode", "2"], "invalid choice"),
+    (CHECK + ["--reasoning", "psychic"], "invalid choice"),
     (["check", "{d}", "--initial-mode", "1"], "is a directory"),
     (["check", "{d}/none.csv", "--initial-mode", "1"], "no such file"),
     (["monitor", "{rec}", "--initial-mode", "1", "--t-s", "0"], "--t-s = 0 s is out of range"),

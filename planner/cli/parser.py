@@ -9,6 +9,7 @@ from robots.registry import DEFAULT_ROBOT, available_robots
 from verifier.step import Backend
 from verifier.tracker import VelocityModel
 from verifier.trajfile import parse_number
+from verifier.window import Reasoning
 
 from ..execution import ExecutionKind
 from ..task import Method
@@ -105,6 +106,9 @@ def build_parser() -> argparse.ArgumentParser:
     c = command("check", "certify the assembly mode of a recorded joint trajectory")
     c.add_argument("trajectory", help="CSV file: t,q1..qn[,qd1..qdn] (s, rad, rad/s)")
     _tracker_options(c)
+    c.add_argument("--reasoning", choices=[r.value for r in Reasoning], default=Reasoning.WINDOW.value,
+                   help="'window': when the forward tracker leaves the verdict open, contract the whole recording "
+                        "forward and backward under each final-mode hypothesis; 'forward': the tracker alone")
     c.add_argument("--json", action="store_true", help="print one JSON object")
     c.add_argument("--plot", help="write a PNG figure of the boxes")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -15,6 +15,7 @@ from verifier.plots import plot_run
 from verifier.step import Backend, Tracker
 from verifier.tracker import Verdict, initial_box_from_mode, verdict_of
 from verifier.trajfile import TrajectoryReader, open_trajectory
+from verifier.window import Reasoning, track_window
 
 from .setup import progress_bar, tracker_setup
 
@@ -24,6 +25,10 @@ __all__ = ["check", "monitor", "Monitor"]
 INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box, eps_q or the initial box is "
                      "violated by the data")
 
+
+#: Longest recording (samples) ``check`` keeps in memory for window reasoning (16 MB of readings for
+#: n = 6; the tubes of the passes take about 16 geometries x 2 hypotheses x 64 bytes per sample more).
+WINDOW_MAX_SAMPLES = 200_000
 
 #: Relative width of a latency histogram bin, and the number of bins (1 ns to ~ 4 h).
 _LATENCY_BIN_RATIO = 0.01
@@ -43,11 +48,15 @@ def check(a) -> int:
     """``crosscert check``: track a recording while it is read and print the verdict; returns the exit code.
 
     Memory does not grow with the recording's length, except with ``--plot``
-    (the boxes of every sample are kept for the figure).
+    (the boxes of every sample are kept for the figure) and with ``window``
+    reasoning, which keeps the readings of recordings up to
+    :data:`WINDOW_MAX_SAMPLES` samples for the window passes (run when the
+    forward tracker leaves the verdict open).
     """
     robot, model, make_settings, x0 = tracker_setup(a)
     t0 = time.perf_counter()
     run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False)
+    readings = [] if a.reasoning == Reasoning.WINDOW.value else None
     bar, cb = progress_bar(None, not a.no_progress and not a.json, "tracking")
     try:
         with open_trajectory(a.trajectory) as (src, name):
@@ -57,6 +66,10 @@ def check(a) -> int:
                 t, q = reader.columns(values)[:2]
                 _print_warnings(reader)
                 run.feed(line, t, q, reader.t_s)
+                if readings is not None:
+                    readings.append(q)
+                    if len(readings) > WINDOW_MAX_SAMPLES:
+                        readings = None  # too long for the window: the forward verdict stands
                 if cb is not None:
                     cb(1)
     finally:
@@ -65,6 +78,21 @@ def check(a) -> int:
     if run.samples < 2:
         raise TrajectoryFileError(f"{name}: at least two samples are needed, got {run.samples}")
     out = {k: v for k, v in run.summary().items() if k not in _MONITOR_ONLY}
+    out["reasoning"] = a.reasoning
+    out["forward_verdict"] = out["verdict"]
+    out["window"] = None
+    if a.reasoning == Reasoning.WINDOW.value and out["verdict"] == Verdict.UNKNOWN.value:
+        if readings is None:
+            print(f"crosscert: note: window reasoning skipped: the recording is longer than {WINDOW_MAX_SAMPLES} "
+                  "samples; the verdict is the forward tracker's", file=sys.stderr)
+        else:
+            win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
+                               x0=run.x0_used, backend=a.backend)
+            out["window"] = win.summary()
+            out["verdict"] = win.verdict.value
+            if win.verdict in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
+                out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
+                                     else -out["initial_mode"])
     out["elapsed_s"] = time.perf_counter() - t0
     if a.plot:
         plot_run(a.plot, run.t_s, run.recorded(), title=f"{Path(name).name}: {out['verdict']}",
@@ -73,6 +101,10 @@ def check(a) -> int:
         print(json.dumps(out))
     else:
         print(f"verdict: {out['verdict']}")
+        if out["window"] is not None:
+            w = out["window"]
+            hyps = ", ".join("final mode {:+d} {}".format(h["final_mode"], h["status"]) for h in w["hypotheses"])
+            print(f"forward tracker: {out['forward_verdict']}; window passes: {w['verdict']} ({hyps})")
         for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
             print(f"{key}: {out[key]}")
         print(f"max width pose (m_x): {1e3 * out['max_width_pose_m']:.3f} mm")
@@ -144,6 +176,7 @@ class Monitor:
         self.a, self.model, self.make_settings, self.x0 = a, model, make_settings, x0
         self.record, self.echo = record, echo
         self.tracker = None
+        self.x0_used = None  # the initial box the tracker started from
         self.t_s = None
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
@@ -163,6 +196,7 @@ class Monitor:
             if x0 is None:
                 x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
                                            backend=self.a.backend)
+            self.x0_used = x0
             self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
                                    spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
         for line, t, q in self.pending:
