@@ -26,6 +26,7 @@ from verifier.window import Reasoning, WindowResult
 
 from . import execution as ex_
 from . import refute
+from .bounce import BounceGap, bounce_gap
 from .certify import certify_plan, certify_plan_window, execution_class, minimal_v_sing
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .plan import derived_a_max, plan_crossing, speed_ceiling
@@ -59,7 +60,10 @@ class CrossingCertificate:
     vector ``xi``) and ``task`` say what was certified.  ``enclosures`` is the
     forward tracker's run at ``v_min``; ``window`` the window passes on the
     same inputs when the forward run alone did not certify (their verdict is
-    then the certificate's).
+    then the certificate's).  ``bounce`` brackets, at ``v_min``, the turn-back
+    distance from which the task's failed crossings are certified
+    ``mode-unchanged`` against the crossing floor (:mod:`planner.bounce`;
+    computed with the refutation bound).
     """
 
     verdict: Verdict
@@ -80,6 +84,7 @@ class CrossingCertificate:
     param_names: tuple = ()
     task: CrossingTask | None = field(default=None, repr=False)
     window: WindowResult | None = field(default=None, repr=False)
+    bounce: BounceGap | None = field(default=None, repr=False)
 
     @property
     def certified_below_v_min(self) -> list:
@@ -142,6 +147,7 @@ class CrossingCertificate:
                 for r in self.refutation
             ],
             "window": None if self.window is None else self.window.summary(),
+            "bounce": None if self.bounce is None else self.bounce.summary(),
             "monte_carlo": None if self.monte_carlo is None else self.monte_carlo.summary(),
             "versions": self.versions,
             "elapsed_s": self.elapsed_s,
@@ -163,7 +169,7 @@ def package_versions() -> dict:
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=0.6, v_high=None,
                      tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
                      executor: Executor | None = None, seed=0, progress=None, kin=None,
-                     imodel=None) -> CrossingCertificate:
+                     imodel=None, bounce: bool = True) -> CrossingCertificate:
     """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
 
     Parameters
@@ -195,6 +201,10 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         Seed of the Monte Carlo executions and of the counterexample starts.
     progress : callable, optional
         ``progress(k)`` after each tracked sample of every batch.
+    bounce : bool
+        With ``refute``: also bracket the bounces of the task at ``v_min``
+        (:func:`planner.bounce.bounce_gap`, on ``executor`` when searching in
+        the background).
     """
     t0 = time.perf_counter()
     kin = KinematicModel(robot) if kin is None else kin
@@ -217,8 +227,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             scan = sorted({round(float(v), 6) for v in scan})
         except (TypeError, ValueError):
             raise InputError(f"refute_speeds must be numbers (m/s), got {refute_speeds!r}") from None
-        refuter = Refuter(robot, task, b, m0, starts, kin, (executor or SubprocessExecutor())
-                          if refute_in_background else None, own_executor=executor is None)
+        pool = (executor or SubprocessExecutor()) if refute_in_background else None
+        refuter = Refuter(robot, task, b, m0, starts, kin, pool, own_executor=executor is None)
         refuter.submit(scan)
     # wall time of each phase (the refutation's is the wait left after the Monte Carlo run)
     clock = {"setup": time.perf_counter() - t0}
@@ -252,7 +262,11 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             v_min = plan = enc = win = cls = None
         t1 = lap("certificate", t1)
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
-        ref_job = None
+        ref_job = bounce_job = None
+        if refuter is not None and v_min is not None and bounce:
+            # the bounces of the task at v_min: where mode-unchanged is certified and where it cannot be
+            bounce_job = (pool.submit(bounce_gap, robot, task, b, v_min, starts=starts) if pool is not None
+                          else None)
         if refuter is not None:
             refuter.drop_from(top)
             if refute_in_background:
@@ -270,7 +284,16 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             ref_bound, ref = refutation_search(refuter, top, tol)
         else:
             ref_bound = ref = None
-        lap("refutation", t1)
+        t1 = lap("refutation", t1)
+        gap = None
+        if refuter is not None and v_min is not None and bounce:
+            try:
+                gap = bounce_job.result() if bounce_job is not None else None
+            except Exception as exc:  # as for the refutation: a failed worker is no result; run it here
+                log.warning("background bounce search failed (%r); searching in this process", exc)
+            if gap is None:
+                gap = bounce_gap(robot, task, b, v_min, starts=starts, kin=kin, imodel=imodel)
+        lap("bounce", t1)
     finally:
         if refuter is not None:
             refuter.close()
@@ -293,6 +316,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         param_names=tuple(robot.param_names),
         task=task,
         window=win,
+        bounce=gap,
     )
 
 

@@ -65,9 +65,11 @@ def certify(a) -> int:
     if a.json:
         print(json.dumps(report))
         return 0
-    print(f"{'v_sing (m/s)':>12} {'m_x (mm)':>10} {'m_xd (m/s)':>11} {'verdict':>15}")
+    # widths are the forward tracker's boxes (the paper's Table II); the verdict includes the window passes
+    print(f"{'v_sing (m/s)':>12} {'m_x (mm)':>10} {'m_xd (m/s)':>11} {'forward':>15} {'verdict':>15}")
     for r in cert.trials:
-        print(f"{r.v_sing:12.4f} {1e3 * r.max_width_pose:10.2f} {r.max_width_velocity:11.3f} {r.verdict.value:>15}")
+        print(f"{r.v_sing:12.4f} {1e3 * r.max_width_pose:10.2f} {r.max_width_velocity:11.3f} "
+              f"{r.forward_verdict.value:>15} {r.verdict.value:>15}")
     vmin = "none (no tried speed certifies)" if cert.v_min is None else f"{cert.v_min:.4f} m/s"
     ref = "not computed" if a.no_refute else ("none found" if cert.refutation_bound is None else f"{cert.refutation_bound:.4f} m/s")
     print(f"minimal certified v_sing: {vmin}")
@@ -77,6 +79,14 @@ def certify(a) -> int:
         print(f"note: certification is not monotone here; also certified below v_min at "
               f"{', '.join(f'{v:.4f}' for v in cert.certified_below_v_min)} m/s")
     print(f"refutation bound (no sound tracker certifies at or below): {ref}")
+    if cert.v_min is not None and cert.v_min > 0 and cert.refutation_bound:
+        print(f"gap (mode-changed): v_min / refutation bound = {cert.v_min / cert.refutation_bound:.3f}")
+    g = cert.bounce
+    if g is not None:
+        cf = "none (not at 30 mm)" if g.certified_from is None else f"{1e3 * g.certified_from:.1f} mm"
+        fl = "none found" if g.floor is None else f"{1e3 * g.floor:.2f} mm"
+        print(f"bounces at {g.speed:.4f} m/s turning back short of the locus: mode-unchanged certified from {cf}; "
+              f"crossing floor (no sound tracker certifies at or closer): {fl}")
     mc = cert.monte_carlo
     if mc is not None:
         print(f"Monte Carlo at v_min: {mc.detected_in_class}/{mc.in_class} admissible executions detected "

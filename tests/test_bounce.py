@@ -1,0 +1,25 @@
+"""The gap for mode-unchanged (planner.bounce): bounces certified only beyond the crossing floor."""
+
+from __future__ import annotations
+
+from planner.bounce import bounce_gap
+from planner.task import PlanningBounds
+from robots import DEXTAR
+from verifier.tracker import Verdict
+
+
+def test_bounces_are_certified_only_beyond_the_crossing_floor(task, kin, imodel):
+    """On the benchmark task at 1.2 m/s: a crossing explains the bounces turning back up to the floor
+    (~10 mm), the tracker never certifies mode-unchanged at or inside it, never mode-changed anywhere,
+    and certifies the bounces that turn back far enough."""
+    g = bounce_gap(DEXTAR, task, PlanningBounds(), 1.2, distances=(0.0, 0.004, 0.009, 0.012, 0.02), tol=1e-3,
+                   kin=kin, imodel=imodel)
+    assert g.floor is not None and 0.005 < g.floor < 0.015, g.summary()
+    assert all(v is not Verdict.MODE_CHANGED for v in g.verdicts), g.summary()
+    for d, v in zip(g.distances, g.verdicts):
+        if d <= g.floor:
+            assert v is not Verdict.MODE_UNCHANGED, (d, g.summary())
+    assert g.certified_from is not None and g.certified_from > g.floor, g.summary()
+    assert g.verdicts[-1] is Verdict.MODE_UNCHANGED
+    s = g.summary()
+    assert s["gap_m"] == g.certified_from - g.floor and len(s["tracker"]) == 5
