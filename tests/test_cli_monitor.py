@@ -174,3 +174,17 @@ def test_latency_statistics_in_constant_memory():
     true = np.percentile(values, 99, method="inverted_cdf") / 1e3
     assert true <= stats.quantile_us(0.99) <= true * 1.0101 + 0.1
     assert stats.max_us() == round(values.max() / 1e3, 1) and stats.bins.nbytes == size
+
+
+@pytest.mark.parametrize("name", ["crossing_1458", "bounce_1458"])
+def test_lagged_events_are_true_and_come_later(monkeypatch, capsys, csv_text, name):
+    """``--lag 20``: every event is about sample k - 20 when sample k is read, every certified mode is the
+    true one, and the stream's verdict is one the problem allows."""
+    code, lines, _ = _monitor(monkeypatch, capsys, csv_text(name), "-", *FLAGS, "--lag", "20")
+    run = run_of(CATALOGUE[name])
+    *events, last = lines
+    assert code == 0 and last["lag"] == 20
+    assert events and all(e["known_at_k"] == e["k"] + 20 for e in events)
+    assert all(e["t"] == pytest.approx(run.t[e["k"]]) for e in events)
+    assert all(e["mode"] in (0, run.mode_true[e["k"]]) for e in events), events
+    assert last["verdict"] in {v.value for v in CATALOGUE[name].expected}

@@ -79,6 +79,8 @@ CASES = [
     (["check", "{rec}", "--x0=0,1,2"], "expected 4 comma-separated numbers"),
     (CHECK + ["--initial-mode", "2"], "invalid choice"),
     (CHECK + ["--reasoning", "psychic"], "invalid choice"),
+    (["monitor", "{rec}", "--initial-mode", "1", "--lag", "5000"], "--lag = 5000 samples is out of range"),
+    (["monitor", "{rec}", "--initial-mode", "1", "--lag", "-3"], "not a non-negative whole number"),
     (["check", "{d}", "--initial-mode", "1"], "is a directory"),
     (["check", "{d}/none.csv", "--initial-mode", "1"], "no such file"),
     (["monitor", "{rec}", "--initial-mode", "1", "--t-s", "0"], "--t-s = 0 s is out of range"),

@@ -182,3 +182,24 @@ def test_bad_arguments_are_refused(runs, settings):
         _window(sc, settings, max_geometries=0)
     with pytest.raises(InputError, match="shape"):
         track_window(interval_model(), sc.q_meas[:, :1], settings, initial_mode=1)
+
+
+def test_fixed_lag_modes_are_true(runs, settings):
+    """Online window reasoning with a lag of 20 samples on slow adversarial crossings and bounces: every
+    mode it certifies (now or 20 samples back) is the true one, and it certifies some the tracker did not."""
+    from verifier.window import FixedLagWindow
+
+    gained = 0
+    for sc in runs[N_RUNS:N_RUNS + 6]:
+        x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
+        fl = FixedLagWindow(interval_model(), settings, x0, lag=20)
+        fwd = []
+        for k, q in enumerate(sc.q_meas):
+            r = fl.update(q)
+            fwd.append(int(fl.tracker.state.mode[0]))
+            assert r.consistent, sc.name
+            assert r.mode_now in (0, sc.mode[k]), (sc.name, k)
+            if r.lagged >= 0:
+                assert r.lagged_mode in (0, sc.mode[r.lagged]), (sc.name, r)
+                gained += r.lagged_mode != 0 and fwd[r.lagged] == 0
+    assert gained > 0

@@ -47,7 +47,7 @@ from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import initial_box_from_mode, verdict_of
 
-__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window", "WINDOW_MAX_PASSES",
+__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window", "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES",
            "WINDOW_MAX_GEOMETRIES"]
 
 #: Default pass budget of a round (backward and forward passes alternate).
@@ -56,6 +56,9 @@ WINDOW_MAX_PASSES = 6
 WINDOW_MAX_GEOMETRIES = 64
 #: Passes stop once the summed tube widths shrink by less than this fraction in a pass.
 WINDOW_REL_TOL = 0.02
+#: Resolution (m) of the forward-kinematics enumeration of :class:`FixedLagWindow` (once per sample
+#: and hypothesis: coarser than the whole-recording passes' 1e-5 m, which splits the locus finely).
+_LAG_FK_TOL = 1e-4
 #: Velocity widths above this (m/s) count as this much when measuring progress (unbounded tubes).
 _WIDTH_CAP = 1e3
 
@@ -192,15 +195,16 @@ def _width(x, xd):
     return float(w)
 
 
-def _final_box(model, q_last, mode, s, xi_row, backend):
-    """Hull ``(2, n)`` of the pose solutions of the last reading in mode ``mode`` or undecided,
-    ``None`` when there is none (the geometry cannot end in that mode), the search box when they
-    could not be isolated (no restriction)."""
+def _final_box(model, q_last, mode, s, xi_row, backend, search=None, tol=1e-5):
+    """Hull ``(2, n)`` of the pose solutions of the last reading in mode ``mode`` or undecided, inside
+    ``search`` (the robot's ``x_bounds`` by default; any box known to hold the pose), ``None`` when there
+    is none (the geometry cannot end in that mode), the search box when they could not be isolated."""
     eps = s.eps_q
     Q = I.sub(q_last, q_last, eps, eps)[0], I.add(q_last, q_last, eps, eps)[1]
-    lo, hi = model.robot.x_bounds
-    search = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
-    sols = pose_solutions(model, Q, xi_row, search, tol=1e-5, backend=backend)
+    if search is None:
+        lo, hi = model.robot.x_bounds
+        search = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
+    sols = pose_solutions(model, Q, xi_row, search, tol=tol, backend=backend)
     if sols is None:
         return np.stack(search)
     mine = [b for b, m in sols if m in (mode, 0)]
@@ -429,3 +433,125 @@ def _decide(hyps, max_passes, rel_tol, max_geometries):
         open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
         for h in open_:
             h.split()
+
+
+@dataclass(frozen=True)
+class LagResult:
+    """What a :class:`FixedLagWindow` knows after reading sample ``k``.
+
+    Attributes
+    ----------
+    k : int
+        Index of the reading just fed.
+    mode_now : int
+        Mode certified at sample ``k`` (+1 / -1, 0 not certified): the
+        tracker's, or the one left when the other final-mode hypothesis over
+        the last ``lag + 1`` samples is refuted.
+    lagged : int
+        Index ``k - lag`` of the sample whose mode ``lagged_mode`` is (-1
+        before ``lag`` samples were read).
+    lagged_mode : int
+        Mode certified at sample ``k - lag`` from the readings up to ``k``.
+    consistent : bool
+        False once every geometry hypothesis of the tracker became empty.
+    """
+
+    k: int
+    mode_now: int
+    lagged: int
+    lagged_mode: int
+    consistent: bool
+
+
+class FixedLagWindow:
+    """Window reasoning online, with a fixed lag: the mode of sample ``k`` certified from the readings up to ``k + lag``.
+
+    After each reading the forward tracker advances; when its mode at the
+    newest sample ``k`` or at ``k - lag`` is not certified, one backward pass
+    per final-mode hypothesis ("the pose at ``k`` is in mode ``m``") runs over
+    the last ``lag + 1`` samples, from the hull of that mode's
+    forward-kinematics solutions intersected with the tracker's box at ``k``
+    and inside the tracker's boxes (:func:`track_window`'s backward pass on a
+    window ending at ``k``).  A hypothesis whose geometry sub-boxes all die is
+    refuted: the mode at ``k`` is the other one.  The mode at ``k - lag`` is
+    the one every surviving sub-box of every surviving hypothesis certifies.
+
+    Parameters
+    ----------
+    model : verifier.model.IntervalModel
+    settings : TrackerSettings
+    x0 : (lo, hi)
+        Initial pose box ``(n,)``, m.
+    lag : int
+        Samples of look-ahead (>= 1).
+    xi_box : (lo, hi), optional
+    backend : {"compiled", "numpy"}
+    """
+
+    def __init__(self, model, settings: TrackerSettings, x0, *, lag: int, xi_box=None,
+                 backend: str | Backend = Backend.COMPILED):
+        from .step import Tracker
+
+        if isinstance(lag, bool) or int(lag) != lag or lag < 1:
+            raise InputError(f"lag must be a positive number of samples, got {lag!r}")
+        self.model, self.lag, self.backend = model, int(lag), str(Backend(backend))
+        s = settings.validated(model.n)
+        self.settings = s
+        self.tracker = Tracker(model, settings, x0, xi_box=xi_box, backend=backend)
+        XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
+        lo, hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
+        self.xi_rows = (np.ascontiguousarray(lo[0]), np.ascontiguousarray(hi[0]))
+        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None), backend, parallel=False)
+        L, n = self.lag + 1, model.n
+        self._q = np.zeros((L, n))
+        self._x = np.zeros((L, 2, n))
+        self._xd = np.zeros((L, 2, n))
+        self._mode = np.zeros(L, np.int64)
+
+    def update(self, q) -> LagResult:
+        """Feed the reading ``q`` ``(n,)``, rad."""
+        r = self.tracker.update(q)
+        k, L = r.k, self.lag + 1
+        slot = k % L
+        self._q[slot] = np.asarray(q, dtype=np.float64)
+        self._x[slot] = np.stack(r.x)
+        self._xd[slot] = np.stack(r.xd)
+        self._mode[slot] = r.mode
+        j = k - self.lag
+        if not r.consistent:
+            return LagResult(k, 0, j if j >= 0 else -1, 0, False)
+        if j < 0:
+            return LagResult(k, r.mode, -1, 0, True)
+        lagged_fwd = int(self._mode[j % L])
+        if r.mode != 0 and lagged_fwd != 0:
+            return LagResult(k, r.mode, j, lagged_fwd, True)
+        order = [(k - i) % L for i in range(L)]  # newest first: the reversed window
+        q_rev = np.ascontiguousarray(self._q[order])
+        P = self.xi_rows[0].shape[0]
+        px = np.ascontiguousarray(np.broadcast_to(self._x[order], (P, L, 2, self.model.n)))
+        pxd = np.ascontiguousarray(np.broadcast_to(-self._xd[order][:, ::-1], (P, L, 2, self.model.n)))
+        alive_modes, lagged_modes = [], []
+        for m in (1, -1):
+            rows, starts = [], []
+            for p in range(P):
+                box = _final_box(self.model, self._q[slot], m, self.settings,
+                                 (self.xi_rows[0][p], self.xi_rows[1][p]), self.backend,
+                                 search=(self._x[slot, 0], self._x[slot, 1]), tol=_LAG_FK_TOL)
+                if box is not None:
+                    rows.append(p)
+                    starts.append((np.maximum(box[0], px[p, 0, 0]), np.minimum(box[1], px[p, 0, 1])))
+            if not rows:
+                continue
+            rows = np.array(rows)
+            x0 = (np.stack([a for a, _ in starts]), np.stack([b for _, b in starts]))
+            _, _, md, bad = _run(self.cfg_b, q_rev, x0, (self.xi_rows[0][rows], self.xi_rows[1][rows]),
+                                 (px[rows], pxd[rows]))
+            live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != m))
+            if live.any():
+                alive_modes.append(m)
+                lagged_modes.extend(md[live, -1].tolist())
+        mode_now = r.mode if r.mode != 0 or len(alive_modes) != 1 else alive_modes[0]
+        lagged = lagged_fwd
+        if lagged == 0 and lagged_modes and all(v == lagged_modes[0] for v in lagged_modes):
+            lagged = int(lagged_modes[0])
+        return LagResult(k, int(mode_now), j, int(lagged), True)

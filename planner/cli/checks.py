@@ -58,6 +58,8 @@ MAX_SPEED = 20.0
 MIN_TOL = 1e-4
 #: Largest Monte Carlo confirmation, executions (memory: boxes of every sample).
 MAX_MONTE_CARLO = 100_000
+#: Largest ``monitor --lag``, samples: each sample near the locus costs about 0.2-0.4 ms per sample of lag.
+MAX_LAG = 1000
 #: Half-length of the cruise of ``simulate`` runs (planner.simulate default), m.
 _CRUISE = 5e-3
 #: Rest after the motion of ``simulate`` runs (planner.simulate default), s.
@@ -151,6 +153,8 @@ def check_command(a, entry) -> None:
         if cmd == "check":
             if a.plot is not None:
                 _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
+        elif a.lag:
+            _in("--lag", a.lag, 0, MAX_LAG, unit=" samples")
         return
     if cmd in ("simulate", "plan", "certify"):
         _in("--a-peak", a.a_peak, 0.0, 1e6, unit=" m/s^2")

@@ -119,6 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
     _tracker_options(mo)
     mo.add_argument("--t-s", type=number, help="sampling period, s (default: fixed by the first two samples)")
     mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
+    mo.add_argument("--lag", type=count, default=0,
+                    help="window reasoning with a fixed lag: the mode of sample k is reported once sample k + LAG is "
+                         "read (0: none; costs milliseconds per sample near the locus, see docs/tracker.md)")
     mo.add_argument("--spread-hypotheses", action="store_true",
                     help="track the geometry hypotheses of each sample on several threads: lower latency on "
                          "dedicated cores, erratic on busy ones")

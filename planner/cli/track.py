@@ -12,10 +12,10 @@ import numpy as np
 
 from robots.errors import CrosscertError, TrajectoryFileError
 from verifier.plots import plot_run
-from verifier.step import Backend, Tracker
+from verifier.step import Backend, Event, Tracker
 from verifier.tracker import Verdict, initial_box_from_mode, verdict_of
 from verifier.trajfile import TrajectoryReader, open_trajectory
-from verifier.window import Reasoning, track_window
+from verifier.window import FixedLagWindow, Reasoning, track_window
 
 from .setup import progress_bar, tracker_setup
 
@@ -177,6 +177,10 @@ class Monitor:
         self.record, self.echo = record, echo
         self.tracker = None
         self.x0_used = None  # the initial box the tracker started from
+        self.lagger = None  # --lag: the fixed-lag window reasoning around the tracker
+        self.mode_now = 0  # --lag: mode certified at the newest sample
+        self.times = []  # --lag: times of the last lag + 1 samples
+        self._lag_mode, self._lag_consistent = 0, True
         self.t_s = None
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
@@ -197,9 +201,16 @@ class Monitor:
                 x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
                                            backend=self.a.backend)
             self.x0_used = x0
-            self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
-                                   spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
+            if getattr(self.a, "lag", 0):
+                self.lagger = FixedLagWindow(self.model, settings, x0, lag=self.a.lag, backend=self.a.backend)
+                self.tracker = self.lagger.tracker
+            else:
+                self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
+                                       spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
         for line, t, q in self.pending:
+            if self.lagger is not None:
+                self._feed_lagged(line, t, q)
+                continue
             t0 = time.perf_counter_ns()
             r = self.tracker.update(q)
             self.latency.add(time.perf_counter_ns() - t0)
@@ -213,6 +224,31 @@ class Monitor:
                 text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
                 print(json.dumps(ev) if self.a.json else text, flush=True)
         self.pending.clear()
+
+    def _feed_lagged(self, line: int, t: float, q) -> None:
+        """``--lag``: events of sample ``k - lag``, known once sample ``k`` is read."""
+        t0 = time.perf_counter_ns()
+        r = self.lagger.update(q)
+        self.latency.add(time.perf_counter_ns() - t0)
+        self.mode_now = r.mode_now
+        self.times.append(t)
+        if len(self.times) > self.lagger.lag + 1:
+            self.times.pop(0)
+        if r.lagged < 0 or not self.echo:
+            return
+        events = []
+        if not r.consistent and self._lag_consistent:
+            events.append(Event.INCONSISTENT)
+        elif r.consistent and r.lagged_mode != self._lag_mode:
+            events.append(Event.MODE_GAINED if self._lag_mode == 0 else
+                          Event.MODE_LOST if r.lagged_mode == 0 else Event.MODE_CHANGED)
+        self._lag_mode, self._lag_consistent = r.lagged_mode, r.consistent
+        tj = self.times[0]
+        for e in events:
+            ev = {"event": e.value, "k": r.lagged, "t": tj, "known_at_k": r.k, "mode": r.lagged_mode}
+            text = (f"sample {r.lagged} (t = {tj:.9g} s, known at sample {r.k}): {e}"
+                    + (f", mode {r.lagged_mode:+d}" if r.lagged_mode else ""))
+            print(json.dumps(ev) if self.a.json else text, flush=True)
 
     def recorded(self) -> dict:
         """The kept boxes as arrays: ``x_lo, x_hi, xd_lo, xd_hi`` (K, n), m and m/s, and ``mode`` (K,)."""
@@ -230,6 +266,8 @@ class Monitor:
         bad = -1 if st is None else int(st.bad_at[0])
         init = 0 if st is None else int(st.init_mode[0])
         final = int(st.mode[0]) if st is not None and bad < 0 else 0
+        if self.lagger is not None and bad < 0:
+            final = int(self.mode_now)
         return {
             "verdict": verdict_of(init, final, bad >= 0).value,
             "initial_mode": init,
@@ -241,6 +279,7 @@ class Monitor:
             "max_width_pose_m": None if st is None else float(st.max_width_pose[0]),
             "max_width_velocity_mps": None if st is None else float(st.max_width_velocity[0]),
             "velocity_model": self.a.velocity_model,
+            "lag": int(getattr(self.a, "lag", 0) or 0),
             "latency_us_mean": self.latency.mean_us(),
             "latency_us_p99": self.latency.quantile_us(0.99),
             "latency_us_max": self.latency.max_us(),
