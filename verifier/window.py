@@ -47,8 +47,8 @@ from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import initial_box_from_mode, verdict_of
 
-__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window", "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES",
-           "WINDOW_MAX_GEOMETRIES"]
+__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
+           "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES"]
 
 #: Default pass budget of a round (backward and forward passes alternate).
 WINDOW_MAX_PASSES = 6
