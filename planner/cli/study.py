@@ -35,10 +35,10 @@ __all__ = ["study", "read_grid", "plot_study", "CERTIFY_KEYS", "BOUNDS_KEYS", "M
 #: Sections and keys a grid file may have at its top level.
 TOP_KEYS = ("robot", "grid", "bounds", "certify")
 #: ``[certify]`` keys (keyword arguments of ``certify_crossing``) a study may set.
-CERTIFY_KEYS = ("tol", "v_low", "v_high", "monte_carlo_runs", "refute", "seed")
+CERTIFY_KEYS = ("tol", "v_low", "v_high", "monte_carlo_runs", "refute", "seed", "bounce")
 #: ``[bounds]`` keys (``PlanningBounds`` fields; ``dynamics`` comes from the robot for ``method = "dynamic"``).
 BOUNDS_KEYS = ("eps_q", "tracking_error", "a_max", "a_margin", "a_peak", "t_s", "t_rest", "method", "qd_max",
-               "qdd_max", "execution")
+               "qdd_max", "execution", "reasoning")
 #: Largest grid file read, bytes (a grid of 10 000 cases fits in a few kB).
 MAX_GRID_BYTES = 1 << 20
 #: Inputs whose values are names, not numbers: they label the plot's series instead of getting a panel.
@@ -112,8 +112,8 @@ def read_grid(path) -> dict:
     for k, v in certify.items():
         if k not in CERTIFY_KEYS:
             raise InputError(f"{path}: [certify] key {k!r} is not allowed; allowed: {', '.join(CERTIFY_KEYS)}")
-        if k == "refute" and not isinstance(v, bool):
-            raise InputError(f"[certify] refute must be true or false, got {v!r}")
+        if k in ("refute", "bounce") and not isinstance(v, bool):
+            raise InputError(f"[certify] {k} must be true or false, got {v!r}")
         if k in ("monte_carlo_runs", "seed") and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
             raise InputError(f"[certify] {k} must be a non-negative whole number, got {v!r}")
         if k in ("tol", "v_low", "v_high") and (isinstance(v, bool) or not isinstance(v, (int, float))
