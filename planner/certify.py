@@ -29,7 +29,12 @@ mode, with the pose inside the robot's ``x_bounds``, (v) samples exactly
 ``q_plan(t_k)`` with the class's reading error and geometry box: by the
 tracker's soundness (docs/soundness.md) its boxes contain the pose and
 velocity of every admissible execution, so when it reports ``mode-changed``
-every admissible execution ends in the other assembly mode.
+every admissible execution ends in the other assembly mode.  With ``window``
+reasoning (``PlanningBounds.reasoning``, the default) a speed the tracker
+leaves undecided is decided by window passes on the same inputs
+(:func:`verifier.window.track_window`): they refute "the run ends in the
+initial mode" only if no motion satisfying the same assumptions does, so
+the guarantee is the same.
 
 The midpoint-preconditioned Newton step and the fixpoint thresholds are not
 inclusion-monotone: re-running the tracker on one execution's (narrower)
