@@ -16,6 +16,8 @@ from .dynamics import LumpedDynamics
 from .mass_model import LumpedMassModel
 from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
 from .kinematics import KinematicModel
+from .rpr3 import RPR3
+from .validation import CheckOutcome, CheckResult, ValidationReport, validate
 from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot
 
 __all__ = [
@@ -32,6 +34,11 @@ __all__ = [
     "get_robot",
     "available_robots",
     "DEXTAR",
+    "RPR3",
+    "validate",
+    "ValidationReport",
+    "CheckResult",
+    "CheckOutcome",
     "DEXTAR_DYNAMICS",
     "benchmark_crossing",
     "elbows_out_ik",

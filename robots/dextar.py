@@ -103,6 +103,7 @@ DEXTAR = Robot(
     # eq. (7) reads q_i only through q_i + delta_i
     joint_offsets=(5, 6),
     mode_sign=1.0,
+    mode_reference=lambda x, q, xi: int(mode_by_cross_product(x, q, xi)[0]),
     description=(
         "DexTAR five-bar planar parallel robot (Mecademic), model of eq. (7) and "
         "calibrated parameter intervals of Table I of the paper. Pose x = E = (x, y) "

@@ -146,6 +146,10 @@ def check_command(a, entry) -> None:
             raise InputError(f"crosscert study needs {' and '.join(missing)}: pip install 'crosscert[study]'")
         _study(a)
         return
+    if cmd == "robots":
+        if a.validate is not None:
+            get_entry(a.validate)  # an unknown name fails here, listing the known ones
+        return
     if cmd in ("check", "monitor"):
         _tracker(a, robot)
         if cmd == "check":
