@@ -168,8 +168,8 @@ GOUGH_STEWART = Robot(
     # solution per mode there; |pitch| < pi/2 keeps the Euler chart valid)
     x_bounds=((-0.15, -0.15, 0.6, -0.35, -0.35, -0.35), (0.15, 0.15, 1.0, 0.35, 0.35, 0.35)),
     loop_closure=gough_stewart_loop_closure,
-    # 20 m/s^2; 60 rad/s^2 gives ~20 m/s^2 at the platform's 0.3 m radius
-    a_max=(20.0, 20.0, 20.0, 60.0, 60.0, 60.0),
+    # 40 m/s^2 (a fast hexapod); 120 rad/s^2 gives ~40 m/s^2 at the platform's 0.3 m radius
+    a_max=(40.0, 40.0, 40.0, 120.0, 120.0, 120.0),
     eps_q=5e-6,  # m: a 5 um linear encoder count on each leg
     t_s=1e-3,
     xd0=(0.05, 0.05, 0.05, 0.15, 0.15, 0.15),  # m/s and rad/s
