@@ -30,9 +30,9 @@ __all__ = ["CheckOutcome", "CheckResult", "ValidationReport", "Sample", "validat
 
 #: Relative agreement required between CasADi's Jacobians and central differences of f.
 JACOBIAN_RTOL = 1e-5
-#: Largest ratio between the time scales ``sqrt(side_i / a_max_i)`` (or ``side_i / xd0_i``) of two pose
-#: coordinates: a bound in the wrong unit (mm for m, deg for rad) is off by 57 to 1000.
-UNIT_RATIO = 30.0
+#: Largest ratio between ``side_i / a_max_i`` (or ``side_i / xd0_i``) of two pose coordinates
+#: (``side`` = the sides of x_bounds): a bound in the wrong unit (mm for m, deg for rad) is off by 57 to 1000.
+UNIT_RATIO = 20.0
 #: Names of the interval checks the verifier provides (reported NOT_RUN when absent).
 INTERVAL_CHECK_NAMES = ("interval-evaluation", "interval-containment")
 
@@ -122,15 +122,16 @@ def _check_units(robot: Robot) -> CheckResult:
     """Bounds in one system of units: the pose coordinates' time scales agree, eps_q is tiny, t_s is short."""
     side = robot.x_hi_array - robot.x_lo_array
     problems = []
-    for field, values, scale in (("a_max", robot.a_max_array, lambda v: np.sqrt(side / v)),
-                                 ("xd0", np.array(robot.xd0), lambda v: side / v)):
-        t = scale(values)
+    # time to cross x_bounds at a_max (squared) and at xd0: a robot's axes differ by a few
+    # times at most; a bound in mm, deg or per minute is off by 57 to 3600
+    for field, values, t in (("a_max", robot.a_max_array, side / robot.a_max_array),
+                             ("xd0", np.array(robot.xd0), side / np.array(robot.xd0))):
         i, j = int(np.argmax(t)), int(np.argmin(t))
         if t[i] > UNIT_RATIO * t[j]:
             problems.append(
-                f"{field}[{i}] = {values[i]:g} and {field}[{j}] = {values[j]:g} imply time scales "
-                f"{t[i]:.3g} s and {t[j]:.3g} s over x_bounds (ratio {t[i] / t[j]:.0f} > {UNIT_RATIO:g}): "
-                f"inconsistent units in {field} or x_bounds (state units per axis: m/s^2 or rad/s^2, m/s or rad/s)")
+                f"{field}[{i}] = {values[i]:g} and {field}[{j}] = {values[j]:g} give x_bounds side / {field} of "
+                f"{t[i]:.3g} and {t[j]:.3g} (ratio {t[i] / t[j]:.0f} > {UNIT_RATIO:g}): inconsistent units in "
+                f"{field} or x_bounds (state units per axis: m/s^2 or rad/s^2, m/s or rad/s)")
     t_acc = float(np.min(np.sqrt(side / robot.a_max_array)))
     if robot.t_s > 0.1 * t_acc:
         problems.append(f"t_s = {robot.t_s:g} s is not short against the {t_acc:.3g} s to cross x_bounds at a_max "

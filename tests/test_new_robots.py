@@ -19,6 +19,7 @@ from planner.simulate import random_geometry, simulate_bounce, simulate_crossing
 from robots import KinematicModel, get_entry, get_robot, validate
 from robots.gough_stewart import HOME, gs_ik, mode_by_plucker
 from robots.rpr3 import RPR3, mode_by_leg_lines, rpr3_ik
+from robots.errors import ModelError
 from robots.validation import CheckOutcome
 from verifier.model import IntervalModel
 from verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
@@ -116,15 +117,18 @@ def test_validate_finds_a_flipped_mode_sign():
 
 def test_validate_finds_inconsistent_units_in_the_bounds():
     # the angular acceleration bound written in deg/s^2 instead of rad/s^2
-    broken = dataclasses.replace(RPR3, a_max=(80.0, 80.0, 800.0 * 180 / math.pi * 100))
+    broken = dataclasses.replace(RPR3, a_max=(80.0, 80.0, 200.0 * 180 / math.pi))  # deg/s^2
     assert "a_max[2]" in _failed(validate(broken), "units")
-    # x_bounds of the position in mm
+    # the initial velocity bound of the position in mm/s
     gs = get_robot("gough-stewart")
-    lo, hi = gs.x_bounds
     broken = dataclasses.replace(gs, xd0=(50.0, 50.0, 50.0, 0.15, 0.15, 0.15))
     assert "xd0" in _failed(validate(broken), "units")
-    with pytest.raises(Exception, match="units"):
+    with pytest.raises(ModelError, match="units"):
         validate(broken).raise_if_failed()
+    # x_bounds of the 3-RPR's position in mm (the robot is built; validate names the field)
+    lo, hi = RPR3.x_bounds
+    broken = dataclasses.replace(RPR3, x_bounds=((1e3 * lo[0], 1e3 * lo[1], lo[2]), (1e3 * hi[0], 1e3 * hi[1], hi[2])))
+    assert "x_bounds" in _failed(validate(broken), "units")
 
 
 def test_validate_finds_a_wrong_jacobian(monkeypatch):
