@@ -164,9 +164,10 @@ GOUGH_STEWART = Robot(
     xi_hi=tuple(_nominal() + _half_widths()),
     q_lo=(0.55,) * 6,
     q_hi=(1.25,) * 6,
-    # the tracked workspace: +-0.15 m and +-0.35 rad around HOME (one FK
+    # the tracked workspace around HOME: +-0.15 m, yaw +-1.3 rad (towards the
+    # singularity of the yaw turn near +-pi/2), pitch and roll +-0.35 rad (one FK
     # solution per mode there; |pitch| < pi/2 keeps the Euler chart valid)
-    x_bounds=((-0.15, -0.15, 0.6, -0.35, -0.35, -0.35), (0.15, 0.15, 1.0, 0.35, 0.35, 0.35)),
+    x_bounds=((-0.15, -0.15, 0.6, -1.3, -0.35, -0.35), (0.15, 0.15, 1.0, 1.3, 0.35, 0.35)),
     loop_closure=gough_stewart_loop_closure,
     # 40 m/s^2 (a fast hexapod); 120 rad/s^2 gives ~40 m/s^2 at the platform's 0.3 m radius
     a_max=(40.0, 40.0, 40.0, 120.0, 120.0, 120.0),

@@ -8,6 +8,7 @@ robot's acceleration bound along the motion.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -270,3 +271,59 @@ def test_gough_stewart_monte_carlo_containment():
     bad = _violations(padded, res, rec)
     assert not bad, "\n".join(bad)
     assert np.mean(rec["mode"] != 0) > 0.9  # not vacuous
+
+
+def test_gough_stewart_near_singular_motion_is_contained():
+    """A yaw turn from 0.2 to 1.25 rad (|det| falls 6-fold towards the singularity near pi/2): sound throughout.
+
+    The mode may be lost near the end (undecided), never wrong; the truth stays in every box.
+    """
+    robot = get_robot("gough-stewart")
+    km = KinematicModel(robot)
+    rng = np.random.default_rng(11)
+    start, goal = HOME.copy(), HOME.copy()
+    start[3], goal[3], goal[0] = 0.2, 1.25, 0.03
+    runs = []
+    for i in range(2):
+        xi = random_geometry(robot, np.random.default_rng(300 + i), corners=True)
+        runs.append(simulate_motion(km, start, goal, 0.5, xi_true=xi, a_peak=100.0, working_guess=gs_ik(start, xi),
+                                    seed=i, t_rest=0.02, t_rest_end=0.02))
+    nm = [abs(km.normalised_mode_batch(r.x[[0, -1]], r.q[[0, -1]], r.xi_true)) for r in runs]
+    assert all(v[1] < v[0] / 5 for v in nm), nm
+    res, rec, K = _track(robot, runs, rng)
+    bad = _violations([_pad(r, K) for r in runs], res, rec)
+    assert not bad, "\n".join(bad)
+    assert np.all(rec["mode"][:, 0] == -1)
+    assert all(v is not Verdict.MODE_CHANGED for v in res.verdict)
+
+
+# --------------------------------------------------------------- certification
+def test_rpr3_certify_on_a_coarse_tolerance(capsys, tmp_path):
+    """The 3-RPR through the whole certification path, coarsely (no refutation, 2 Monte Carlo runs)."""
+    argv = ["certify", "--robot", "3rpr", "--tol", "0.25", "--monte-carlo", "2", "--no-refute", "--no-progress",
+            "--out", str(tmp_path / "c")]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "minimal certified v_sing: 0.6000 m/s" in out
+    assert "refutation bound (no sound tracker certifies at or below): not computed" in out
+    assert "2/2 admissible executions detected" in out and "0 containment failures, 0 wrong verdicts" in out
+
+
+@pytest.mark.slow
+def test_rpr3_default_certification(capsys, tmp_path):
+    """``crosscert certify --robot 3rpr`` with every default (~1 min): v_min and the refutation line."""
+    from problems import PLANNING, check_certified_speed
+
+    assert main(["certify", "--robot", "3rpr", "--no-progress", "--out", str(tmp_path / "c"), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    check_certified_speed(report["v_min"], PLANNING["3rpr_benchmark"].expected)
+
+
+def test_rpr3_sweep_starts_in_the_benchmark_mode(capsys, tmp_path):
+    """The sweep gives the tracker the mode the benchmark starts in (-1 for the 3-RPR, +1 for the DexTAR)."""
+    assert main(["sweep", "--robot", "3rpr", "--speeds", "1.5", "--out", str(tmp_path / "s"), "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    rows = [line.split() for line in out.splitlines() if line.strip().startswith("1.500")]
+    assert [r[1] for r in rows] == ["paper", "sound"]
+    sound = rows[1]
+    assert sound[5] == "mode-changed" and sound[6] == "True", out
