@@ -316,7 +316,8 @@ def test_rpr3_default_certification(capsys, tmp_path):
 
     assert main(["certify", "--robot", "3rpr", "--no-progress", "--out", str(tmp_path / "c"), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    check_certified_speed(report["v_min"], PLANNING["3rpr_benchmark"].expected)
+    check_certified_speed(report["v_min_mps"], PLANNING["3rpr_benchmark"].expected)
+    assert "refutation_bound_mps" in report
 
 
 def test_rpr3_sweep_starts_in_the_benchmark_mode(capsys, tmp_path):
