@@ -17,6 +17,8 @@ from .mass_model import LumpedMassModel
 from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
 from .kinematics import KinematicModel
 from .rpr3 import RPR3
+from .gough_stewart import GOUGH_STEWART
+from .base import ReferenceMotion
 from .validation import CheckOutcome, CheckResult, ValidationReport, validate
 from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot
 
@@ -35,6 +37,8 @@ __all__ = [
     "available_robots",
     "DEXTAR",
     "RPR3",
+    "GOUGH_STEWART",
+    "ReferenceMotion",
     "validate",
     "ValidationReport",
     "CheckResult",

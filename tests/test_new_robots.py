@@ -11,6 +11,7 @@ import dataclasses
 import json
 import math
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -140,6 +141,15 @@ def test_validate_finds_a_wrong_jacobian(monkeypatch):
     assert "J_x misses" in _failed(report, "interval-evaluation").replace("evaluation of J_x misses", "J_x misses")
 
 
+def test_validate_finds_a_loop_closure_the_interval_evaluator_cannot_read():
+    """CasADi builds the model, but exp has no interval implementation: the interval checks fail, naming it."""
+    def with_exp(x, q, xi):
+        return RPR3.loop_closure(x, q, xi) * ca.exp(1e-12 * x[0])
+
+    report = validate(dataclasses.replace(RPR3, loop_closure=with_exp))
+    assert "interval implementation" in _failed(report, "interval-evaluation")
+
+
 def test_validate_reports_interval_checks_not_run_without_them():
     report = validate(RPR3, interval_checks={})
     outcomes = {c.name: c.outcome for c in report.checks}
@@ -162,10 +172,11 @@ def test_robots_command(capsys):
 def test_gough_stewart_refuses_crossing_commands_in_one_line(capsys, tmp_path):
     for argv in (["certify", "--robot", "gough-stewart", "--out", str(tmp_path / "c")],
                  ["plan", "--robot", "gough-stewart", "--v-sing", "1", "-o", str(tmp_path / "p.csv")],
-                 ["simulate", "--robot", "gough-stewart", "--v-sing", "0.3", "--bounce", "-o", str(tmp_path / "s.csv")]):
+                 ["simulate", "--robot", "gough-stewart", "--v-sing", "0.3", "--bounce", "-o", str(tmp_path / "s.csv")],
+                 ["plan", "--robot", "3rpr", "--v-sing", "1", "--method", "dynamic", "-o", str(tmp_path / "d.csv")]):
         assert main(argv) == 2
         err = capsys.readouterr().err
-        assert err.count("\n") == 1 and "gough-stewart" in err
+        assert err.count("\n") == 1 and ("gough-stewart" in err or "no dynamic model" in err), err
 
 
 def test_gough_stewart_simulate_then_check(capsys, tmp_path):
