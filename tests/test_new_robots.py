@@ -187,6 +187,15 @@ def test_gough_stewart_simulate_then_check(capsys, tmp_path):
     assert '"verdict": "mode-unchanged"' in capsys.readouterr().out
 
 
+def test_rpr3_simulate_then_monitor(capsys, tmp_path):
+    path = tmp_path / "r.csv"
+    assert main(["simulate", "--robot", "3rpr", "--v-sing", "1.5", "-o", str(path)]) == 0
+    capsys.readouterr()
+    assert main(["monitor", str(path), "--robot", "3rpr", "--initial-mode", "-1", "--json"]) == 0
+    last = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert last["verdict"] == "mode-changed" and last["initial_mode"] == -1 and last["final_mode"] == 1
+
+
 def test_rpr3_simulate_then_check(capsys, tmp_path):
     path = tmp_path / "r.csv"
     assert main(["simulate", "--robot", "3rpr", "--v-sing", "1.0", "--bounce", "-o", str(path)]) == 0
