@@ -146,10 +146,6 @@ DEFAULT_CERTIFICATION = {
     # 2026-12-01 on the working tree over 316f1b0: 1.198 / 0.84375 m/s, 15.4 s.
     "dextar": CertificationExpectation(v_min=1.198, v_min_tol=0.01, refutation_bound=0.8438,
                                        measured="docs/planning.md (2026-11-25), benchmarks/README.md (2026-12-01)"),
-    # 3-RPR: docs/robots.md (2026-12-01): the default v_low 0.6 m/s certifies (the slowest speed
-    # tried); `--v-low 0.1` gives 0.3125 m/s.  The refutation search finds no counterexample.
-    "3rpr": CertificationExpectation(v_min=0.6, v_min_tol=0.01, refutation_bound=None,
-                                     measured="docs/robots.md (2026-12-01)"),
 }
 
 #: Planning problems by name: ``<robot>_benchmark`` for every registered robot with a benchmark crossing.

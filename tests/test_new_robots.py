@@ -331,13 +331,16 @@ def test_rpr3_certify_on_a_coarse_tolerance(capsys, tmp_path):
 
 @pytest.mark.slow
 def test_rpr3_default_certification(capsys, tmp_path):
-    """``crosscert certify --robot 3rpr`` with every default (~1 min): v_min and the refutation line."""
-    from problems import PLANNING, check_certified_speed
+    """``crosscert certify --robot 3rpr`` with every default (~1 min): v_min and the refutation line.
 
+    docs/robots.md (2026-12-01): the slowest speed tried, 0.6 m/s, certifies (0.3125 m/s with
+    ``--v-low 0.1``); the counterexample search finds none, so there is no refutation bound.
+    """
     assert main(["certify", "--robot", "3rpr", "--no-progress", "--out", str(tmp_path / "c"), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    check_certified_speed(report["v_min_mps"], PLANNING["3rpr_benchmark"].expected)
-    assert "refutation_bound_mps" in report
+    assert report["v_min_mps"] == pytest.approx(0.6, abs=0.01)
+    assert report["v_min_at_lower_end"] is True
+    assert report["refutation_bound_mps"] is None
 
 
 def test_rpr3_sweep_starts_in_the_benchmark_mode(capsys, tmp_path):
