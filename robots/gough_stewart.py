@@ -155,6 +155,12 @@ def mode_by_plucker(x, xi=None) -> np.ndarray:
     return np.sign(np.linalg.det(np.concatenate([u, np.cross(r, u)], axis=2))).astype(int)
 
 
+def _mode_reference(x, q, xi) -> int:
+    """``Robot.mode_reference``: the geometric mode at one configuration (a module-level
+    function, so that the robot pickles for worker processes)."""
+    return int(mode_by_plucker(x, xi)[0])
+
+
 GOUGH_STEWART = Robot(
     name="gough-stewart",
     n=6,
@@ -175,7 +181,7 @@ GOUGH_STEWART = Robot(
     t_s=1e-3,
     xd0=(0.05, 0.05, 0.05, 0.15, 0.15, 0.15),  # m/s and rad/s
     mode_sign=-1.0,  # det of the Euler-rate map is -cos(pitch): +1 = Plücker determinant > 0 (home)
-    mode_reference=lambda x, q, xi: int(mode_by_plucker(x, xi)[0]),
+    mode_reference=_mode_reference,
     description=(
         "Gough-Stewart 6-6 platform with ASSUMED design data (base radius 0.5 m, platform radius 0.3 m). "
         "Pose x = (p_x, p_y, p_z, yaw, pitch, roll) in m and rad (R = Rz Ry Rx, |pitch| < pi/2); joints = leg "

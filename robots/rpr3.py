@@ -103,6 +103,12 @@ def _half_widths() -> np.ndarray:
     return w
 
 
+def _mode_reference(x, q, xi) -> int:
+    """``Robot.mode_reference``: the geometric mode at one configuration (a module-level
+    function, so that the robot pickles for worker processes)."""
+    return int(mode_by_leg_lines(x, xi)[0])
+
+
 RPR3 = Robot(
     name="3rpr",
     n=3,
@@ -125,7 +131,7 @@ RPR3 = Robot(
     xd0=(0.1, 0.1, 1.0),  # m/s, m/s, rad/s
     joint_offsets=(12, 13, 14),
     mode_sign=1.0,
-    mode_reference=lambda x, q, xi: int(mode_by_leg_lines(x, xi)[0]),
+    mode_reference=_mode_reference,
     description=(
         "3-RPR planar parallel robot with ASSUMED design data: base points A_i, platform points b_i "
         "(platform frame), leg offsets delta_i. Pose x = (p_x, p_y, phi) in m, m, rad; joints = leg "

@@ -96,6 +96,16 @@ def test_rpr3_joint_offsets_are_additive():
         np.testing.assert_allclose(km.f_batch(x, q2, xi2), km.f_batch(x, q, xi), atol=1e-15)
 
 
+@pytest.mark.parametrize("name", ["dextar", "3rpr", "gough-stewart"])
+def test_robots_pickle_for_worker_processes(name):
+    """certify runs its searches in worker processes: a robot (with its mode_reference) must pickle."""
+    import pickle
+
+    robot = get_robot(name)
+    again = pickle.loads(pickle.dumps(robot))
+    assert again == robot and again.mode_reference is robot.mode_reference  # by reference: a module-level function
+
+
 # --------------------------------------------------------------- validation
 @pytest.mark.parametrize("name", ["dextar", "3rpr", "gough-stewart"])
 def test_validate_passes_for_every_shipped_robot(name):
