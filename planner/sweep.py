@@ -41,7 +41,7 @@ def cruise_for(v_sing, a_peak=60.0, start_distance=0.035, minimum=0.005):
 
 
 def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityModel.SOUND), *, xi_true=None,
-          seed=0, t_rest=0.1, a_peak=60.0, start_distance=0.035, initial_mode=1, settings_kw=None, progress=None,
+          seed=0, t_rest=0.1, a_peak=60.0, start_distance=0.035, initial_mode=None, settings_kw=None, progress=None,
           record_speed=None):
     """Track simulated crossings at several speeds under several error models.
 
@@ -59,8 +59,10 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
     start_distance : float
         Every run starts at least this far (m) before the locus (the constant
         speed zone grows for slow crossings), so slow runs do not start next to it.
-    initial_mode : int
-        Assembly mode at the start (the first sample's mode).
+    initial_mode : int, optional
+        Assembly mode at the start, given to the tracker; default the mode of
+        each simulated run's first sample (which side of the locus the
+        benchmark starts on depends on the robot).
     record_speed : float, optional
         Speed whose boxes are returned for figures.
 
@@ -83,7 +85,8 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
     figures = {}
     for vm in models:
         s = TrackerSettings.for_robot(robot, velocity_model=vm, **(settings_kw or {}))
-        boxes = [initial_box_from_mode(imodel, q[b, 0], initial_mode, s) for b in range(len(runs))]
+        boxes = [initial_box_from_mode(imodel, q[b, 0], int(runs[b].mode_true[0]) if initial_mode is None else initial_mode,
+                                       s) for b in range(len(runs))]
         x0 = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
         res, rec = track_batch(imodel, q, s, x0, record=True, progress=progress)
         for b, r in enumerate(runs):

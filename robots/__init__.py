@@ -16,6 +16,10 @@ from .dynamics import LumpedDynamics
 from .mass_model import LumpedMassModel
 from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
 from .kinematics import KinematicModel
+from .rpr3 import RPR3
+from .gough_stewart import GOUGH_STEWART
+from .base import ReferenceMotion
+from .validation import CheckOutcome, CheckResult, ValidationReport, validate
 from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot
 
 __all__ = [
@@ -32,6 +36,13 @@ __all__ = [
     "get_robot",
     "available_robots",
     "DEXTAR",
+    "RPR3",
+    "GOUGH_STEWART",
+    "ReferenceMotion",
+    "validate",
+    "ValidationReport",
+    "CheckResult",
+    "CheckOutcome",
     "DEXTAR_DYNAMICS",
     "benchmark_crossing",
     "elbows_out_ik",

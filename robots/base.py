@@ -20,7 +20,7 @@ import numpy as np
 from .errors import ModelError
 from .validators import floats, vector
 
-__all__ = ["Robot", "LoopClosure"]
+__all__ = ["Robot", "LoopClosure", "BenchmarkCrossing", "ReferenceMotion"]
 
 #: Signature of a loop-closure definition: ``(x, q, xi) -> f`` on CasADi SX
 #: column vectors of shapes ``(n,)``, ``(n,)``, ``(m,)``, returning ``(n,)``.
@@ -49,7 +49,7 @@ class Robot:
     xi_lo, xi_hi : tuple of float, length m
         Calibration interval ``[xi]`` enclosing the true parameters, SI.
     q_lo, q_hi : tuple of float, length n
-        Modelled joint range, rad.
+        Modelled joint range, rad (m for prismatic joints).
     x_bounds : tuple (lo, hi) of tuples of float, each length n
         A box, SI, containing every pose reachable for any ``xi`` in
         ``[xi_lo, xi_hi]`` (the search domain of the interval forward
@@ -64,7 +64,8 @@ class Robot:
         Default componentwise bound on ``|x''|``, m/s^2 (rad/s^2 for angular
         pose coordinates).
     eps_q : float
-        Default encoder error bound, rad: ``|q_meas - q_true| <= eps_q``.
+        Default encoder error bound, rad (m for prismatic joints):
+        ``|q_meas - q_true| <= eps_q``.
     t_s : float
         Default sampling period, s.
     xd0 : tuple of float, length n
@@ -85,6 +86,12 @@ class Robot:
         ``+1.0`` or ``-1.0``.  The assembly mode is defined as
         ``mode_sign * sign(det J_x)``, so that a robot module can align it with
         its geometric convention.
+    mode_reference : callable, optional
+        ``mode_reference(x, q, xi) -> int``: the assembly mode (+1/-1) of a
+        regular configuration computed from the robot's geometry, without
+        CasADi (e.g. a cross product).  It states the mode convention
+        independently of ``mode_sign``, so that :func:`robots.validate` can
+        check that the two agree.  ``None``: that check is not run.
     description : str, optional
         One-paragraph human description (source of the data, conventions).
     """
@@ -106,6 +113,7 @@ class Robot:
     mode_sign: float = 1.0
     xi_splits: tuple[int, ...] | None = None
     joint_offsets: tuple[int | None, ...] | None = None
+    mode_reference: Callable[..., int] | None = field(default=None, repr=False, compare=False)
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -189,6 +197,8 @@ class Robot:
         if self.mode_sign not in (1, -1):
             raise ModelError(f"Robot {self.name}: mode_sign must be +1 or -1, got {self.mode_sign!r}")
         set_(self, "mode_sign", float(self.mode_sign))
+        if self.mode_reference is not None and not callable(self.mode_reference):
+            raise ModelError(f"Robot {self.name}: mode_reference must be callable or None")
         if not isinstance(self.description, str):
             raise ModelError(f"Robot {self.name}: description must be a string")
 
@@ -276,4 +286,28 @@ class BenchmarkCrossing:
 
     def __post_init__(self) -> None:
         for name in ("point", "direction", "q_point", "xi"):
+            object.__setattr__(self, name, vector(name, getattr(self, name), error=ModelError))
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceMotion:
+    """A robot's reference motion for ``simulate`` when it ships no crossing: a straight segment at rest ends.
+
+    Attributes
+    ----------
+    start, goal : ndarray, shape (n,)
+        End poses, SI (m, rad); the segment between them is regular.
+    q_start : ndarray, shape (n,)
+        Joints at ``start`` (a working-branch guess), rad or m.
+    xi : ndarray, shape (m,)
+        Geometry the joints were computed for.
+    """
+
+    start: np.ndarray
+    goal: np.ndarray
+    q_start: np.ndarray
+    xi: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("start", "goal", "q_start", "xi"):
             object.__setattr__(self, name, vector(name, getattr(self, name), error=ModelError))

@@ -73,6 +73,12 @@ def dextar_loop_closure(x, q, xi):
     return ca.vertcat(f1, f2)
 
 
+def _mode_reference(x, q, xi) -> int:
+    """``Robot.mode_reference``: the geometric mode at one configuration (a module-level
+    function, so that the robot pickles for worker processes)."""
+    return int(mode_by_cross_product(x, q, xi)[0])
+
+
 _MM = 1e-3
 DEXTAR = Robot(
     name="dextar",
@@ -103,6 +109,7 @@ DEXTAR = Robot(
     # eq. (7) reads q_i only through q_i + delta_i
     joint_offsets=(5, 6),
     mode_sign=1.0,
+    mode_reference=_mode_reference,
     description=(
         "DexTAR five-bar planar parallel robot (Mecademic), model of eq. (7) and "
         "calibrated parameter intervals of Table I of the paper. Pose x = E = (x, y) "

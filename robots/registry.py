@@ -11,9 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from .base import BenchmarkCrossing, Robot
+from .base import BenchmarkCrossing, ReferenceMotion, Robot
+from .gough_stewart import GOUGH_STEWART, gs_reference_motion
 from .dextar import DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing
 from .mass_model import LumpedMassModel
+from .rpr3 import RPR3, rpr3_benchmark_crossing
 from .errors import InputError, UnknownRobotError
 
 __all__ = ["RobotEntry", "ROBOTS", "DEFAULT_ROBOT", "available_robots", "get_entry", "get_robot"]
@@ -31,11 +33,15 @@ class RobotEntry:
         Lumped dynamic model, when the robot has one.
     benchmark : callable ``xi -> BenchmarkCrossing`` or None
         Its reference crossing for a geometry (``None``: nominal).
+    motion : callable ``xi -> ReferenceMotion`` or None
+        A regular reference motion for ``simulate`` (robots without a
+        benchmark crossing).
     """
 
     robot: Robot
     dynamics: LumpedMassModel | None = None
     benchmark: Callable[..., BenchmarkCrossing] | None = None
+    motion: Callable[..., ReferenceMotion] | None = None
 
     @property
     def name(self) -> str:
@@ -51,13 +57,25 @@ class RobotEntry:
     def benchmark_crossing(self, xi=None) -> BenchmarkCrossing:
         """The benchmark crossing for geometry ``xi`` (nominal when None), or InputError if there is none."""
         if self.benchmark is None:
-            raise InputError(f"robot {self.robot.name!r} has no benchmark crossing; give --start and --goal")
+            raise InputError(f"robot {self.robot.name!r} ships no crossing benchmark, so crossing planning "
+                             "(plan, certify, sweep, study) is not available for it; check, monitor and simulate are")
         return self.benchmark(xi)
+
+    def reference_motion(self, xi=None) -> ReferenceMotion:
+        """The reference motion for geometry ``xi`` (nominal when None), or InputError if there is none."""
+        if self.motion is None:
+            raise InputError(f"robot {self.robot.name!r} has no reference motion")
+        return self.motion(xi)
 
 
 #: Registered robots by lower-case name.
 ROBOTS: dict[str, RobotEntry] = {
-    e.name: e for e in (RobotEntry(DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing),)
+    e.name: e
+    for e in (
+        RobotEntry(DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing),
+        RobotEntry(RPR3, None, rpr3_benchmark_crossing),
+        RobotEntry(GOUGH_STEWART, None, None, gs_reference_motion),
+    )
 }
 
 #: The robot commands use when ``--robot`` is not given.

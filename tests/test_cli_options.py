@@ -20,6 +20,9 @@ CHECK = ["check", "{rec}", "--initial-mode", "1"]
 SWEEP = ["sweep", "--out", "{d}/s"]
 
 CASES = [
+    # robots
+    (["robots", "--validate", "delta"], "unknown robot 'delta'"),
+    (["robots", "--seed", "-1"], "not a non-negative whole number"),
     # simulate
     (SIM[:2] + ["0", *SIM[3:]], "--v-sing = 0 m/s is out of range"),
     (SIM[:2] + ["1e-9", *SIM[3:]], "samples"),
@@ -151,7 +154,7 @@ def test_help_shows_defaults_and_robots_and_version(capsys):
     assert stop.value.code == 0
     out = capsys.readouterr().out
     assert "(default: 0.01)" in out and "(default: 60.0)" in out and "(default: 0.0)" in out
-    assert "one of dextar" in out and "``" not in out
+    assert "one of 3rpr, dextar, gough-stewart" in out and "``" not in out
     with pytest.raises(SystemExit):
         main(["--version"])
     assert capsys.readouterr().out.startswith("crosscert ")

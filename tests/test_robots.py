@@ -47,14 +47,14 @@ def random_elbows_out_pose(rng, xi):
 
 # ------------------------------------------------------------------ registry
 def test_registry():
-    assert available_robots() == ["dextar"]
+    assert available_robots() == ["3rpr", "dextar", "gough-stewart"]
     assert ROBOTS["dextar"].robot is DEXTAR
     assert get_robot("dextar") is DEXTAR
     assert get_robot("  DexTAR ") is DEXTAR
     with pytest.raises(UnknownRobotError, match="dextar") as err:
-        get_robot("gough-stewart")
+        get_robot("delta")
     assert isinstance(err.value, InputError) and isinstance(err.value, KeyError)
-    assert "gough-stewart" in str(err.value)
+    assert "delta" in str(err.value)
 
 
 def test_dextar_data_in_si():

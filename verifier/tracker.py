@@ -142,6 +142,10 @@ class TrackResult:
         }
 
 
+#: Widths (pose units) below which a solution box with a certified mode is kept, tried in turn.
+_INITIAL_SMALL = (5e-3, 2e-2, 8e-2)
+
+
 def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_box=None, x_search=None,
                           backend: str = "compiled"):
     """Enclosure of the pose in assembly mode ``mode`` for the first sample.
@@ -165,7 +169,12 @@ def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_bo
     if x_search is None:
         lo, hi = model.robot.x_bounds
         x_search = (np.asarray(lo, dtype=float), np.asarray(hi, dtype=float))
-    sols = pose_solutions(model, Q, XI, x_search, tol=1e-5, backend=backend)
+    # A solution set wider than `small` (many uncertain parameters, angles in
+    # the pose) is bisected down to `tol` and exhausts the budget: retry coarser.
+    for small in _INITIAL_SMALL:
+        sols = pose_solutions(model, Q, XI, x_search, tol=1e-5, small=small, backend=backend)
+        if sols is not None:
+            break
     if sols is None:
         raise InputError("could not isolate the forward-kinematics solutions of the first sample; give --x0 instead")
     if not sols:

@@ -1,5 +1,5 @@
 """The ``crosscert`` command: certify a planned crossing, plan one, check a recording, monitor a stream,
-simulate, sweep, run a design study.
+simulate, sweep, run a design study, list and validate robots.
 
 Exit codes: 0 a verdict was given, 2 bad input or usage (one line on stderr,
 no traceback), 3 the data contradict the assumptions (inconsistent).  Robots
@@ -16,6 +16,7 @@ from robots.registry import get_entry
 from .checks import check_command
 from .parser import UsageError, build_parser
 from .planning import certify, plan
+from .robots import robots
 from .simulation import simulate, sweep
 from .study import study
 from .track import check, monitor
@@ -23,7 +24,7 @@ from .track import check, monitor
 __all__ = ["build_parser", "main"]
 
 _COMMANDS = {"check": check, "monitor": monitor, "simulate": simulate, "sweep": sweep, "plan": plan,
-             "certify": certify, "study": study}
+             "certify": certify, "study": study, "robots": robots}
 
 
 def main(argv=None) -> int:

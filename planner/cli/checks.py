@@ -148,6 +148,10 @@ def check_command(a, entry) -> None:
             raise InputError(f"crosscert study needs {' and '.join(missing)}: pip install 'crosscert[study]'")
         _study(a)
         return
+    if cmd == "robots":
+        if a.validate is not None:
+            get_entry(a.validate)  # an unknown name fails here, listing the known ones
+        return
     if cmd in ("check", "monitor"):
         _tracker(a, robot)
         if cmd == "check":
@@ -162,8 +166,15 @@ def check_command(a, entry) -> None:
         _in("--v-sing", a.v_sing, 0.0, MAX_SPEED, unit=" m/s")
     if cmd == "simulate":
         _in("--t-rest", a.t_rest, 0.0, 600.0, lo_open=False, unit=" s")
-        bench = entry.benchmark_crossing()
-        _a_peak_within_robot(a.a_peak, bench.direction, robot)
+        if entry.benchmark is None and entry.motion is not None:
+            if a.bounce:
+                raise InputError(f"robot {entry.name!r} ships no crossing, so there is no bounce to simulate; "
+                                 "drop --bounce to simulate its reference motion")
+            m = entry.reference_motion()
+            direction = m.goal - m.start
+        else:
+            direction = entry.benchmark_crossing().direction
+        _a_peak_within_robot(a.a_peak, direction, robot)
         T = ramp_length(a.v_sing, a.a_peak)[0]
         duration = a.t_rest + 2 * T + 2 * _CRUISE / a.v_sing + _REST_END
         _budget(f"simulate at --v-sing {a.v_sing:g} m/s, --a-peak {a.a_peak:g} m/s^2, --t-rest {a.t_rest:g} s",

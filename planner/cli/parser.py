@@ -172,6 +172,11 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
     w.add_argument("--no-progress", action="store_true", help="no progress bar")
 
+    ro = command("robots", "list the shipped robots (n, m, defaults), or check one definition with --validate")
+    ro.add_argument("--validate", metavar="NAME", help=f"run robots.validate on robot NAME ({', '.join(available_robots())})")
+    ro.add_argument("--seed", type=count, default=0, help="seed of the random configurations checked")
+    ro.set_defaults(robot=DEFAULT_ROBOT)
+
     st = command("study", "design study: certify every point of a grid of bounds on Dask, one CSV row per case")
     st.add_argument("grid", help="TOML file: robot = NAME (optional), [grid] {input: [values]}, optional [bounds] "
                                  "and [certify] tables (docs/cli.md)")

@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from robots import KinematicModel
+from robots.registry import get_entry
 from verifier.plots import plot_run
 from verifier.tracker import VelocityModel, Verdict
 from verifier.trajfile import write_trajectory
 
-from ..simulate import simulate_bounce, simulate_crossing
+from ..simulate import simulate_bounce, simulate_crossing, simulate_motion
 from ..sweep import sweep as run_sweep
 from .setup import benchmark_setup, progress_bar, true_geometry
 
@@ -16,9 +18,19 @@ __all__ = ["simulate", "sweep"]
 
 
 def simulate(a) -> int:
-    """``crosscert simulate``: write the readings of a simulated benchmark crossing or bounce."""
-    entry, kin, bench = benchmark_setup(a.robot)
+    """``crosscert simulate``: write the readings of a simulated benchmark crossing or bounce (or, for a robot
+    that ships a reference motion instead, of that motion at ``--v-sing``)."""
+    entry = get_entry(a.robot)
     robot = entry.robot
+    if entry.benchmark is None and entry.motion is not None:
+        kin = KinematicModel(robot)
+        m = entry.reference_motion()
+        run = simulate_motion(kin, m.start, m.goal, a.v_sing, xi_true=true_geometry(robot, a.seed), t_rest=a.t_rest,
+                              a_peak=a.a_peak, working_guess=m.q_start, seed=a.seed)
+        write_trajectory(a.output, run.t, run.q_meas)
+        print(f"wrote {a.output}: {run.n_samples} samples of the reference motion at {run.v_sing} (pose units)/s")
+        return 0
+    entry, kin, bench = benchmark_setup(a.robot)
     fn = simulate_bounce if a.bounce else simulate_crossing
     run = fn(kin, bench.point, bench.direction, a.v_sing, xi_true=true_geometry(robot, a.seed), t_rest=a.t_rest,
              a_peak=a.a_peak, working_guess=bench.q_point, seed=a.seed)

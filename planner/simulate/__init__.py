@@ -23,7 +23,7 @@ differences.  SI units throughout.
 from __future__ import annotations
 
 from .measure import Quantisation, quantise, random_geometry
-from .run import SimulatedRun, max_v_sing, simulate_bounce, simulate_crossing
+from .run import SimulatedRun, max_v_sing, simulate_bounce, simulate_crossing, simulate_motion
 from .timelaw import RAMP_PEAK, TimeLaw, bounce_time_law, crossing_time_law, ramp_length
 
 __all__ = [
@@ -38,5 +38,6 @@ __all__ = [
     "SimulatedRun",
     "simulate_crossing",
     "simulate_bounce",
+    "simulate_motion",
     "max_v_sing",
 ]

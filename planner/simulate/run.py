@@ -21,7 +21,7 @@ from ..sampling import align_to_samples
 from .measure import Quantisation, quantise
 from .timelaw import RAMP_PEAK, TimeLaw, bounce_time_law, crossing_time_law, ramp_length
 
-__all__ = ["SimulatedRun", "simulate_crossing", "simulate_bounce", "max_v_sing"]
+__all__ = ["SimulatedRun", "simulate_crossing", "simulate_bounce", "simulate_motion", "max_v_sing"]
 
 #: Largest joint change (rad) between the IK guess interpolated from the scan
 #: and the IK at a sample: more means the IK jumped to another branch.
@@ -369,3 +369,66 @@ def max_v_sing(model: KinematicModel, crossing_point, direction, *, xi_true=None
     if bounce:
         return _v_from_distance((s_true - short - e_lo) / 2.0 - cruise, a_peak)
     return _v_from_distance(min(-e_lo, e_hi) - cruise, a_peak)
+
+
+def simulate_motion(model: KinematicModel, start, goal, v_max: float, *, xi_true=None, t_s: float | None = None,
+                    eps_q: float | None = None, t_rest: float = 0.05, t_rest_end: float = 0.05,
+                    a_peak: float = 10.0, working_guess=None, seed=None, quantisation: str = "floor",
+                    strict_xi: bool = True) -> SimulatedRun:
+    """Simulate a regular straight motion from ``start`` to ``goal`` (no singularity is crossed).
+
+    The time law of :func:`simulate_crossing` centred on the segment's
+    midpoint: rest, ramp to ``v_max``, constant speed, ramp down, rest.  Pose
+    speed ``|x'|`` is in the pose's units per second (m/s for a translation;
+    a motion that also turns mixes m and rad).  For robots that ship a
+    reference motion instead of a crossing (``simulate``) and for tests.
+
+    ``k_sing``, ``x_sing`` and ``t_sing`` of the result mark the midpoint
+    (``s_sing = 0``); ``mode_true`` is constant.  Other parameters as in
+    :func:`simulate_crossing`.
+
+    Raises
+    ------
+    SimulationError
+        If ``v_max`` cannot be reached within the segment at ``a_peak``, if IK
+        fails, or if the assembly mode changes or vanishes along the motion.
+    """
+    start = V.vector("start", start, model.n)
+    goal = V.vector("goal", goal, model.n)
+    L = float(np.linalg.norm(goal - start))
+    if not L > 0:
+        raise InputError("start and goal coincide")
+    u = (goal - start) / L
+    mid = 0.5 * (start + goal)
+    p, u, v, a_peak, _c, t_rest, t_rest_end, t_s, eps_q, xi, qg = _prepare(
+        model, mid, u, v_max, xi_true, t_s, eps_q, t_rest, t_rest_end, a_peak, 1e-9, working_guess,
+        quantisation, strict_xi)
+    T, D = ramp_length(v, a_peak)
+    cruise = 0.5 * L - D
+    if cruise <= 0:
+        raise SimulationError(f"{model.robot.name}: v = {v:g} needs ramps of {2 * D:.4g} (pose units) at a_peak = "
+                              f"{a_peak:g}, longer than the {L:.4g} segment; lower the speed")
+    law = crossing_time_law(v, a_peak, cruise, t_rest, t_rest_end)
+    n_samp = int(math.floor(law.duration / t_s)) + 1
+    t = np.arange(n_samp) * t_s
+    s, sd, sdd = law.evaluate(t)
+    X = p + s[:, None] * u
+    Q = model.ik_path(X, xi, qg)
+    ok = valid_poses(model, X, Q, np.ones(len(X), dtype=bool))
+    if not ok.all():
+        raise SimulationError(f"{model.robot.name}: the motion leaves x_bounds or the joint range at "
+                              f"t = {t[~ok][0]:.4f} s")
+    XD, XDD = sd[:, None] * u, sdd[:, None] * u
+    QD = model.joint_velocity(X, Q, xi, XD)
+    QDD = model.joint_acceleration(X, Q, xi, XD, QD, XDD)
+    modes = model.mode_batch(X, Q, xi)
+    if np.any(modes == 0) or np.any(modes != modes[0]):
+        raise SimulationError(f"{model.robot.name}: the motion meets the Type 2 locus; choose another segment")
+    k_mid = int(np.argmin(np.abs(s)))
+    q_meas = quantise(Q, eps_q, quantisation, np.random.default_rng(seed))
+    return SimulatedRun(
+        robot_name=model.robot.name, t=t, q_meas=q_meas, q=Q, x=X, xd=XD, xdd=XDD, qd=QD, qdd=QDD,
+        mode_true=modes, xi_true=np.array(xi), k_sing=k_mid, t_sing=float(t[k_mid]), x_sing=X[k_mid],
+        s_sing=0.0, v_sing=v, bounce=False, crossing_point=p, direction=u, t_s=t_s, eps_q=eps_q,
+        a_peak=a_peak, quantisation=quantisation, time_law=law,
+    )

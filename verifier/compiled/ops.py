@@ -30,6 +30,9 @@ TWO_PI = 2.0 * math.pi
 _TRIG_ULPS = float(TRIG_ULPS)
 
 jit = njit(cache=True, nogil=True)
+#: IEEE division as numpy's (x / 0 is inf or NaN): numba's default raises
+#: ZeroDivisionError, which an empty divisor such as [0.3, 0] reached.
+_ieee_jit = njit(cache=True, nogil=True, error_model="numpy")
 
 
 @intrinsic
@@ -183,7 +186,7 @@ def _nan_inf(v, repl):
     return repl if v != v else v
 
 
-@jit
+@_ieee_jit
 def div(al, ah, bl, bh):
     """``[a] / [b]``: hull of ``{x / y : y != 0}`` (see :func:`verifier.interval.div`)."""
     if bl <= 0.0 and bh >= 0.0:

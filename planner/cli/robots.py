@@ -1,0 +1,41 @@
+"""``crosscert robots``: the shipped robots, and the validation of one of them."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from robots.registry import ROBOTS, get_entry
+from robots.validation import validate
+from verifier.validation import INTERVAL_CHECKS
+
+__all__ = ["robots"]
+
+
+def _row(entry) -> str:
+    r = entry.robot
+    fmt = lambda v: "(" + ", ".join(f"{x:g}" for x in np.atleast_1d(v)) + ")"  # noqa: E731
+    extras = [name for name, has in (("dynamics", entry.dynamics is not None),
+                                      ("benchmark crossing", entry.benchmark is not None),
+                                      ("reference motion", entry.motion is not None)) if has]
+    return (f"{entry.name}: n = {r.n}, m = {r.m}, t_s = {r.t_s:g} s, eps_q = {r.eps_q:g}, a_max = {fmt(r.a_max)}, "
+            f"xd0 = {fmt(r.xd0)}; ships {', '.join(extras) if extras else 'no task'}")
+
+
+def robots(a) -> int:
+    """``crosscert robots``: list the registered robots, or validate one (``--validate NAME``); exit code 0 or 2."""
+    if a.validate is None:
+        for name in sorted(ROBOTS):
+            print(_row(ROBOTS[name]))
+        return 0
+    entry = get_entry(a.validate)
+    report = validate(entry.robot, seed=a.seed, interval_checks=INTERVAL_CHECKS)
+    for c in report.checks:
+        print(f"{c.name:>22}: {c.outcome.value:<7} {c.message}")
+    if report.ok:
+        print(f"{entry.name}: every check passed")
+        return 0
+    names = ", ".join(c.name for c in report.failures)
+    print(f"crosscert: error: robot {entry.name} fails validation ({names}); see the report above", file=sys.stderr)
+    return 2
