@@ -34,7 +34,6 @@ as the DexTAR's Table I.  SI units: m, rad.
 from __future__ import annotations
 
 import functools
-import math
 
 import casadi as ca
 import numpy as np
