@@ -30,7 +30,7 @@ from .tracker import (
 )
 from .trajectory import Trajectory
 from .trajfile import read_trajectory, write_trajectory
-from . import validation  # registers the interval checks of robots.validate
+from . import validation as validation  # noqa: F401  (registers the interval checks of robots.validate)
 
 __all__ = [
     "CrosscertError",

@@ -55,7 +55,7 @@ def check_interval_evaluation(robot, km, sample, rng) -> CheckResult:
 def check_interval_containment(robot, km, sample, rng) -> CheckResult:
     """Contracted boxes and enclosures over boxes contain sampled truths."""
     im = IntervalModel(robot)
-    X, Q, xi = sample.X, sample.Q, sample.xi
+    X, Q = sample.X, sample.Q
     B, n = X.shape
     eps = robot.eps_q
     err = eps * rng.choice([-1.0, 1.0], size=Q.shape)  # readings at the edge of the error bound
