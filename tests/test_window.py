@@ -60,7 +60,7 @@ def runs():
 
 @pytest.fixture(scope="module")
 def results(runs, settings):
-    return [(sc, _window(sc, settings)) for sc in runs]
+    return [(sc, _window(sc, settings, max_geometries=8)) for sc in runs]
 
 
 def test_window_is_sound_on_adversarial_runs(results):
