@@ -126,6 +126,14 @@ def deciding_attempt(attempts: Sequence[BounceSearch]) -> BounceSearch | None:
     return attempts[-1] if attempts else None
 
 
+def row_outcome(verified: bool, attempts) -> SearchOutcome:
+    """Outcome of a row of attempts: FOUND if verified, NOT_SEARCHED without attempts, else the deciding one's."""
+    if verified:
+        return SearchOutcome.FOUND
+    dec = deciding_attempt(attempts)
+    return SearchOutcome.NOT_SEARCHED if dec is None else dec.outcome
+
+
 @dataclass(frozen=True, eq=False)
 class SpeedRefutation:
     """Search result for one recording (one speed).
@@ -168,12 +176,7 @@ class SpeedRefutation:
     outcome: SearchOutcome = field(init=False)
 
     def __post_init__(self) -> None:
-        dec = deciding_attempt(self.attempts)
-        if self.verified:
-            out = SearchOutcome.FOUND
-        else:
-            out = SearchOutcome.NOT_SEARCHED if dec is None else dec.outcome
-        object.__setattr__(self, "outcome", out)
+        object.__setattr__(self, "outcome", row_outcome(self.verified, self.attempts))
 
 
 @dataclass(frozen=True)
@@ -248,12 +251,7 @@ class RecordingRefutation:
     outcome: SearchOutcome = field(init=False)
 
     def __post_init__(self) -> None:
-        dec = deciding_attempt(self.attempts)
-        if self.verified:
-            out = SearchOutcome.FOUND
-        else:
-            out = SearchOutcome.NOT_SEARCHED if dec is None else dec.outcome
-        object.__setattr__(self, "outcome", out)
+        object.__setattr__(self, "outcome", row_outcome(self.verified, self.attempts))
 
 
 @dataclass(frozen=True)
