@@ -44,7 +44,7 @@ from robots.errors import InputError
 
 from . import interval as I
 from .settings import TrackerSettings, Verdict
-from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
+from .step import Backend, Tracker, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import initial_box_from_mode, verdict_of
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
@@ -368,7 +368,7 @@ class _Hypothesis:
 
     def _keep(self, live):
         self.xlo, self.xhi, self.tx, self.txd = self.xlo[live], self.xhi[live], self.tx[live], self.txd[live]
-        self.final = self.final[live] if len(self.final) == len(live) else self.final
+        self.final = self.final[live]
 
     def _final_boxes(self):
         K = self.q.shape[0]
@@ -490,8 +490,6 @@ class FixedLagWindow:
 
     def __init__(self, model, settings: TrackerSettings, x0, *, lag: int, xi_box=None,
                  backend: str | Backend = Backend.COMPILED):
-        from .step import Tracker
-
         if isinstance(lag, bool) or int(lag) != lag or lag < 1:
             raise InputError(f"lag must be a positive number of samples, got {lag!r}")
         self.model, self.lag, self.backend = model, int(lag), str(Backend(backend))
