@@ -31,7 +31,8 @@ from verifier.window import track_window
 from . import refute
 from .simulate import simulate_bounce
 from .sweep import cruise_for
-from .task import CrossingTask, PlanningBounds, crossing_on_segment
+from .generate.crossing import crossing_point_and_joints
+from .task import CrossingTask, PlanningBounds
 
 __all__ = ["BounceGap", "bounce_gap", "BOUNCE_DISTANCES", "BOUNCE_FLOOR_TOL"]
 
@@ -89,15 +90,6 @@ class BounceGap:
         }
 
 
-def _crossing_point(kin, task: CrossingTask, xi):
-    """The task's crossing point (m), its unit direction and the joints there (rad), for geometry ``xi``."""
-    sc = crossing_on_segment(kin, task, xi)
-    s = np.linspace(0.0, sc.s_star, max(2, int(np.ceil(sc.s_star / 1e-3)) + 1))
-    path = task.start[None, :] + s[:, None] * sc.u[None, :]
-    q = kin.ik_path(path, xi, task.working_guess)
-    return path[-1], sc.u, q[-1], sc.m0
-
-
 def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *, starts=None,
                distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None) -> BounceGap:
     """Certified and refuted turn-back distances of the task's bounces at ``speed`` (module docstring).
@@ -123,7 +115,8 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, 
     imodel = IntervalModel(robot) if imodel is None else imodel
     b = bounds.resolved(robot)
     xi = robot.xi_center
-    point, u, q_point, m0 = _crossing_point(kin, task, xi)
+    point, q_point, m0 = crossing_point_and_joints(kin, task, xi)
+    u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
     distances = tuple(sorted({float(d) for d in distances}))
 
     def recording(d):

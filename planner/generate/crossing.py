@@ -16,7 +16,7 @@ from .check import CRITERION_TOL, verify
 from .nlp import initial_guess, sample, solve_nlp
 from .types import GeneratedTrajectory, GenerationLimits, LimitExceeded, Objective
 
-__all__ = ["generate_crossing"]
+__all__ = ["generate_crossing", "crossing_point_and_joints"]
 
 #: ``|mode value| / Hadamard bound`` below which a given crossing point is on the locus.
 _LOCUS_RTOL = 1e-8
@@ -48,8 +48,9 @@ def _dynamics(kin: KinematicModel, dynamics) -> LumpedDynamics:
     raise InputError(f"dynamics must be a LumpedMassModel or LumpedDynamics, got {type(dynamics).__name__}")
 
 
-def _crossing(kin: KinematicModel, task: CrossingTask, xi, crossing_point):
-    """Crossing point, joints there, start mode; InputError on a bad request."""
+def crossing_point_and_joints(kin: KinematicModel, task: CrossingTask, xi, crossing_point=None):
+    """Where ``task`` crosses the locus of ``xi`` (``crossing_point``, m, when given; else where its straight
+    segment does), the joints there (rad) and the start mode; InputError on a bad request."""
     if crossing_point is None:
         c = crossing_on_segment(kin, task, xi)
         s_star, u, m0 = c.s_star, c.u, c.m0
@@ -187,7 +188,7 @@ def generate_crossing(kin: KinematicModel, dynamics, task: CrossingTask, v_sing:
     if xi.shape != (robot.m,):
         raise InputError(f"xi_plan must have {robot.m} entries")
 
-    point, q_point, m0 = _crossing(kin, task, xi, crossing_point)
+    point, q_point, m0 = crossing_point_and_joints(kin, task, xi, crossing_point)
     t_dir = uncontrolled_direction(kin, point, q_point, xi)
     try:
         guess = initial_guess(kin, task, point, q_point, v_sing, NA, NB, xi)
