@@ -55,7 +55,7 @@ class BounceGap:
     speed : float
         Approach speed of the bounces, m/s.
     distances : tuple of float
-        Turn-back distances tried by the tracker, m.
+        Turn-back distances tried by the tracker, m (increasing).
     verdicts : tuple of Verdict
         The tracker's verdict (window reasoning) at each distance.
     certified_from : float or None
@@ -91,10 +91,22 @@ class BounceGap:
 
 
 def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *, starts=None,
-               distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None) -> BounceGap:
+               distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None,
+               exhaustive: bool = False) -> BounceGap:
     """Certified and refuted turn-back distances of the task's bounces at ``speed`` (module docstring).
 
     Module-level so that any executor can run it in another process.
+
+    The tracker is asked by bisection over ``distances``: the farthest first
+    (not certified: no ``certified_from``), then the middle of the bracket
+    between the nearest certified and the farthest uncertified distance
+    (the nearest distance is presumed uncertified until the bracket reaches
+    it).  The crossing searches then run on every third distance below
+    ``certified_from`` and bisect up to it: a bounce certified
+    ``mode-unchanged`` has no crossing explanation, so the floor lies below.
+    Both results keep their meaning when the family is not monotone in the
+    distance: every tried distance from ``certified_from`` on is certified,
+    and the floor is a verified counterexample.
 
     Parameters
     ----------
@@ -110,6 +122,9 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, 
         Turn-back distances, m.
     tol : float
         Resolution of the crossing floor, m.
+    exhaustive : bool
+        Track every distance and search crossings on every third one (no
+        bisection of the tracker's side; for tests and studies of the whole family).
     """
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
@@ -126,16 +141,40 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, 
         return run.q_meas, b.t_s
 
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q)
-    verdicts = []
-    for d in distances:
-        q, _ = recording(d)
-        x0 = initial_box_from_mode(imodel, q[0], m0, s)
-        verdicts.append(track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES).verdict)
+    verdicts: dict[float, Verdict] = {}
+
+    def unchanged(i: int) -> bool:
+        d = distances[i]
+        if d not in verdicts:
+            q, _ = recording(d)
+            x0 = initial_box_from_mode(imodel, q[0], m0, s)
+            verdicts[d] = track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES).verdict
+        return verdicts[d] is Verdict.MODE_UNCHANGED
+
+    if exhaustive:
+        for i in range(len(distances)):
+            unchanged(i)
+    elif unchanged(len(distances) - 1):
+        lo, hi = 0, len(distances) - 1  # lo presumed uncertified until tried
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if unchanged(mid):
+                hi = mid
+            else:
+                lo = mid
+        if lo == 0:
+            unchanged(0)
     certified_from = None
-    for d, v in zip(reversed(distances), reversed(verdicts)):
-        if v is not Verdict.MODE_UNCHANGED:
+    for d in sorted(verdicts, reverse=True):
+        if verdicts[d] is not Verdict.MODE_UNCHANGED:
             break
         certified_from = d
-    floor = refute.crossing_floor(kin, recording, distances[::3], tol=tol, m0=m0, xi_starts=starts,
-                                  bounds={"eps_q": b.eps_q}, max_cpu_time=BOUNCE_CPU_TIME)
-    return BounceGap(float(speed), distances, tuple(verdicts), certified_from, floor.floor, tuple(floor.rows))
+    scan = distances[::3]
+    if certified_from is not None and not exhaustive:
+        scan = tuple(d for d in scan if d < certified_from) or distances[:1]
+    floor = refute.crossing_floor(kin, recording, scan, tol=tol, m0=m0, xi_starts=starts,
+                                  bounds={"eps_q": b.eps_q}, max_cpu_time=BOUNCE_CPU_TIME,
+                                  upper=None if exhaustive else certified_from)
+    tried = tuple(sorted(verdicts))
+    return BounceGap(float(speed), tried, tuple(verdicts[d] for d in tried), certified_from, floor.floor,
+                     tuple(floor.rows))

@@ -5,7 +5,7 @@ assembly-mode change to be certified from its encoders, and prove it.
 
 * :func:`certify_plan` — the tracker run on inputs that cover every admissible
   execution of a plan (see *What a certificate guarantees* below);
-* :func:`minimal_v_sing` — batched search of the smallest certified speed;
+* :func:`minimal_v_sing` — bisection search of the smallest certified speed;
 
 Plans come from :mod:`planner.plan`, the Monte Carlo confirmation from
 :mod:`planner.montecarlo`, the whole pipeline from :mod:`planner.pipeline`.
@@ -154,58 +154,65 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
                         max_geometries=max_geometries)
 
 
-def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6, progress=None):
-    """Smallest certified ``v_sing`` in ``[v_low, v_high]`` to ``tol`` (m/s).
+def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None):
+    """Smallest certified ``v_sing`` in ``[v_low, v_high]`` to ``tol`` (m/s), by bisection.
 
-    The first round plans ``grid`` speeds spread over ``[v_low, v_high]``, each
-    later round at least ``grid - 2`` interior speeds of the current bracket
-    (more, up to three times that, when it saves a round), certified in one
-    batch per round; the bracket shrinks to the interval between
-    the fastest uncertified speed below the slowest certified one and that
-    certified speed.  Certification need not be monotone in the speed: the
-    table of every trial is returned, and the result is the slowest speed
-    certified such that every tried speed above it was certified too.
+    The fastest speed ``v_high`` is certified first; if it is not, there is
+    no ``v_min``.  Otherwise the bracket ``(v_fail, v_cert)`` starts as
+    ``(v_low, v_high)`` and each question, at its midpoint, moves one end:
+    to the midpoint when it certifies (``v_cert``), else the other end
+    (``v_fail``).  ``v_low`` is presumed not to certify until the bracket
+    reaches it; it is then tried itself.  A question is one plan, certified
+    alone (:func:`_certify_speeds`): about ``log2((v_high - v_low) / tol)``
+    questions instead of a grid of speeds.
+
+    Certification need not be monotone in the speed: the table of every
+    trial is returned, and the result is the slowest certified speed such
+    that every tried speed above it was certified (bisection keeps every
+    failed speed below ``v_cert``).  When monotonicity fails, the result is
+    still certified (its own run certified it); only a slower certified
+    speed may have been missed.
+
+    ``observe(trial)`` (optional) is called with each :class:`SpeedTrial` as
+    it completes (the pipeline passes certified speeds to the counterexample
+    searches running meanwhile).
 
     Returns
     -------
     v_min : float or None
-        ``None`` when no tried speed certifies, or when the fastest one does not.
+        ``None`` when ``v_high`` does not certify.
     trials : list of SpeedTrial (sorted by speed)
     """
     robot = kin.robot
     b = bounds.resolved(robot)
     v_low, v_high = V.positive("v_low", v_low), V.positive("v_high", v_high)
+    tol = V.positive("tol", tol)
     if not v_low < v_high:
         raise InputError(f"need v_low < v_high, got [{v_low}, {v_high}]")
     trials: dict[float, SpeedTrial] = {}
-    lo, hi = float(v_low), float(v_high)
-    speeds = list(np.linspace(lo, hi, grid))
-    while True:
-        speeds = [round(v, 6) for v in speeds if round(v, 6) not in trials]
-        if speeds:
-            for v, trial in zip(speeds, _certify_speeds(kin, imodel, task, b, speeds, progress)):
-                trials[v] = trial
-        ordered = sorted(trials)
-        ok = [trials[v].verdict is Verdict.MODE_CHANGED for v in ordered]
-        if not ok[-1]:
-            # the fastest tried speed is not certified: no speed has every
-            # faster trial certified (a non-monotone table is left to the user)
-            return None, [trials[v] for v in ordered]
-        # slowest speed from which every faster trial certifies
-        i = len(ordered) - 1
-        while i > 0 and ok[i - 1]:
-            i -= 1
-        v_cert = ordered[i]
-        v_fail = ordered[i - 1] if i > 0 else None
-        if v_fail is None:
-            return v_cert, [trials[v] for v in ordered]
-        if v_cert - v_fail <= tol:
-            return v_cert, [trials[v] for v in ordered]
-        # enough interior speeds to reach tol in two more rounds when up to
-        # three times the base grid allows it (one round costs about as much
-        # as one tracked run: the batch is vectorised)
-        interior = int(np.clip(np.ceil(np.sqrt((v_cert - v_fail) / tol)) - 1, grid - 2, 3 * (grid - 2)))
-        speeds = list(np.linspace(v_fail, v_cert, interior + 2)[1:-1])
+
+    def certified(v) -> bool:
+        v = round(float(v), 6)
+        if v not in trials:
+            trials[v] = _certify_speeds(kin, imodel, task, b, [v], progress)[0]
+            if observe is not None:
+                observe(trials[v])
+        return trials[v].verdict is Verdict.MODE_CHANGED
+
+    v_cert, v_fail = round(float(v_high), 6), round(float(v_low), 6)
+    if not certified(v_cert):
+        return None, [trials[v] for v in sorted(trials)]
+    while v_cert - v_fail > tol:
+        mid = round(0.5 * (v_fail + v_cert), 6)
+        if mid in (v_fail, v_cert):  # tol below the rounding of speeds
+            break
+        if certified(mid):
+            v_cert = mid
+        else:
+            v_fail = mid
+    if v_fail == round(float(v_low), 6) and certified(v_fail):  # no question failed: v_low itself
+        v_cert = v_fail
+    return v_cert, [trials[v] for v in sorted(trials)]
 
 
 def _certify_speeds(kin, imodel, task, b, speeds, progress):

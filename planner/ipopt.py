@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-__all__ = ["IpoptRun", "solve_with_ipopt", "STRICT_BOUNDS"]
+__all__ = ["IpoptRun", "ParametricSolver", "solve_with_ipopt", "STRICT_BOUNDS"]
 
 #: Options of every solve: bounds are never relaxed (``bound_relax_factor = 0``)
 #: and the solution honours them exactly; adaptive barrier update; no banner.
@@ -27,6 +27,38 @@ class IpoptRun:
     stats: dict
     status: str
     elapsed_s: float
+
+
+class ParametricSolver:
+    """One IPOPT solver built once for ``min obj(z, p)`` s.t. ``lbg <= g(z, p) <= ubg``, ``lbx <= z <= ubx``.
+
+    Building an ``nlpsol`` (the expression graph, its derivatives and IPOPT's
+    set-up) costs as much as a short solve; data that change between solves
+    of one problem family (readings, bounds, scales) enter as the parameter
+    vector ``p``, so one solver serves every instance of the family.
+
+    Parameters
+    ----------
+    name : str
+        Name of the CasADi solver.
+    z, p, obj, g : casadi.SX
+        Variables, parameters, objective and constraints.
+    ipopt : dict
+        IPOPT options on top of :data:`STRICT_BOUNDS`.
+    """
+
+    def __init__(self, name: str, z, p, obj, g, *, ipopt: dict):
+        self._solver = ca.nlpsol(name, "ipopt", {"x": z, "p": p, "f": obj, "g": g},
+                                 {"ipopt": {**STRICT_BOUNDS, **ipopt}, "print_time": False})
+        self.n_variables, self.n_constraints = int(z.numel()), int(g.numel())
+
+    def solve(self, *, p, z0, lbx, ubx, lbg, ubg) -> IpoptRun:
+        """Solve the instance of parameters ``p`` from ``z0``."""
+        t0 = time.perf_counter()
+        sol = self._solver(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
+        elapsed = time.perf_counter() - t0
+        stats = self._solver.stats()
+        return IpoptRun(sol, stats, str(stats.get("return_status", "unknown")), elapsed)
 
 
 def solve_with_ipopt(name: str, z, obj, g, *, z0, lbx, ubx, lbg, ubg, ipopt: dict) -> IpoptRun:

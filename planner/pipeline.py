@@ -12,7 +12,8 @@ from __future__ import annotations
 import importlib.metadata as md
 import logging
 import time
-from concurrent.futures import Executor, Future, ThreadPoolExecutor
+import threading
+from concurrent.futures import Executor, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -240,7 +241,11 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
 
     try:
         t1 = time.perf_counter()
-        v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress)
+        # a certified speed is the refutation's ceiling: no counterexample is searched at or above it
+        observe = None if refuter is None else (
+            lambda t: refuter.drop_from(t.v_sing) if t.verdict is Verdict.MODE_CHANGED else None)
+        v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress,
+                                       observe=observe)
         t1 = lap("search", t1)
         plan = enc = win = mc = a_used = cls = None
         # the batched search pads shorter plans with rest samples: re-certify the
@@ -354,7 +359,16 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None):
 
 
 class Refuter:
-    """Counterexample searches by speed: submitted to an executor, or run here when asked.
+    """Counterexample searches by speed: fed to an executor one at a time, or run here when asked.
+
+    The speeds of :meth:`submit` are handed to the executor in increasing
+    order, the next one when the previous one has finished, and only while
+    they stay below the *ceiling*: the slowest speed certified so far
+    (:meth:`drop_from`), above which no counterexample is wanted.  The
+    speed search and the counterexample searches thus share one bracket,
+    and a worker never starts a search the certification made useless.
+    Which speeds below the final ceiling are searched does not depend on
+    timing, so neither does the result.
 
     Parameters
     ----------
@@ -376,35 +390,60 @@ class Refuter:
         self._futures: dict[float, Future] = {}
         self._speeds: set = set()
         self._rows: dict = {}
+        self._lock = threading.Condition()
+        self._queue: list = []  # speeds of submit() not yet handed to the executor
+        self._ceiling = float("inf")
+        self._closed = False
+        self._feeder: threading.Thread | None = None
 
     def submit(self, speeds) -> None:
-        """Queue searches at ``speeds`` (m/s) on the executor."""
-        self._speeds.update(speeds)
-        if self._executor is not None:
-            for v in speeds:
-                if v not in self._futures:
-                    self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+        """Queue searches at ``speeds`` (m/s), handed to the executor one at a time below the ceiling."""
+        speeds = list(speeds)
+        with self._lock:
+            self._speeds.update(speeds)
+            if self._executor is None:
+                return
+            self._queue = sorted(set(self._queue) | {v for v in speeds if v not in self._futures})
+            if self._feeder is None:
+                self._feeder = threading.Thread(target=self._feed, name="crosscert-refuter", daemon=True)
+                self._feeder.start()
+
+    def _feed(self) -> None:
+        while True:
+            with self._lock:
+                self._queue = [v for v in self._queue if v < self._ceiling and v not in self._futures]
+                if self._closed or self._executor is None or not self._queue:
+                    self._feeder = None
+                    return
+                v = self._queue.pop(0)
+                future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+            wait([future])
 
     def drop_from(self, v_top) -> None:
-        """Forget the speeds at or above ``v_top`` (searches not started are cancelled)."""
-        self._speeds = {v for v in self._speeds if v < v_top}
-        for v, f in self._futures.items():
-            if v >= v_top:
-                f.cancel()
+        """Forget the speeds at or above ``v_top`` (searches not started are cancelled): the new ceiling."""
+        with self._lock:
+            self._ceiling = min(self._ceiling, float(v_top))
+            self._speeds = {v for v in self._speeds if v < v_top}
+            for v, f in self._futures.items():
+                if v >= v_top:
+                    f.cancel()
 
     def speeds(self) -> list:
         """The speeds still wanted, sorted."""
-        return sorted(self._speeds)
+        with self._lock:
+            return sorted(self._speeds)
 
     def result(self, v):
         """The search at speed ``v``: the executor's result, or a run here if the executor failed."""
-        self._speeds.add(v)
+        with self._lock:
+            self._speeds.add(v)
         if v not in self._rows:
             row = None
             if self._executor is not None:
-                future = self._futures.get(v)
-                if future is None or future.cancelled():
-                    future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+                with self._lock:
+                    future = self._futures.get(v)
+                    if future is None or future.cancelled():
+                        future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
                 try:
                     row = future.result()
                 except Exception as exc:
@@ -421,8 +460,10 @@ class Refuter:
 
     def close(self) -> None:
         """Cancel what has not started; shut the executor down if this object made it."""
-        for f in self._futures.values():
-            f.cancel()
+        with self._lock:
+            self._closed = True
+            for f in self._futures.values():
+                f.cancel()
         if self._own and self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
 

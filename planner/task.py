@@ -255,6 +255,24 @@ def crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
         If the start or goal is unreachable or on the locus, if both lie in the
         same assembly mode, or if the segment crosses the locus more than once.
     """
+    xi = np.asarray(xi, dtype=float)
+    key = (kin.robot, task.start.tobytes(), task.goal.tobytes(), np.asarray(task.working_guess, float).tobytes(),
+           xi.tobytes())
+    hit = _CROSSINGS.get(key)
+    if hit is None:
+        hit = _CROSSINGS[key] = _crossing_on_segment(kin, task, xi)
+        while len(_CROSSINGS) > _CROSSING_CACHE_SIZE:
+            del _CROSSINGS[next(iter(_CROSSINGS))]
+    return hit
+
+
+#: :func:`crossing_on_segment` results of this process, by (robot, task, geometry): plans of one task
+#: at many speeds, the execution class and the searches all ask for the same crossing.
+_CROSSINGS: dict = {}
+_CROSSING_CACHE_SIZE = 64
+
+
+def _crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
     L = float(np.linalg.norm(task.goal - task.start))
     u = (task.goal - task.start) / L
     N = max(8, int(np.ceil(L / _SEGMENT_STEP)))

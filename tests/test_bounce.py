@@ -13,7 +13,7 @@ def test_bounces_are_certified_only_beyond_the_crossing_floor(task, kin, imodel)
     (~10 mm), the tracker never certifies mode-unchanged at or inside it, never mode-changed anywhere,
     and certifies the bounces that turn back far enough."""
     g = bounce_gap(DEXTAR, task, PlanningBounds(), 1.2, distances=(0.0, 0.004, 0.009, 0.012, 0.02), tol=1e-3,
-                   kin=kin, imodel=imodel)
+                   kin=kin, imodel=imodel, exhaustive=True)
     assert g.floor is not None and 0.005 < g.floor < 0.015, g.summary()
     assert all(v is not Verdict.MODE_CHANGED for v in g.verdicts), g.summary()
     for d, v in zip(g.distances, g.verdicts):

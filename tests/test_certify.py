@@ -80,7 +80,7 @@ def test_minimal_speed_and_monte_carlo_confirmation(task, kin, imodel):
     """
     im = imodel
     b = PlanningBounds()
-    v_min, trials = minimal_v_sing(kin, im, task, b, 0.9, 1.6, tol=0.05, grid=4)
+    v_min, trials = minimal_v_sing(kin, im, task, b, 0.9, 1.6, tol=0.05)
     assert v_min is not None and 0.9 < v_min <= 1.6
     by_v = {t.v_sing: t.verdict for t in trials}
     assert by_v[v_min] is Verdict.MODE_CHANGED
@@ -93,7 +93,7 @@ def test_minimal_speed_and_monte_carlo_confirmation(task, kin, imodel):
     assert all(s > BENCHMARK.expected.refutation_bound for s, v in by_v.items() if v is Verdict.MODE_CHANGED)
     # the forward tracker alone: the DexTAR's number before window reasoning (1.198 m/s)
     fwd = PlanningBounds(reasoning="forward")
-    v_fwd, trials_fwd = minimal_v_sing(kin, im, task, fwd, 0.9, 1.6, tol=0.05, grid=4)
+    v_fwd, trials_fwd = minimal_v_sing(kin, im, task, fwd, 0.9, 1.6, tol=0.05)
     check_certified_speed(v_fwd, BENCHMARK.expected, tol=0.05 + BENCHMARK.expected.v_min_tol, forward=True)
     assert all(t.verdict is t.forward_verdict for t in trials_fwd)
     plan = plan_crossing(kin, task, v_min, b)

@@ -423,13 +423,14 @@ class _Hypothesis:
 
 def _decide(hyps, max_passes, rel_tol, max_geometries):
     """Rounds on both hypotheses in step, halving each one's geometries between its rounds while it
-    stays within ``max_geometries``, until one hypothesis is refuted or none can be halved."""
+    stays within ``max_geometries``, until one hypothesis is refuted (at once: the other is then left
+    as it stands, consistent) or none can be halved."""
     open_ = list(hyps)
     while open_:
         for h in open_:
             h.round(max_passes, rel_tol)
-        if any(h.refuted for h in hyps):
-            return
+            if h.refuted:  # one refuted hypothesis decides: the other's round could only cost time
+                return
         open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
         for h in open_:
             h.split()

@@ -21,6 +21,7 @@ never reported as one: every converged candidate goes through
 
 from __future__ import annotations
 
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
@@ -29,7 +30,7 @@ from robots import validators as V
 from robots.errors import InputError, SimulationError
 from robots.kinematics import KinematicModel
 
-from ..ipopt import solve_with_ipopt
+from ..ipopt import ParametricSolver
 from .problem import (
     ACCEL_MARGIN,
     JOINT_MARGIN,
@@ -57,6 +58,11 @@ IPOPT_TOL = 1e-9
 #: IPOPT's constraint violation tolerance (also the "acceptable" one), in the scaled
 #: rows (eps_q- and full-acceleration units): far inside the margins above.
 IPOPT_CONSTR_VIOL_TOL = 1e-10
+#: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
+_MAX_CHUNK = 64
+#: Smallest move between consecutive samples a chunk always accepts, as a fraction of the smallest
+#: side of the robot's workspace box (the continuity check is relative to the last step otherwise).
+_CONTINUITY_FLOOR = 1e-3
 
 
 def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, np.ndarray]:
@@ -94,8 +100,37 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
     K = Q.shape[0]
     X = np.full((K, kin.n), np.nan)
     solved = np.zeros(K, dtype=bool)
-    prev = None
-    for k in range(K):
+    # Continuation in chunks: one batched Newton per chunk, each row started
+    # from the last pose extrapolated at the last step.  A chunk keeps its
+    # longest prefix whose rows converged, stayed in mode m0 and moved
+    # continuously; the first row after it is solved alone, as the one-sample
+    # continuation would (so chunks only skip work, they never jump branch).
+    side = float(np.min(kin.robot.x_hi_array - kin.robot.x_lo_array))
+    prev = step = None
+    k, chunk = 0, 1
+    while k < K:
+        if prev is not None and chunk > 1:
+            ks = np.arange(k, min(K, k + chunk))
+            guess = prev[None, :] + (ks - k + 1)[:, None] * step[None, :]
+            Xc, ok = kin.fk_batch(Q[ks], xi, guess)
+            good = ok.copy()
+            if good.any():
+                good[good] = kin.mode_batch(Xc[good], Q[ks[good]], xi) == m0
+            moves = np.max(np.abs(np.diff(np.vstack([prev[None, :], Xc]), axis=0)), axis=1)
+            good &= moves <= np.maximum(4.0 * np.max(np.abs(step)), _CONTINUITY_FLOOR * side)
+            n_ok = int(np.argmin(good)) if not good.all() else good.size
+            if n_ok:
+                X[k:k + n_ok], solved[k:k + n_ok] = Xc[:n_ok], True
+                last = Xc[n_ok - 1]
+                step = last - (Xc[n_ok - 2] if n_ok >= 2 else prev)
+                prev = last
+                k += n_ok
+            if n_ok == ks.size:
+                chunk = min(2 * chunk, _MAX_CHUNK)
+                continue
+            chunk = 1
+            if k >= K:
+                break
         x = None
         if prev is not None:
             Xk, ok = kin.fk_batch(Q[k:k + 1], xi, prev[None, :])
@@ -109,7 +144,10 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
                 # the lexicographically first solution of its mode.
                 x = mine[0] if prev is None else min(mine, key=lambda s: float(np.max(np.abs(s - prev))))
         if x is not None:
+            step = np.zeros(kin.n) if prev is None or not solved[k - 1] else x - prev
             X[k], solved[k], prev = x, True, x
+            chunk = 2
+        k += 1
     if not solved.any():
         raise SimulationError(f"{kin.robot.name}: no sample has a forward-kinematics solution in mode {m0:+d}")
     idx = np.nonzero(solved)[0]
@@ -172,9 +210,68 @@ def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndar
 
 
 # --------------------------------------------------------------------- NLP
+#: Solvers built in this process, by (robot, samples, kind, IPOPT options): most recently used last.
+_SOLVERS: OrderedDict = OrderedDict()
+#: How many solvers :data:`_SOLVERS` keeps (each holds its expression graph and IPOPT's workspace).
+_SOLVER_CACHE_SIZE = 16
+
+
+def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind, ipopt: dict) -> ParametricSolver:
+    """The NLP of ``kind`` on ``K`` samples, built once per process with every datum a parameter.
+
+    Parameters ``p`` (in this order): the readings ``q_meas`` (n x K, column
+    by column), ``eps_q`` (n), ``a_max`` (n), ``t_s``, the box centre ``xc``
+    and half-width ``xh`` (m each), the residual scales (n) and ``m0``.
+    """
+    key = (kin.robot, int(K), kind, tuple(sorted(ipopt.items())))
+    solver = _SOLVERS.get(key)
+    if solver is not None:
+        _SOLVERS.move_to_end(key)
+        return solver
+    n, m = kin.n, kin.m
+    qm, eps, amax = ca.SX.sym("qm", n, K), ca.SX.sym("eps", n), ca.SX.sym("amax", n)
+    ts, xc, xh = ca.SX.sym("ts"), ca.SX.sym("xc", m), ca.SX.sym("xh", m)
+    fs, m0 = ca.SX.sym("fscale", n), ca.SX.sym("m0")
+    p = ca.vertcat(ca.vec(qm), eps, amax, ts, xc, xh, fs, m0)
+
+    # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq.
+    s = ca.SX.sym("s", m)
+    Xs = ca.SX.sym("x", n, K)
+    Vs = ca.SX.sym("v", n, K)
+    Ws = ca.SX.sym("w", n, K - 1)
+    Ds = ca.SX.sym("dq", n, K)
+    xi = xc + xh * s
+    U = ca.repmat(amax, 1, K - 1) * Ws
+    Q = qm + ca.repmat(eps, 1, K) * Ds
+
+    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi, fs],
+                        [kin.sx_f / fs, kin.sx_mode / kin.sx_hadamard])
+    F, M = point.map(K)(Xs, Q, ca.repmat(xi, 1, K), ca.repmat(fs, 1, K))
+    M = m0 * M
+    dyn_x = ((Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U)
+             / ca.repmat(0.5 * ts * ts * amax, 1, K - 1))
+    dyn_v = (Vs[:, 1:] - Vs[:, :-1] - ts * U) / ca.repmat(ts * amax, 1, K - 1)
+    # The only difference between the kinds: which samples' modes are constrained.
+    # A bounce keeps m0 at every sample; a crossing starts in m0 and ends in -m0
+    # (M is already multiplied by m0, so the last row is -M >= margin).
+    if kind is CounterexampleKind.BOUNCE:
+        mode_rows = ca.vec(M)
+    else:
+        mode_rows = ca.vertcat(M[0], -M[K - 1])
+    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), mode_rows)
+    z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds))
+    # Feasibility problem; the small smoothness objective picks a regular point.
+    obj = ca.sumsqr(Ws) / (n * (K - 1))
+    solver = ParametricSolver(kind.value, z, p, obj, g, ipopt=ipopt)
+    _SOLVERS[key] = solver
+    while len(_SOLVERS) > _SOLVER_CACHE_SIZE:
+        _SOLVERS.popitem(last=False)
+    return solver
+
+
 def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, kind: CounterexampleKind, *,
                      max_iter: int, max_cpu_time: float, print_level: int):
-    """Set up and solve the NLP of ``kind``; returns (Counterexample or None, status, iters, time, nv, ng)."""
+    """Solve the NLP of ``kind`` from ``xi_start``; returns (Counterexample or None, status, iters, time, nv, ng)."""
     K, n, m = rb.n_samples, kin.n, kin.m
     ts, qm, eps, amax = rb.t_s, rb.q_meas, rb.eps_q, rb.a_max
     xc, xh = 0.5 * (rb.xi_lo + rb.xi_hi), 0.5 * (rb.xi_hi - rb.xi_lo)
@@ -192,33 +289,15 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     jq = kin.jac_q_batch(X0, qm, xi_start)
     fscale = np.median(np.linalg.norm(jq * eps[None, None, :], axis=2), axis=0)
     fscale = np.where(fscale > 0, fscale, 1.0)
+    solver = _counterexample_solver(kin, K, kind, {
+        "print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time, "tol": IPOPT_TOL,
+        "constr_viol_tol": IPOPT_CONSTR_VIOL_TOL, "acceptable_constr_viol_tol": IPOPT_CONSTR_VIOL_TOL})
 
-    # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq.
-    s = ca.SX.sym("s", m)
-    Xs = ca.SX.sym("x", n, K)
-    Vs = ca.SX.sym("v", n, K)
-    Ws = ca.SX.sym("w", n, K - 1)
-    Ds = ca.SX.sym("dq", n, K)
-    xi = ca.DM(xc) + ca.DM(xh) * s
-    U = ca.repmat(ca.DM(amax), 1, K - 1) * Ws
-    Q = ca.DM(qm.T) + ca.repmat(ca.DM(eps), 1, K) * Ds
+    def vecF(a):  # CasADi's vec() is column-major
+        return np.asarray(a, dtype=float).reshape(-1, order="F")
 
-    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi],
-                        [kin.sx_f / ca.DM(fscale), rb.m0 * kin.sx_mode / kin.sx_hadamard])
-    F, M = point.map(K)(Xs, Q, ca.repmat(xi, 1, K))
-    dyn_x = ((Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U)
-             / ca.repmat(ca.DM(0.5 * ts * ts * amax), 1, K - 1))
-    dyn_v = (Vs[:, 1:] - Vs[:, :-1] - ts * U) / ca.repmat(ca.DM(ts * amax), 1, K - 1)
-    # The only difference between the kinds: which samples' modes are constrained.
-    # A bounce keeps m0 at every sample; a crossing starts in m0 and ends in -m0
-    # (M is already multiplied by m0, so the last row is -M >= margin).
-    if kind is CounterexampleKind.BOUNCE:
-        mode_rows = ca.vec(M)
-    else:
-        mode_rows = ca.vertcat(M[0], -M[K - 1])
-    n_mode = int(mode_rows.numel())
-    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), mode_rows)
-    z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds))
+    p = np.concatenate([vecF(qm.T), eps, amax, [ts], xc, xh, fscale, [float(rb.m0)]])
+    n_mode = K if kind is CounterexampleKind.BOUNCE else 2
     n_eq = 2 * n * (K - 1) + n * K
     lbg = np.concatenate([np.zeros(n_eq), np.full(n_mode, MODE_MARGIN)])
     ubg = np.concatenate([np.zeros(n_eq), np.full(n_mode, np.inf)])
@@ -233,25 +312,16 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     wb = np.full((n, K - 1), 1 - ACCEL_MARGIN)
     db = np.full((n, K), 1 - JOINT_MARGIN)
 
-    def vecF(a):  # CasADi's vec() is column-major
-        return np.asarray(a, dtype=float).reshape(-1, order="F")
-
     lbx = np.concatenate([-sb, vecF(x_lo), vecF(-vb), vecF(-wb), vecF(-db)])
     ubx = np.concatenate([sb, vecF(x_hi), vecF(vb), vecF(wb), vecF(db)])
     s0 = np.divide(xi_start - xc, xh, out=np.zeros(m), where=xh > 0)
     X0c = np.clip(X0.T, x_lo, x_hi)
     z0 = np.concatenate([np.clip(s0, -sb, sb), vecF(X0c), vecF(np.clip(V0.T, -vb, vb)),
                          vecF(U0.T / amax[:, None]), np.zeros(n * K)])
-
-    # Feasibility problem; the small smoothness objective picks a regular point.
-    obj = ca.sumsqr(Ws) / (n * (K - 1))
-    run = solve_with_ipopt(kind.value, z, obj, g, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
-                           ipopt={"print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
-                                  "tol": IPOPT_TOL, "constr_viol_tol": IPOPT_CONSTR_VIOL_TOL,
-                                  "acceptable_constr_viol_tol": IPOPT_CONSTR_VIOL_TOL})
+    run = solver.solve(p=p, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
     iters = int(stats.get("iter_count", -1))
-    nv, ng = int(z.numel()), int(g.numel())
+    nv, ng = solver.n_variables, solver.n_constraints
     if ipopt_outcome(status) is not SearchOutcome.CONVERGED:
         return None, status, iters, elapsed, nv, ng
     zs = np.asarray(sol["x"], dtype=float).reshape(-1)

@@ -117,7 +117,7 @@ def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tupl
 def crossing_floor(kin: KinematicModel, make_recording: Callable[[float], tuple], distances: Sequence[float], *,
                    tol: float | None = None, m0: int = 1, xi_starts: Sequence | None = None,
                    bounds: dict | None = None, max_iter: int = MAX_ITER, max_cpu_time: float = MAX_CPU_TIME,
-                   dense: int = DENSE_POINTS,
+                   dense: int = DENSE_POINTS, upper: float | None = None,
                    progress: Callable[[RecordingRefutation], None] | None = None) -> CrossingFloor:
     """Crossing-counterexample search on bounces turning back at several distances before the locus.
 
@@ -153,6 +153,11 @@ def crossing_floor(kin: KinematicModel, make_recording: Callable[[float], tuple]
         ``xi_lo``, ``xi_hi``, ``v0_max``, ``v_max``, ``x_lo``, ``x_hi``).
     max_iter, max_cpu_time, dense
         Passed to :func:`~planner.refute.search_crossing` (per attempt; ``max_cpu_time`` in s).
+    upper : float, optional
+        A distance (m) known to have no crossing counterexample (e.g. one
+        whose bounce a sound tracker certified ``mode-unchanged``): with
+        ``tol``, the bisection's upper end when no tried distance above the
+        largest refuted one is unrefuted.  It is not searched itself.
     progress : callable, optional
         Called with each :class:`RecordingRefutation` as it completes.
 
@@ -187,9 +192,13 @@ def crossing_floor(kin: KinematicModel, make_recording: Callable[[float], tuple]
     for d in ds:
         if d not in rows:
             run(d)
+    if upper is not None:
+        upper = V.positive("upper", upper, allow_zero=True)
     while tol is not None:
         refuted = [d for d in rows if rows[d].verified]
         above = [d for d in rows if refuted and d > max(refuted) and not rows[d].verified]
+        if upper is not None and refuted and upper > max(refuted):
+            above.append(upper)
         if not refuted or not above or min(above) - max(refuted) <= tol:
             break
         run(0.5 * (max(refuted) + min(above)))
