@@ -134,7 +134,14 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, 
     u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
     distances = tuple(sorted({float(d) for d in distances}))
 
-    def recording(d):
+    recordings: dict = {}
+
+    def recording(d):  # the tracker and the crossing search read the same bounce: simulate it once
+        if d not in recordings:
+            recordings[d] = _bounce_readings(d)
+        return recordings[d]
+
+    def _bounce_readings(d):
         run = simulate_bounce(kin, point, u, speed, xi_true=xi, t_s=b.t_s, eps_q=b.eps_q, t_rest=0.02,
                               a_peak=b.a_peak, cruise=max(5e-3, cruise_for(speed, b.a_peak) - d / 2),
                               working_guess=q_point, seed=0, short=d)
