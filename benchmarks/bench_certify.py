@@ -17,6 +17,12 @@ Each measurement runs in a fresh child process (this script with ``--child``):
 (``refute_in_background=False``) instead of the background worker.  CPU time
 is that of the certifying process (all its threads) plus that of the worker
 process, which is waited for when the certificate is returned.
+
+``--profile`` instead profiles one warm run with every search in the calling
+process (``refute_in_background=False``, so the worker's share is seen too)
+and prints the inclusive time of each part of the work (:data:`PARTS`):
+plans, execution classes, forward tracking, window passes, the CasADi
+kinematics, NLP building, IPOPT, the counterexample checks, the simulations.
 """
 
 from __future__ import annotations
@@ -35,7 +41,29 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-PHASES = ("setup", "search", "certificate", "monte_carlo", "refutation")
+PHASES = ("setup", "search", "certificate", "monte_carlo", "refutation", "bounce")
+#: Parts of the work in the ``--profile`` table: (label, module path suffix, function name).  Times are
+#: inclusive (a part may contain another: window passes contain forward passes of the kernel).
+PARTS = (
+    ("speed search (search_v_min)", "planner/certify.py", "search_v_min"),
+    ("  plans (plan_crossing)", "planner/plan.py", "plan_crossing"),
+    ("  execution classes (cartesian_class)", "planner/execution.py", "cartesian_class"),
+    ("  forward tracker runs (track)", "verifier/tracker.py", "track"),
+    ("  window passes (track_window)", "verifier/window.py", "track_window"),
+    ("Monte Carlo (monte_carlo_runs)", "planner/montecarlo.py", "monte_carlo_runs"),
+    ("  batched forward tracking (track_batch)", "verifier/tracker.py", "track_batch"),
+    ("refutation bound (refute_speed)", "planner/pipeline.py", "refute_speed"),
+    ("bounce gap (bounce_gap)", "planner/bounce.py", "bounce_gap"),
+    ("  bounce simulations (simulate_bounce)", "planner/simulate/run.py", "simulate_bounce"),
+    ("counterexample NLPs (search_counterexample)", "planner/refute/nlp.py", "search_counterexample"),
+    ("  FK initial guesses (fk_branch_guess)", "planner/refute/nlp.py", "fk_branch_guess"),
+    ("  NLP building (_counterexample_solver)", "planner/refute/nlp.py", "_counterexample_solver"),
+    ("  IPOPT iterations (ParametricSolver.solve)", "planner/ipopt.py", "solve"),
+    ("  trusted checks (verify_counterexample)", "planner/refute/verify.py", "verify_counterexample"),
+    ("every window pass (verifier.window._run)", "verifier/window.py", "_run"),
+    ("every compiled kernel call (compiled/step.py run)", "verifier/compiled/step.py", "run"),
+    ("CasADi numeric kinematics (KinematicModel._call)", "robots/kinematics.py", "_call"),
+)
 
 
 def children_cpu_s() -> float:
@@ -68,6 +96,39 @@ def child(repeat: int, method: str, foreground: bool) -> list:
     return runs
 
 
+def profile(method: str) -> None:
+    """One warm ``certify_crossing`` under cProfile, every search in this process; prints the :data:`PARTS` table."""
+    import cProfile
+    import pstats
+
+    from planner import PlanningBounds, benchmark_task, certify_crossing
+    from planner.certify import certify_speed
+    from robots import DEFAULT_ROBOT, KinematicModel, get_entry
+    from verifier.model import IntervalModel
+
+    entry = get_entry(DEFAULT_ROBOT)
+    robot, task = entry.robot, benchmark_task(entry)
+    bounds = PlanningBounds(method=method, dynamics=entry.dynamics if method == "dynamic" else None)
+    kin, imodel = KinematicModel(robot), IntervalModel(robot)
+    certify_speed(kin, imodel, task, bounds, 1.0)  # loads the kernels (not profiled)
+    prof = cProfile.Profile()
+    t0 = time.perf_counter()
+    prof.enable()
+    cert = certify_crossing(robot, task, bounds, kin=kin, imodel=imodel, refute_in_background=False)
+    prof.disable()
+    wall = time.perf_counter() - t0
+    stats = pstats.Stats(prof).stats
+    print(f"one warm certify_crossing under cProfile, every search in this process: {wall:.1f} s "
+          f"(v_min {cert.v_min}, refutation bound {cert.refutation_bound}); inclusive times:")
+    print(f"{'part':<52}{'calls':>7}{'s':>9}{'share':>8}")
+    for label, path, name in PARTS:
+        calls = tot = 0.0
+        for (file, _line, fn), (_cc, nc, _tt, ct, _callers) in stats.items():
+            if fn == name and file.replace("\\", "/").endswith(path):
+                calls, tot = calls + nc, tot + ct
+        print(f"{label:<52}{int(calls):>7}{tot:>9.2f}{tot / wall:>8.0%}")
+
+
 def measure(args: argparse.Namespace, repeat: int, cache_dir: str | None) -> list | None:
     """Run the child process; ``cache_dir`` None = the numba cache of the source tree."""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
@@ -89,8 +150,12 @@ def main(argv=None) -> int:
     p.add_argument("--foreground", action="store_true")
     p.add_argument("--no-cold", action="store_true", help="skip the run with an empty numba cache")
     p.add_argument("--json")
+    p.add_argument("--profile", action="store_true", help="profile one warm run by part of the work instead")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    if a.profile:
+        profile(a.method)
+        return 0
     if a.child:
         print(json.dumps(child(a.repeat, a.method, a.foreground)))
         return 0

@@ -48,7 +48,7 @@ on executions checked to be admissible.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -56,7 +56,7 @@ from robots import KinematicModel
 from robots import validators as V
 from robots.errors import InputError
 from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, TrackResult, Verdict, initial_box_from_mode, track, track_batch
+from verifier.tracker import TrackerSettings, TrackResult, Verdict, track
 from verifier.window import Reasoning, WindowResult, track_window
 
 from . import execution as ex_
@@ -71,6 +71,10 @@ __all__ = [
     "execution_class",
     "tracker_settings",
     "minimal_v_sing",
+    "search_v_min",
+    "certify_speed",
+    "CertifiedRun",
+    "SpeedSearch",
 ]
 
 
@@ -119,7 +123,7 @@ def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
 
 
 def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int, *,
-                 execution: ex_.ExecutionClass | None = None, kin=None) -> TrackResult:
+                 execution: ex_.ExecutionClass | None = None, kin=None, progress=None) -> TrackResult:
     """Run the tracker on inputs covering every admissible execution of ``plan``.
 
     Readings ``q_plan`` with the class's reading error and geometry box
@@ -128,13 +132,14 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
     encloses every start pose of mode ``initial_mode`` for every geometry of
     the box.  ``MODE_CHANGED`` certifies every admissible execution.  The
     forward tracker's run; :func:`certify_plan_window` adds the window passes.
+    ``progress(k)`` (optional) after each tracked sample.
     """
     robot = imodel.robot
     b = bounds.resolved(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
     s = tracker_settings(robot, b, derived_a_max(plan, b), execution)
-    return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box)
+    return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box, progress=progress)
 
 
 def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int,
@@ -154,7 +159,81 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
                         max_geometries=max_geometries)
 
 
-def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None):
+@dataclass(frozen=True, eq=False)
+class CertifiedRun:
+    """One speed certified as :func:`certify_speed` runs it (a question of the speed search).
+
+    Attributes
+    ----------
+    plan : PlannedTrajectory
+    execution : ExecutionClass
+        The admissible executions of this plan alone.
+    a_max : tuple of float
+        The acceleration bound assumed, per pose axis.
+    forward : TrackResult
+        The forward tracker's run (:func:`certify_plan`).
+    window : WindowResult or None
+        The window passes on the same inputs (:func:`certify_plan_window`),
+        run when the forward run left the verdict ``unknown`` under ``window``
+        reasoning; ``None`` otherwise.
+    """
+
+    plan: PlannedTrajectory
+    execution: ex_.ExecutionClass
+    a_max: tuple
+    forward: TrackResult
+    window: WindowResult | None
+
+    @property
+    def verdict(self) -> Verdict:
+        """The run's verdict: the window passes' when they ran, else the forward run's."""
+        return (self.window or self.forward).verdict
+
+    def trial(self) -> SpeedTrial:
+        """The row of the search's table."""
+        f = self.forward
+        return SpeedTrial(float(self.plan.v_sing), self.verdict, float(f.max_width_pose), float(f.max_width_velocity),
+                          int(f.certified_at_step), f.verdict)
+
+
+def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None) -> CertifiedRun:
+    """Plan ``task`` at ``v_sing`` (m/s) and certify that plan alone (forward run, then window passes if undecided).
+
+    What the certificate of ``v_sing`` is: its verdict ``MODE_CHANGED``
+    certifies every admissible execution of the plan (module docstring).
+    """
+    b = bounds.resolved(kin.robot)
+    plan = plan_crossing(kin, task, v_sing, b)
+    cls = execution_class(kin, plan, b)
+    m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
+    a_max = derived_a_max(plan, b)
+    forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
+    window = None
+    if forward.verdict is Verdict.UNKNOWN and b.reasoning is Reasoning.WINDOW:
+        window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=a_max)
+    return CertifiedRun(plan, cls, a_max, forward, window)
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedSearch:
+    """Result of :func:`search_v_min`.
+
+    Attributes
+    ----------
+    v_min : float or None
+        Slowest certified speed, m/s (``None``: ``v_high`` does not certify).
+    trials : tuple of SpeedTrial
+        Every tried speed, sorted.
+    runs : dict
+        ``{v_sing: CertifiedRun}`` of every tried speed (the run at ``v_min`` is its certificate).
+    """
+
+    v_min: float | None
+    trials: tuple
+    runs: dict = field(repr=False)
+
+
+def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None) -> SpeedSearch:
     """Smallest certified ``v_sing`` in ``[v_low, v_high]`` to ``tol`` (m/s), by bisection.
 
     The fastest speed ``v_high`` is certified first; if it is not, there is
@@ -163,7 +242,7 @@ def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progre
     to the midpoint when it certifies (``v_cert``), else the other end
     (``v_fail``).  ``v_low`` is presumed not to certify until the bracket
     reaches it; it is then tried itself.  A question is one plan, certified
-    alone (:func:`_certify_speeds`): about ``log2((v_high - v_low) / tol)``
+    alone (:func:`certify_speed`): about ``log2((v_high - v_low) / tol)``
     questions instead of a grid of speeds.
 
     Certification need not be monotone in the speed: the table of every
@@ -175,13 +254,7 @@ def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progre
 
     ``observe(trial)`` (optional) is called with each :class:`SpeedTrial` as
     it completes (the pipeline passes certified speeds to the counterexample
-    searches running meanwhile).
-
-    Returns
-    -------
-    v_min : float or None
-        ``None`` when ``v_high`` does not certify.
-    trials : list of SpeedTrial (sorted by speed)
+    searches running meanwhile); ``progress(k)`` after each tracked sample.
     """
     robot = kin.robot
     b = bounds.resolved(robot)
@@ -189,54 +262,34 @@ def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progre
     tol = V.positive("tol", tol)
     if not v_low < v_high:
         raise InputError(f"need v_low < v_high, got [{v_low}, {v_high}]")
-    trials: dict[float, SpeedTrial] = {}
+    runs: dict[float, CertifiedRun] = {}
 
     def certified(v) -> bool:
-        v = round(float(v), 6)
-        if v not in trials:
-            trials[v] = _certify_speeds(kin, imodel, task, b, [v], progress)[0]
+        if v not in runs:
+            runs[v] = certify_speed(kin, imodel, task, b, v, progress=progress)
             if observe is not None:
-                observe(trials[v])
-        return trials[v].verdict is Verdict.MODE_CHANGED
+                observe(runs[v].trial())
+        return runs[v].verdict is Verdict.MODE_CHANGED
 
     v_cert, v_fail = round(float(v_high), 6), round(float(v_low), 6)
     if not certified(v_cert):
-        return None, [trials[v] for v in sorted(trials)]
-    while v_cert - v_fail > tol:
-        mid = round(0.5 * (v_fail + v_cert), 6)
-        if mid in (v_fail, v_cert):  # tol below the rounding of speeds
-            break
-        if certified(mid):
-            v_cert = mid
-        else:
-            v_fail = mid
-    if v_fail == round(float(v_low), 6) and certified(v_fail):  # no question failed: v_low itself
-        v_cert = v_fail
-    return v_cert, [trials[v] for v in sorted(trials)]
+        v_min = None
+    else:
+        while v_cert - v_fail > tol:
+            mid = round(0.5 * (v_fail + v_cert), 6)
+            if mid in (v_fail, v_cert):  # tol below the rounding of speeds
+                break
+            if certified(mid):
+                v_cert = mid
+            else:
+                v_fail = mid
+        if v_fail == round(float(v_low), 6) and certified(v_fail):  # no question failed: v_low itself
+            v_cert = v_fail
+        v_min = v_cert
+    return SpeedSearch(v_min, tuple(runs[v].trial() for v in sorted(runs)), runs)
 
 
-def _certify_speeds(kin, imodel, task, b, speeds, progress):
-    robot = kin.robot
-    plans = [plan_crossing(kin, task, v, b) for v in speeds]
-    a_max = np.max([derived_a_max(p, b) for p in plans], axis=0)
-    # one class for the batch: the union of the plans' paths (a superset of
-    # each plan's own class; the certificate re-runs its speed alone)
-    cls = execution_class(kin, plans, b)
-    s = tracker_settings(robot, b, a_max, cls)
-    K = max(len(p.t) for p in plans)
-    q = np.stack([np.vstack([p.q, np.repeat(p.q[-1:], K - len(p.t), axis=0)]) for p in plans])
-    m0 = int(kin.mode(plans[0].x[0], plans[0].q[0], plans[0].xi_plan))
-    boxes = [initial_box_from_mode(imodel, p.q[0], m0, s, xi_box=cls.xi_box) for p in plans]
-    x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
-    res = track_batch(imodel, q, s, x0, xi_box=cls.xi_box, progress=progress)
-    verdicts = list(res.verdict)
-    if b.reasoning is Reasoning.WINDOW:
-        for i, p in enumerate(plans):
-            if verdicts[i] is Verdict.UNKNOWN:
-                verdicts[i] = track_window(imodel, p.q, s, x0=(x0[0][i], x0[1][i]), xi_box=cls.xi_box,
-                                           max_geometries=CERTIFY_WINDOW_GEOMETRIES).verdict
-    return [
-        SpeedTrial(float(v), verdicts[i], float(res.max_width_pose[i]), float(res.max_width_velocity[i]),
-                   int(res.certified_at_step[i]), res.verdict[i])
-        for i, v in enumerate(speeds)
-    ]
+def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None):
+    """:func:`search_v_min`'s speed and table: ``(v_min or None, list of SpeedTrial sorted by speed)``."""
+    r = search_v_min(kin, imodel, task, bounds, v_low, v_high, tol=tol, progress=progress, observe=observe)
+    return r.v_min, list(r.trials)

@@ -13,7 +13,7 @@ import importlib.metadata as md
 import logging
 import time
 import threading
-from concurrent.futures import Executor, Future, ThreadPoolExecutor, wait
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,12 +23,12 @@ from robots import validators as V
 from robots.errors import InputError, SimulationError
 from verifier.model import IntervalModel
 from verifier.tracker import TrackResult, Verdict
-from verifier.window import Reasoning, WindowResult
+from verifier.window import WindowResult
 
 from . import execution as ex_
 from . import refute
 from .bounce import BounceGap, bounce_gap
-from .certify import certify_plan, certify_plan_window, execution_class, minimal_v_sing
+from .certify import search_v_min
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .plan import derived_a_max, plan_crossing, speed_ceiling
 from .simulate import random_geometry
@@ -244,27 +244,15 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         # a certified speed is the refutation's ceiling: no counterexample is searched at or above it
         observe = None if refuter is None else (
             lambda t: refuter.drop_from(t.v_sing) if t.verdict is Verdict.MODE_CHANGED else None)
-        v_min, trials = minimal_v_sing(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress,
-                                       observe=observe)
+        search = search_v_min(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress, observe=observe)
+        v_min, trials = search.v_min, list(search.trials)
         t1 = lap("search", t1)
+        # the search certified each speed alone, on its own plan, class and a_max: its run at
+        # v_min is the certificate (no re-run)
         plan = enc = win = mc = a_used = cls = None
-        # the batched search pads shorter plans with rest samples: re-certify the
-        # candidate alone, on its own samples; if it fails, try the next faster
-        # certified speed (the certificate's verdict is this run's verdict)
-        for cand in ([t.v_sing for t in trials if t.verdict is Verdict.MODE_CHANGED and t.v_sing >= v_min]
-                     if v_min is not None else []):
-            plan = plan_crossing(kin, task, cand, b)
-            cls = execution_class(kin, plan, b)
-            enc = certify_plan(imodel, plan, b, m0, execution=cls)
-            win = None
-            if enc.verdict is not Verdict.MODE_CHANGED and b.reasoning is Reasoning.WINDOW:
-                win = certify_plan_window(imodel, plan, b, m0, execution=cls)
-            if (win or enc).verdict is Verdict.MODE_CHANGED:
-                v_min = cand
-                a_used = derived_a_max(plan, b)
-                break
-        else:
-            v_min = plan = enc = win = cls = None
+        if v_min is not None:
+            run = search.runs[v_min]
+            plan, cls, enc, win, a_used = run.plan, run.execution, run.forward, run.window, run.a_max
         t1 = lap("certificate", t1)
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
         ref_job = bounce_job = None
@@ -359,16 +347,13 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None):
 
 
 class Refuter:
-    """Counterexample searches by speed: fed to an executor one at a time, or run here when asked.
+    """Counterexample searches by speed: submitted to an executor, or run here when asked.
 
-    The speeds of :meth:`submit` are handed to the executor in increasing
-    order, the next one when the previous one has finished, and only while
-    they stay below the *ceiling*: the slowest speed certified so far
-    (:meth:`drop_from`), above which no counterexample is wanted.  The
-    speed search and the counterexample searches thus share one bracket,
-    and a worker never starts a search the certification made useless.
-    Which speeds below the final ceiling are searched does not depend on
-    timing, so neither does the result.
+    The speed search calls :meth:`drop_from` with every speed it certifies
+    (a certified speed cannot be refuted): searches at or above it that have
+    not started are cancelled, so the worker's time goes to the speeds that
+    can still bound ``v_min`` from below.  Which speeds below the final
+    ``v_min`` are searched does not depend on timing, so neither does the result.
 
     Parameters
     ----------
@@ -390,39 +375,20 @@ class Refuter:
         self._futures: dict[float, Future] = {}
         self._speeds: set = set()
         self._rows: dict = {}
-        self._lock = threading.Condition()
-        self._queue: list = []  # speeds of submit() not yet handed to the executor
-        self._ceiling = float("inf")
-        self._closed = False
-        self._feeder: threading.Thread | None = None
+        self._lock = threading.Lock()  # drop_from comes from the search, result from the helper thread
 
     def submit(self, speeds) -> None:
-        """Queue searches at ``speeds`` (m/s), handed to the executor one at a time below the ceiling."""
-        speeds = list(speeds)
+        """Queue searches at ``speeds`` (m/s) on the executor."""
         with self._lock:
             self._speeds.update(speeds)
-            if self._executor is None:
-                return
-            self._queue = sorted(set(self._queue) | {v for v in speeds if v not in self._futures})
-            if self._feeder is None:
-                self._feeder = threading.Thread(target=self._feed, name="crosscert-refuter", daemon=True)
-                self._feeder.start()
-
-    def _feed(self) -> None:
-        while True:
-            with self._lock:
-                self._queue = [v for v in self._queue if v < self._ceiling and v not in self._futures]
-                if self._closed or self._executor is None or not self._queue:
-                    self._feeder = None
-                    return
-                v = self._queue.pop(0)
-                future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
-            wait([future])
+            if self._executor is not None:
+                for v in speeds:
+                    if v not in self._futures:
+                        self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
 
     def drop_from(self, v_top) -> None:
-        """Forget the speeds at or above ``v_top`` (searches not started are cancelled): the new ceiling."""
+        """Forget the speeds at or above ``v_top`` (searches not started are cancelled)."""
         with self._lock:
-            self._ceiling = min(self._ceiling, float(v_top))
             self._speeds = {v for v in self._speeds if v < v_top}
             for v, f in self._futures.items():
                 if v >= v_top:
@@ -461,9 +427,9 @@ class Refuter:
     def close(self) -> None:
         """Cancel what has not started; shut the executor down if this object made it."""
         with self._lock:
-            self._closed = True
-            for f in self._futures.values():
-                f.cancel()
+            futures = list(self._futures.values())
+        for f in futures:
+            f.cancel()
         if self._own and self._executor is not None:
             self._executor.shutdown(wait=False, cancel_futures=True)
 

@@ -1,0 +1,127 @@
+"""The two speed searches of a certification and the bracket they share (planner.certify, planner.pipeline).
+
+The searches' logic is checked on stand-in answers (a speed certifies above
+a threshold, a counterexample exists below one), so every case runs in
+milliseconds; the real certifications are in test_certify.py.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from types import SimpleNamespace
+
+import pytest
+
+import planner.certify as certify_mod
+import planner.pipeline as pipeline_mod
+from planner.certify import search_v_min
+from planner.pipeline import Refuter, refutation_search
+from planner.task import PlanningBounds
+from robots import DEXTAR
+from robots.errors import InputError
+from verifier.tracker import Verdict
+
+
+class _Run:
+    """What search_v_min reads of a CertifiedRun: the verdict and the table row."""
+
+    def __init__(self, v, ok):
+        self.verdict = Verdict.MODE_CHANGED if ok else Verdict.UNKNOWN
+        self.v = v
+
+    def trial(self):
+        return certify_mod.SpeedTrial(self.v, self.verdict, 0.0, 0.0, -1, Verdict.UNKNOWN)
+
+
+def _answers(monkeypatch, certifies):
+    asked = []
+
+    def fake(kin, imodel, task, b, v, progress=None):
+        asked.append(v)
+        return _Run(v, certifies(v))
+
+    monkeypatch.setattr(certify_mod, "certify_speed", fake)
+    return asked
+
+
+KIN = SimpleNamespace(robot=DEXTAR)
+
+
+@pytest.mark.parametrize("threshold", [0.61, 0.8438, 0.9987, 1.5, 1.95])
+def test_bisection_brackets_a_monotone_threshold_within_tol(monkeypatch, threshold):
+    asked = _answers(monkeypatch, lambda v: v >= threshold)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01)
+    assert r.v_min is not None and threshold <= r.v_min <= threshold + 0.01
+    below = [t.v_sing for t in r.trials if t.v_sing < r.v_min]
+    assert below and r.v_min - max(below) <= 0.01
+    # about log2((v_high - v_low) / tol) questions, each asked once, v_high first
+    assert asked[0] == 1.96 and len(asked) == len(set(asked)) <= math.ceil(math.log2(1.36 / 0.01)) + 1
+    assert [t.v_sing for t in r.trials] == sorted(asked)
+
+
+def test_v_low_is_tried_when_everything_certifies(monkeypatch):
+    asked = _answers(monkeypatch, lambda v: True)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01)
+    assert r.v_min == 0.6 and 0.6 in asked
+
+
+def test_no_v_min_when_the_fastest_speed_fails(monkeypatch):
+    asked = _answers(monkeypatch, lambda v: False)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01)
+    assert r.v_min is None and asked == [1.96]
+
+
+def test_non_monotone_answers_still_give_a_certified_speed_with_every_faster_trial_certified(monkeypatch):
+    """Certified above 1.2 and in (0.9, 1.0) only: whatever bisection finds is certified, and so is every
+    tried speed above it (the guarantee that does not need monotonicity)."""
+    _answers(monkeypatch, lambda v: v >= 1.2 or 0.9 < v < 1.0)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01)
+    by_v = {t.v_sing: t.verdict for t in r.trials}
+    assert by_v[r.v_min] is Verdict.MODE_CHANGED
+    assert all(v is Verdict.MODE_CHANGED for s, v in by_v.items() if s >= r.v_min)
+
+
+def test_observer_sees_every_trial_in_order(monkeypatch):
+    asked = _answers(monkeypatch, lambda v: v >= 1.0)
+    seen = []
+    search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.05, observe=lambda t: seen.append(t.v_sing))
+    assert seen == asked
+
+
+def test_bad_bracket_is_refused(monkeypatch):
+    _answers(monkeypatch, lambda v: True)
+    with pytest.raises(InputError):
+        search_v_min(KIN, None, None, PlanningBounds(), 1.5, 1.0)
+
+
+class _Row:
+    def __init__(self, v, refuted):
+        self.speed, self.verified = v, refuted
+
+
+def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeypatch):
+    """Once the speed search certifies a speed (drop_from), no search at or above it starts, and the
+    bisection stays below it too; the bound is the largest refuted speed within tol."""
+    started, gate = [], threading.Event()
+
+    def fake(robot, task, b, m0, starts, v, kin=None):
+        started.append(v)
+        if v == 0.3:
+            gate.wait(10)  # hold the first search until the ceiling is set
+        return _Row(v, v <= 0.84)
+
+    monkeypatch.setattr(pipeline_mod, "refute_speed", fake)
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
+        ref.submit(scan)
+        ref.drop_from(0.99)  # the speed search certified 0.99 while 0.3 was running
+        gate.set()
+        bound, rows = refutation_search(ref, 0.99, 0.01)
+        ref.close()
+    assert all(v < 0.99 for v in started), started
+    assert started[:7] == scan[:7]  # increasing order
+    assert 0.83 <= bound <= 0.84 and all(r.speed < 0.99 for r in rows)
+    assert len(started) == len(set(started))
