@@ -60,7 +60,8 @@ from verifier.tracker import TrackerSettings, TrackResult, Verdict, initial_box_
 from verifier.window import Reasoning, WindowResult, track_window
 
 from . import execution as ex_
-from .plan import derived_a_max, plan_crossing
+from .acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
+from .plan import plan_crossing
 from .task import ExecutionKind, PlannedTrajectory, PlanningBounds
 
 __all__ = [
@@ -94,7 +95,7 @@ CERTIFY_WINDOW_GEOMETRIES = 16
 
 # ------------------------------------------------------------------ planning
 def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -> TrackerSettings:
-    """Tracker settings of a certifying run: the class's reading error and drift, ``a_max`` (m/s^2)."""
+    """Tracker settings of a certifying run: the class's reading error and drift, ``a_max`` (per axis, its unit/s^2)."""
     drift = {}
     if cls.drift_per_sample is not None:
         # d per sample as a rate, rounded up so that j t_s rate >= j d
@@ -133,7 +134,7 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
     b = bounds.resolved(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
-    s = tracker_settings(robot, b, derived_a_max(plan, b), execution)
+    s = tracker_settings(robot, b, derived_a_max(plan, b, robot), execution)
     return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box)
 
 
@@ -142,14 +143,14 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
                         max_geometries: int = CERTIFY_WINDOW_GEOMETRIES) -> WindowResult:
     """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
 
-    ``a_max`` (m/s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
+    ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
     certifies every admissible execution, as for :func:`certify_plan`.
     """
     robot = imodel.robot
     b = bounds.resolved(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
-    s = tracker_settings(robot, b, derived_a_max(plan, b) if a_max is None else a_max, execution)
+    s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
                         max_geometries=max_geometries)
 
@@ -211,7 +212,8 @@ def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, grid=6
 def _certify_speeds(kin, imodel, task, b, speeds, progress):
     robot = kin.robot
     plans = [plan_crossing(kin, task, v, b) for v in speeds]
-    a_max = np.max([derived_a_max(p, b) for p in plans], axis=0)
+    # per axis, the widest bound of the batch (each axis on its own, in its own unit)
+    a_max = AccelerationAssumption.widest(acceleration_assumption(p, b, robot) for p in plans).values
     # one class for the batch: the union of the plans' paths (a superset of
     # each plan's own class; the certificate re-runs its speed alone)
     cls = execution_class(kin, plans, b)
