@@ -112,8 +112,8 @@ class AccelerationAssumption:
 
 
 def robot_a_max_assumption(robot) -> AccelerationAssumption:
-    """The robot's physical ``a_max`` on every axis (source ``given``: the caller chose it)."""
-    return AccelerationAssumption(tuple(AxisAcceleration(float(v), u, AccelerationSource.GIVEN)
+    """The robot's physical ``a_max`` on every axis (source ``robot a_max``)."""
+    return AccelerationAssumption(tuple(AxisAcceleration(float(v), u, AccelerationSource.ROBOT_A_MAX)
                                         for v, u in zip(robot.a_max, robot.acceleration_units)))
 
 
