@@ -158,3 +158,11 @@ def test_given_a_max_is_stated_as_given_and_the_robot_run_skipped_when_they_coin
                                          {"value": 200.0, "unit": "rad/s^2"}]
     assert report["at_robot_a_max"]["outcome"] == "coincides"
     assert report["v_min_at_robot_a_max_mps"] is None
+
+
+def test_check_refuses_one_a_max_for_axes_of_different_units(tmp_path, capsys):
+    csv = tmp_path / "t.csv"
+    csv.write_text("t,q1,q2,q3\n0,0.1,0.1,0.1\n0.001,0.1,0.1,0.1\n")
+    assert main(["check", str(csv), "--robot", "3rpr", "--initial-mode", "1", "--a-max", "80"]) == 2
+    err = _one_line_error(capsys)
+    assert "axes are in m, m, rad: omit --a-max to use the robot's per-axis a_max (80, 80, 200)" in err, err

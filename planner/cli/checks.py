@@ -152,6 +152,11 @@ def _output_folder(path, what: str, files: tuple[str, ...]) -> None:
 
 
 def _tracker(a, robot) -> None:
+    for name, value, field in (("--a-max", a.a_max, "a_max"), ("--xd0", a.xd0, "xd0")):
+        if value is not None and robot.mixed_units:
+            raise InputError(f"{name} {value:g} bounds every pose axis with one number, but robot {robot.name}'s "
+                             f"axes are in {', '.join(robot.pose_units)}: omit {name} to use the robot's per-axis "
+                             f"{field} ({', '.join(f'{v:g}' for v in getattr(robot, field))})")
     _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
     _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
     _in("--xd0", a.xd0, 0.0, 1e3, lo_open=False, unit=" m/s")

@@ -81,7 +81,9 @@ def _tracker_options(p):
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
     g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
-    p.add_argument("--a-max", type=number, help="end-effector acceleration bound, m/s^2 (all components; robot default)")
+    p.add_argument("--a-max", type=number,
+                   help="end-effector acceleration bound, m/s^2, every pose axis (robots whose axes are all lengths; "
+                        "robot default)")
     p.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
     p.add_argument("--xd0", type=number, help="initial velocity bound, m/s (all components; robot default)")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
