@@ -6,10 +6,13 @@ Layout, along the method:
   segment meets the locus; :mod:`planner.locus` — the line scans behind it;
 * :mod:`planner.plan` — the three time laws, built on :mod:`planner.timescale`
   (time-optimal) and :mod:`planner.generate` (dynamic);
+* :mod:`planner.acceleration` — the per-axis acceleration bounds a certificate
+  assumes, with units and sources;
 * :mod:`planner.certify` — certification of plans and the speed search;
 * :mod:`planner.montecarlo` — simulated executions tracked at run time;
 * :mod:`planner.refute` — verified counterexamples (the refutation bound, the crossing floor);
-* :mod:`planner.pipeline` — all of it, on an executor;
+* :mod:`planner.pipeline` — all of it, on an executor; :mod:`planner.assumption_cost`
+  — the same under the robot's physical ``a_max``;
 * :mod:`planner.simulate`, :mod:`planner.sweep` — simulated runs and the
   paper's speed sweep; :mod:`planner.cli` — the ``crosscert`` command.
 
@@ -18,6 +21,8 @@ Explicit re-exports (no star imports).
 
 import logging
 
+from .acceleration import AccelerationAssumption, AccelerationSource, AxisAcceleration, acceleration_assumption
+from .assumption_cost import AtRobotAMax, ComparisonOutcome, certify_at_robot_a_max
 from .certify import SpeedTrial, certify_plan, execution_class, minimal_v_sing
 from .execution import ExecutionClass, cartesian_class, in_class, joint_class
 from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
@@ -56,6 +61,13 @@ __all__ = [
     "monte_carlo_confirmation",
     "CrossingCertificate",
     "certify_crossing",
+    "AccelerationAssumption",
+    "AccelerationSource",
+    "AxisAcceleration",
+    "acceleration_assumption",
+    "AtRobotAMax",
+    "ComparisonOutcome",
+    "certify_at_robot_a_max",
     "ExecutionClass",
     "cartesian_class",
     "in_class",

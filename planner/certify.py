@@ -60,7 +60,8 @@ from verifier.tracker import TrackerSettings, TrackResult, Verdict, track
 from verifier.window import Reasoning, WindowResult, track_window
 
 from . import execution as ex_
-from .plan import derived_a_max, plan_crossing
+from .acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
+from .plan import plan_crossing
 from .task import ExecutionKind, PlannedTrajectory, PlanningBounds
 
 __all__ = [
@@ -98,7 +99,7 @@ CERTIFY_WINDOW_GEOMETRIES = 16
 
 # ------------------------------------------------------------------ planning
 def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -> TrackerSettings:
-    """Tracker settings of a certifying run: the class's reading error and drift, ``a_max`` (m/s^2)."""
+    """Tracker settings of a certifying run: the class's reading error and drift, ``a_max`` (per axis, its unit/s^2)."""
     drift = {}
     if cls.drift_per_sample is not None:
         # d per sample as a rate, rounded up so that j t_s rate >= j d
@@ -138,7 +139,7 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
     b = bounds.resolved(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
-    s = tracker_settings(robot, b, derived_a_max(plan, b), execution)
+    s = tracker_settings(robot, b, derived_a_max(plan, b, robot), execution)
     return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box, progress=progress)
 
 
@@ -147,14 +148,14 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
                         max_geometries: int = CERTIFY_WINDOW_GEOMETRIES) -> WindowResult:
     """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
 
-    ``a_max`` (m/s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
+    ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
     certifies every admissible execution, as for :func:`certify_plan`.
     """
     robot = imodel.robot
     b = bounds.resolved(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
-    s = tracker_settings(robot, b, derived_a_max(plan, b) if a_max is None else a_max, execution)
+    s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
                         max_geometries=max_geometries)
 
@@ -168,8 +169,8 @@ class CertifiedRun:
     plan : PlannedTrajectory
     execution : ExecutionClass
         The admissible executions of this plan alone.
-    a_max : tuple of float
-        The acceleration bound assumed, per pose axis.
+    acceleration : AccelerationAssumption
+        The acceleration bound assumed, per pose axis, with its unit and source.
     forward : TrackResult
         The forward tracker's run (:func:`certify_plan`).
     window : WindowResult or None
@@ -180,7 +181,7 @@ class CertifiedRun:
 
     plan: PlannedTrajectory
     execution: ex_.ExecutionClass
-    a_max: tuple
+    acceleration: AccelerationAssumption
     forward: TrackResult
     window: WindowResult | None
 
@@ -206,12 +207,12 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None) -> Certif
     plan = plan_crossing(kin, task, v_sing, b)
     cls = execution_class(kin, plan, b)
     m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
-    a_max = derived_a_max(plan, b)
+    acceleration = acceleration_assumption(plan, b, kin.robot)
     forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
     window = None
     if forward.verdict is Verdict.UNKNOWN and b.reasoning is Reasoning.WINDOW:
-        window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=a_max)
-    return CertifiedRun(plan, cls, a_max, forward, window)
+        window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=acceleration.values)
+    return CertifiedRun(plan, cls, acceleration, forward, window)
 
 
 @dataclass(frozen=True, eq=False)

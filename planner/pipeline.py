@@ -30,7 +30,8 @@ from . import refute
 from .bounce import BounceGap, bounce_gap
 from .certify import search_v_min
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
-from .plan import derived_a_max, plan_crossing, speed_ceiling
+from .acceleration import AccelerationAssumption, derived_a_max
+from .plan import plan_crossing, speed_ceiling
 from .simulate import random_geometry
 from .task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
 from .worker import SubprocessExecutor
@@ -41,7 +42,7 @@ __all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refut
 log = logging.getLogger(__name__)
 
 #: Version of the layout of :meth:`CrossingCertificate.summary` (``certificate.json``).
-CERTIFICATE_SCHEMA = "crosscert-certificate/2"
+CERTIFICATE_SCHEMA = "crosscert-certificate/3"
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,12 @@ class CrossingCertificate:
     then the certificate's).  ``bounce`` brackets, at ``v_min``, the turn-back
     distance from which the task's failed crossings are certified
     ``mode-unchanged`` against the crossing floor (:mod:`planner.bounce`;
-    computed with the refutation bound).
+    computed with the refutation bound).  ``a_max_used`` is the acceleration
+    bound of every pose axis with its unit and source
+    (:mod:`planner.acceleration`), ``acceleration_units`` the robot's unit of
+    each axis' acceleration; ``at_robot_a_max`` the same search under
+    the robot's physical ``a_max`` (:func:`planner.assumption_cost.certify_at_robot_a_max`;
+    None when not asked for).
     """
 
     verdict: Verdict
@@ -74,7 +80,7 @@ class CrossingCertificate:
     trajectory: PlannedTrajectory | None
     enclosures: TrackResult | None
     bounds: PlanningBounds
-    a_max_used: tuple | None
+    a_max_used: AccelerationAssumption | None
     monte_carlo: MonteCarloResult | None
     versions: dict
     elapsed_s: float
@@ -86,6 +92,8 @@ class CrossingCertificate:
     task: CrossingTask | None = field(default=None, repr=False)
     window: WindowResult | None = field(default=None, repr=False)
     bounce: BounceGap | None = field(default=None, repr=False)
+    at_robot_a_max: object = field(default=None, repr=False)
+    acceleration_units: tuple = ()
 
     @property
     def certified_below_v_min(self) -> list:
@@ -109,6 +117,7 @@ class CrossingCertificate:
     def summary(self) -> dict:
         """JSON-ready, self-describing report (schema :data:`CERTIFICATE_SCHEMA`; docs/file-formats.md)."""
         b = self.bounds
+        at = self.at_robot_a_max
         execution = None
         if self.execution is not None:
             execution = self.execution.summary()
@@ -119,10 +128,12 @@ class CrossingCertificate:
             "robot": self.robot_name,
             "task": None if self.task is None else {"start_m": self.task.start.tolist(), "goal_m": self.task.goal.tolist(),
                                                     "working_guess_rad": self.task.working_guess.tolist()},
+            "acceleration_units": list(self.acceleration_units),
             "method": b.method.value,
             "bounds": {
                 "eps_q_rad": b.eps_q, "tracking_error_rad": b.tracking_error, "t_s": b.t_s, "t_rest_s": b.t_rest,
-                "a_peak_mps2": b.a_peak, "a_max_mps2": None if b.a_max is None else list(b.a_max),
+                "a_peak_mps2": b.a_peak,
+                "a_max": None if b.a_max is None else [{"value": v, "unit": u} for v, u in zip(b.a_max, self.acceleration_units)],
                 "a_margin": b.a_margin, "xi_splits": None if b.xi_splits is None else list(b.xi_splits),
                 "execution": b.execution.value, "qd_max_radps": b.qd_max, "qdd_max_radps2": b.qdd_max,
                 "reasoning": b.reasoning.value,
@@ -133,7 +144,10 @@ class CrossingCertificate:
             "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
             "certified_below_v_min_mps": self.certified_below_v_min,
             "v_min_at_lower_end": self.v_min_at_lower_end,
-            "a_max_used_mps2": None if self.a_max_used is None else list(self.a_max_used),
+            "a_max_used": None if self.a_max_used is None else self.a_max_used.summary(),
+            "v_min_at_robot_a_max_mps": None if at is None else at.v_min,
+            "refutation_bound_at_robot_a_max_mps": None if at is None else at.refutation_bound,
+            "at_robot_a_max": None if at is None else at.summary(),
             "execution": execution,
             "trials": [
                 {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "forward_verdict": r.forward_verdict.value,
@@ -252,7 +266,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         plan = enc = win = mc = a_used = cls = None
         if v_min is not None:
             run = search.runs[v_min]
-            plan, cls, enc, win, a_used = run.plan, run.execution, run.forward, run.window, run.a_max
+            plan, cls, enc, win, a_used = run.plan, run.execution, run.forward, run.window, run.acceleration
         t1 = lap("certificate", t1)
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
         ref_job = bounce_job = None
@@ -310,6 +324,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         task=task,
         window=win,
         bounce=gap,
+        acceleration_units=robot.acceleration_units,
     )
 
 
@@ -340,7 +355,7 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None):
     except (InputError, SimulationError) as exc:
         nan = float("nan")
         return refute.SpeedRefutation(float(v), 0, False, False, None, nan, nan, nan, f"no plan: {exc}", 0.0, ())
-    a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b)
+    a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b, robot)
     overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
     return refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
                                    bounds=overrides, max_cpu_time=REFUTE_CPU_TIME).rows[0]

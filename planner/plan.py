@@ -4,7 +4,8 @@
   from ``task.start`` to ``task.goal`` that crosses the nominal Type 2 locus at
   speed ``v_sing`` (smoothstep, time-optimal or dynamic time law);
 * :func:`speed_ceiling` — the fastest crossing speed a time law allows;
-* :func:`derived_a_max` — the acceleration bound a certificate of a plan assumes.
+* :func:`derived_a_max` — the acceleration bound a certificate of a plan assumes
+  (defined in :mod:`planner.acceleration`, with its units and sources).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import numpy as np
 from robots import validators as V
 from robots.errors import InputError, SimulationError
 
+from .acceleration import derived_a_max
 from .generate import GenerationLimits, generate_crossing
 from .sampling import align_to_samples
 from .simulate import RAMP_PEAK, TimeLaw, ramp_length
@@ -167,22 +169,3 @@ def _plan_dynamic(kin, task, v_sing, b, xi):
     gen = generate_crossing(kin, b.dynamics, task, v_sing, limits, objective="time", t_s=b.t_s, t_rest=b.t_rest,
                             t_after=b.t_rest, xi_plan=xi)
     return gen.to_planned_trajectory()
-
-
-def derived_a_max(plan: PlannedTrajectory, b: PlanningBounds) -> tuple[float, ...]:
-    """The ``a_max`` (m/s^2, per axis) a certificate of ``plan`` assumes under the resolved bounds ``b``.
-
-    ``b.a_max`` when given (checked against the plan's peak), else the plan's
-    peak acceleration enlarged by ``b.a_margin``.
-    """
-    peak = np.max(np.abs(plan.xdd), axis=0)
-    if b.a_max is None:
-        # an axis the plan does not accelerate still gets a_margin * the largest
-        # planned acceleration: room for tracking errors, an assumption stated in a_max
-        return tuple(float(v) for v in np.maximum(peak * (1.0 + b.a_margin), b.a_margin * peak.max()))
-    if np.any(np.asarray(b.a_max) < peak):
-        raise InputError(
-            f"bounds contradict the plan: a_max = {list(b.a_max)} m/s^2 is below the planned peak acceleration "
-            f"{peak.tolist()} m/s^2"
-        )
-    return tuple(float(v) for v in b.a_max)

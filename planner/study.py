@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 
 #: What a grid may span, with the unit of its values.
 GRID_KEYS = {
-    "a_max": "m/s^2, every axis (absent: derived from each plan)",
+    "a_max": "every axis, in its unit (m/s^2): robots whose pose axes share one unit (absent: derived per axis)",
     "width_scale": "scale of every calibration half-width around the box centre",
     "width_scale.lengths": "scale of the half-widths of the parameters that are not joint offsets",
     "width_scale.offsets": "scale of the half-widths of the joint-offset parameters",
@@ -55,7 +55,7 @@ GRID_KEYS = {
     "robot": "a registered robot with a benchmark crossing",
 }
 #: Columns of a result row, in order (inputs first; a missing input is empty).
-COLUMNS = (["case_id"] + list(GRID_KEYS) + ["v_min_mps", "refutation_bound_mps", "verdict", "trials", "a_max_used_mps2",
+COLUMNS = (["case_id"] + list(GRID_KEYS) + ["v_min_mps", "refutation_bound_mps", "verdict", "trials", "a_max_used",
                                             "elapsed_s", "error", "versions"])
 
 
@@ -149,7 +149,8 @@ def run_case(case: StudyCase, settings: dict) -> dict:
             task = dataclasses.replace(task, start=task.start + shift * across, goal=task.goal + shift * across)
         kw = dict(settings.get("bounds", {}))
         if "a_max" in v:
-            kw["a_max"] = (float(v["a_max"]),) * robot.n
+            # one number for every axis: PlanningBounds refuses it for a robot whose axes mix m and rad
+            kw["a_max"] = float(v["a_max"])
             kw["a_peak"] = min(kw.get("a_peak", PlanningBounds().a_peak), float(v["a_max"]))
         if "eps_q" in v:
             kw["eps_q"] = float(v["eps_q"])
@@ -161,9 +162,9 @@ def run_case(case: StudyCase, settings: dict) -> dict:
         cert = certify_crossing(robot, task, PlanningBounds(**kw), **{"bounce": False, **settings.get("certify", {})})
         row.update(v_min_mps=cert.v_min, refutation_bound_mps=cert.refutation_bound, verdict=cert.verdict.value,
                    trials=len(cert.trials),
-                   a_max_used_mps2="" if cert.a_max_used is None else json.dumps(list(cert.a_max_used)))
+                   a_max_used="" if cert.a_max_used is None else json.dumps(cert.a_max_used.summary()))
     except Exception as exc:  # one bad case must not lose the study
-        row.update(v_min_mps="", refutation_bound_mps="", verdict="", trials="", a_max_used_mps2="",
+        row.update(v_min_mps="", refutation_bound_mps="", verdict="", trials="", a_max_used="",
                    error=f"{type(exc).__name__}: {exc}")
     row["elapsed_s"] = round(time.perf_counter() - t0, 3)
     return row

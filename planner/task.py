@@ -118,11 +118,14 @@ class PlanningBounds:
         Encoder error bound, rad (robot default).
     tracking_error : float
         Allowed deviation of the readings from the planned joints, rad.
-    a_max : array (n,), optional
-        End-effector acceleration bound, m/s^2.  ``None``: derived from each
-        plan as ``max |xdd_plan| (1 + a_margin)`` componentwise.
+    a_max : float or array (n,), optional
+        End-effector acceleration bound per pose axis, in that axis' unit per
+        s^2 (m/s^2 or rad/s^2, ``robot.pose_units``); one number stands for
+        every axis only when all axes share a unit.  ``None``: derived from
+        each plan, axis by axis (:func:`planner.acceleration.acceleration_assumption`).
     a_margin : float
-        Relative margin of the derived ``a_max``.
+        Relative margin of the derived bound of an axis the plan accelerates
+        (its planned peak times ``1 + a_margin``).
     a_peak : float
         Peak acceleration of the planned speed ramps, m/s^2.
     t_s : float, optional
@@ -176,8 +179,7 @@ class PlanningBounds:
         tracking = V.positive("tracking_error", self.tracking_error, allow_zero=True)
         margin = V.positive("a_margin", self.a_margin, allow_zero=True)
         rest = V.positive("t_rest", self.t_rest, allow_zero=True)
-        amax = None if self.a_max is None else V.floats("a_max", np.broadcast_to(
-            np.asarray(self.a_max, float), (robot.n,)), robot.n, positive=True)
+        amax = None if self.a_max is None else _per_axis_a_max(self.a_max, robot)
         splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
         method = parse_option(Method, "planning method", self.method)
         execution = parse_option(ExecutionKind, "execution class", self.execution)
@@ -186,6 +188,23 @@ class PlanningBounds:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
         return PlanningBounds(eps, tracking, amax, margin, a_peak, ts, rest, splits, method, self.dynamics,
                               self.qd_max, self.qdd_max, execution, reasoning)
+
+
+def _per_axis_a_max(value, robot) -> tuple[float, ...]:
+    """A given ``a_max``: one positive bound per pose axis (one number only when every axis has the same unit)."""
+    units = robot.acceleration_units
+    if np.ndim(value) == 0 or np.size(value) == 1:
+        if robot.mixed_units:
+            raise InputError(
+                f"a_max = {np.ravel(value).tolist()} is one number, but robot {robot.name}'s pose axes are in "
+                f"({', '.join(units)}): give one bound per axis, e.g. a_max = "
+                f"({', '.join(f'{v:g}' for v in robot.a_max)}) (its physical a_max)")
+        return V.floats("a_max", np.broadcast_to(np.asarray(value, float).reshape(-1), (robot.n,)), robot.n,
+                        positive=True)
+    try:
+        return V.floats("a_max", value, robot.n, positive=True)
+    except InputError as exc:
+        raise InputError(f"{exc} (one bound per pose axis of robot {robot.name}, in {', '.join(units)})") from None
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 
 from .base import BenchmarkCrossing, LoopClosure, Robot
+from .units import PoseUnit
 from .dextar import DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing, elbows_out_ik, singular_y
 from .dynamics import LumpedDynamics
 from .mass_model import LumpedMassModel
@@ -24,6 +25,7 @@ from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_e
 
 __all__ = [
     "Robot",
+    "PoseUnit",
     "LoopClosure",
     "KinematicModel",
     "LumpedMassModel",

@@ -18,6 +18,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import ModelError
+from .units import PoseUnit
 from .validators import floats, vector
 
 __all__ = ["Robot", "LoopClosure", "BenchmarkCrossing", "ReferenceMotion"]
@@ -60,9 +61,14 @@ class Robot:
         ``(n,)`` residual of eq. (1).  Only operations the interval evaluator
         supports may be used (``+ - * /``, integer powers, ``sqrt``, ``sin``,
         ``cos``).
+    pose_units : tuple of PoseUnit (or ``"m"`` / ``"rad"``), length n
+        Unit of each pose coordinate: ``"m"`` for a length, ``"rad"`` for an
+        angle.  The one declaration of the pose's units: per-axis bounds
+        (``a_max``, ``xd0``, ``tracking_a_margin``) are in these units per s or
+        per s^2, and nothing combines axes of different units.
     a_max : tuple of float, length n
-        Default componentwise bound on ``|x''|``, m/s^2 (rad/s^2 for angular
-        pose coordinates).
+        The robot's physical bound on ``|x''|`` per axis, in its unit per s^2
+        (m/s^2 or rad/s^2, see ``pose_units``): what the drives can produce.
     eps_q : float
         Default encoder error bound, rad (m for prismatic joints):
         ``|q_meas - q_true| <= eps_q``.
@@ -92,6 +98,16 @@ class Robot:
         CasADi (e.g. a cross product).  It states the mode convention
         independently of ``mode_sign``, so that :func:`robots.validate` can
         check that the two agree.  ``None``: that check is not run.
+    tracking_a_margin : tuple of float, length n, optional
+        How far the executed end-effector acceleration may deviate from the
+        planned one, per axis, in its unit per s^2: the tracking error the
+        robot's controller allows, ``|x''_executed - x''_planned| <=
+        tracking_a_margin``.  A planning-time certificate takes it as the
+        acceleration bound of an axis its plan does not accelerate.  Declare it
+        only with a stated reason (a controller's specification, a measurement);
+        ``None`` (default): not declared, and such an axis is bounded by the
+        robot's ``a_max``, the bound that holds whatever the controller does.
+        Each entry is positive and at most ``a_max``.
     description : str, optional
         One-paragraph human description (source of the data, conventions).
     """
@@ -106,6 +122,7 @@ class Robot:
     q_hi: tuple[float, ...]
     x_bounds: tuple[tuple[float, ...], tuple[float, ...]]
     loop_closure: LoopClosure = field(repr=False)
+    pose_units: tuple[PoseUnit, ...]
     a_max: tuple[float, ...]
     eps_q: float
     t_s: float
@@ -114,6 +131,7 @@ class Robot:
     xi_splits: tuple[int, ...] | None = None
     joint_offsets: tuple[int | None, ...] | None = None
     mode_reference: Callable[..., int] | None = field(default=None, repr=False, compare=False)
+    tracking_a_margin: tuple[float, ...] | None = None
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -163,10 +181,22 @@ class Robot:
         set_(self, "x_bounds", (xb_lo, xb_hi))
         if not callable(self.loop_closure):
             raise ModelError(f"Robot {self.name}: loop_closure must be callable")
+        set_(self, "pose_units", self._checked_units(n))
         amax = floats("a_max", self.a_max, n, error=ModelError)
         if any(a <= 0 for a in amax):
             raise ModelError(f"Robot {self.name}: a_max must be positive, got {amax}")
         set_(self, "a_max", amax)
+        if self.tracking_a_margin is not None:
+            margin = floats("tracking_a_margin", self.tracking_a_margin, n, error=ModelError)
+            bad = [i for i in range(n) if not 0 < margin[i] <= amax[i]]
+            if bad:
+                i = bad[0]
+                raise ModelError(
+                    f"Robot {self.name}: tracking_a_margin[{i}] = {margin[i]:g} {self.pose_units[i].acceleration} "
+                    f"must be positive and at most a_max[{i}] = {amax[i]:g} {self.pose_units[i].acceleration} "
+                    "(or declare no margin: tracking_a_margin=None)"
+                )
+            set_(self, "tracking_a_margin", margin)
         xd0 = floats("xd0", self.xd0, n, error=ModelError)
         if any(v <= 0 for v in xd0):
             raise ModelError(f"Robot {self.name}: xd0 must be positive, got {xd0}")
@@ -201,6 +231,41 @@ class Robot:
             raise ModelError(f"Robot {self.name}: mode_reference must be callable or None")
         if not isinstance(self.description, str):
             raise ModelError(f"Robot {self.name}: description must be a string")
+
+    def _checked_units(self, n: int) -> tuple[PoseUnit, ...]:
+        """``pose_units`` as ``n`` :class:`PoseUnit` values, or ModelError naming the allowed ones."""
+        try:
+            if isinstance(self.pose_units, str):
+                raise TypeError
+            units = tuple(self.pose_units)
+        except TypeError:
+            raise ModelError(f"Robot {self.name}: pose_units must be a tuple of units, one per pose axis") from None
+        if len(units) != n:
+            raise ModelError(f"Robot {self.name}: pose_units needs one unit per pose axis ({n}), got {len(units)}")
+        out = []
+        for i, u in enumerate(units):
+            try:
+                out.append(PoseUnit(u))
+            except ValueError:
+                raise ModelError(f"Robot {self.name}: pose_units[{i}] = {u!r} is not a pose unit; use one of "
+                                 f"{', '.join(repr(p.value) for p in PoseUnit)}") from None
+        return tuple(out)
+
+    # ----------------------------------------------------------------- units
+    @property
+    def acceleration_units(self) -> tuple[str, ...]:
+        """Unit of each axis' acceleration (``"m/s^2"`` or ``"rad/s^2"``), from ``pose_units``."""
+        return tuple(u.acceleration for u in self.pose_units)
+
+    @property
+    def velocity_units(self) -> tuple[str, ...]:
+        """Unit of each axis' velocity (``"m/s"`` or ``"rad/s"``), from ``pose_units``."""
+        return tuple(u.velocity for u in self.pose_units)
+
+    @property
+    def mixed_units(self) -> bool:
+        """Whether the pose mixes lengths and angles (then no one number can stand for every axis)."""
+        return len(set(self.pose_units)) > 1
 
     # ----------------------------------------------------------------- arrays
     @property
@@ -250,7 +315,7 @@ class Robot:
 
     @property
     def a_max_array(self) -> np.ndarray:
-        """Default acceleration bound, shape ``(n,)``, m/s^2."""
+        """The robot's physical acceleration bound, shape ``(n,)``, per axis in ``acceleration_units``."""
         return np.array(self.a_max, dtype=float)
 
     def xi_in_box(self, xi, *, tol: float = 0.0) -> bool:

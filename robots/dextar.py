@@ -97,6 +97,7 @@ DEXTAR = Robot(
     # |x| <= 0.1213 m and |y| <= 0.1703 m; rounded outwards.
     x_bounds=((-0.13, -0.18), (0.13, 0.18)),
     loop_closure=dextar_loop_closure,
+    pose_units=("m", "m"),  # E = (x, y)
     a_max=(80.0, 80.0),
     eps_q=math.pi / 34000,
     t_s=1e-3,

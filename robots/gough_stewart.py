@@ -176,6 +176,7 @@ GOUGH_STEWART = Robot(
     x_bounds=((-0.15, -0.15, 0.6, -1.3, -0.35, -0.35), (0.15, 0.15, 1.0, 1.3, 0.35, 0.35)),
     loop_closure=gough_stewart_loop_closure,
     # 40 m/s^2 (a fast hexapod); 120 rad/s^2 gives ~40 m/s^2 at the platform's 0.3 m radius
+    pose_units=("m", "m", "m", "rad", "rad", "rad"),  # (p_x, p_y, p_z, yaw, pitch, roll)
     a_max=(40.0, 40.0, 40.0, 120.0, 120.0, 120.0),
     eps_q=5e-6,  # m: a 5 um linear encoder count on each leg
     t_s=1e-3,

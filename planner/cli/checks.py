@@ -84,6 +84,26 @@ def _in(name: str, v, lo: float, hi: float, *, lo_open: bool = True, unit: str =
         raise InputError(f"{name} = {v:g}{unit} is out of range: it must lie in {left}{lo:g}, {hi:g}]{unit}")
 
 
+def _a_max_per_axis(a, robot) -> None:
+    """``certify --a-max``: one bound per pose axis in its unit, or one number when every axis has the same unit."""
+    if a.a_max is None:
+        return
+    units = robot.acceleration_units
+    if len(a.a_max) not in (1, robot.n):
+        raise InputError(f"--a-max takes 1 or {robot.n} comma-separated bounds for robot {robot.name} (axes in "
+                         f"{', '.join(units)}), got {len(a.a_max)}")
+    if len(a.a_max) == 1 and robot.mixed_units:
+        raise InputError(f"--a-max {a.a_max[0]:g}: robot {robot.name}'s pose axes are in {', '.join(units)}, so one "
+                         f"number cannot bound them all; give one per axis, e.g. --a-max "
+                         f"{','.join(f'{v:g}' for v in robot.a_max)} (its physical a_max)")
+    for i, v in enumerate(a.a_max):
+        unit = units[0] if len(a.a_max) == 1 else units[i]
+        _in("--a-max" if len(a.a_max) == 1 else f"--a-max (axis {i + 1})", v, 0.0, 1e6, unit=f" {unit}")
+    if len(a.a_max) == 1 and a.a_max[0] < a.a_peak:
+        raise InputError(f"--a-max {a.a_max[0]:g} {units[0]} is below --a-peak {a.a_peak:g} {units[0]}: the plans "
+                         "accelerate up to a_peak, so no plan would satisfy the bound")
+
+
 def _budget(what: str, samples: float, n: int, *, scenarios: int = 1, tracked: bool = False,
             hint: str = "shorten the motion") -> None:
     """Refuse a run whose samples would need more than the memory or time limits."""
@@ -132,6 +152,11 @@ def _output_folder(path, what: str, files: tuple[str, ...]) -> None:
 
 
 def _tracker(a, robot) -> None:
+    for name, value, field in (("--a-max", a.a_max, "a_max"), ("--xd0", a.xd0, "xd0")):
+        if value is not None and robot.mixed_units:
+            raise InputError(f"{name} {value:g} bounds every pose axis with one number, but robot {robot.name}'s "
+                             f"axes are in {', '.join(robot.pose_units)}: omit {name} to use the robot's per-axis "
+                             f"{field} ({', '.join(f'{v:g}' for v in getattr(robot, field))})")
     _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
     _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
     _in("--xd0", a.xd0, 0.0, 1e3, lo_open=False, unit=" m/s")
@@ -193,10 +218,7 @@ def check_command(a, entry) -> None:
     if cmd == "certify":
         _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
         _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
-        _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
-        if a.a_max is not None and a.a_max < a.a_peak:
-            raise InputError(f"--a-max {a.a_max:g} m/s^2 is below --a-peak {a.a_peak:g} m/s^2: the plans accelerate "
-                             "up to a_peak, so no plan would satisfy the bound")
+        _a_max_per_axis(a, robot)
         _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
         _in("--v-high", a.v_high, a.v_low, MAX_SPEED, unit=" m/s")
         _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")

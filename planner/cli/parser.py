@@ -14,7 +14,7 @@ from verifier.window import Reasoning
 from ..execution import ExecutionKind
 from ..task import Method
 
-__all__ = ["build_parser", "UsageError", "TABLE2_SPEEDS", "number", "count"]
+__all__ = ["build_parser", "UsageError", "TABLE2_SPEEDS", "number", "numbers", "count"]
 
 #: Table II speeds of the paper, m/s, and two slower ones.
 TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
@@ -30,6 +30,11 @@ def number(text: str) -> float:
         return parse_number(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a decimal number") from None
+
+
+def numbers(text: str) -> tuple[float, ...]:
+    """argparse ``type=``: one or more comma-separated finite decimal numbers."""
+    return tuple(number(t) for t in text.split(","))
 
 
 def count(text: str) -> int:
@@ -76,7 +81,9 @@ def _tracker_options(p):
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
     g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
-    p.add_argument("--a-max", type=number, help="end-effector acceleration bound, m/s^2 (all components; robot default)")
+    p.add_argument("--a-max", type=number,
+                   help="end-effector acceleration bound, m/s^2, every pose axis (robots whose axes are all lengths; "
+                        "robot default)")
     p.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
     p.add_argument("--xd0", type=number, help="initial velocity bound, m/s (all components; robot default)")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
@@ -138,7 +145,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound")
     _task_options(ce)
-    ce.add_argument("--a-max", type=number, help="end-effector acceleration bound, m/s^2 (default: planned peak + 10%%)")
+    ce.add_argument("--a-max", type=numbers, metavar="A[,A...]",
+                    help="end-effector acceleration bound per pose axis, each in its axis' unit (m/s^2 or rad/s^2), "
+                         "comma-separated; one number for every axis when they share a unit (default: per axis, the "
+                         "planned peak + 10%% where the plan accelerates, else the robot's tracking margin or a_max; "
+                         "docs/planning.md)")
     ce.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
     ce.add_argument("--tracking-error", type=number, default=0.0, help="extra joint tracking error allowed, rad")
     ce.add_argument("--execution", choices=[k.value for k in ExecutionKind], default=ExecutionKind.CARTESIAN.value,

@@ -11,6 +11,7 @@ from verifier.files import atomic_write
 from verifier.plots import plot_run
 from verifier.trajfile import write_trajectory
 
+from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
 from ..pipeline import certify_crossing
 from ..plan import plan_crossing
 from ..task import Method, PlanningBounds
@@ -34,7 +35,8 @@ def certify(a) -> int:
     """``crosscert certify``: v_min, its certificate, the refutation bound; a table, a JSON report and a figure."""
     entry, kin, task = task_setup(a)
     robot = entry.robot
-    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a.a_max, a_peak=a.a_peak,
+    a_max = None if a.a_max is None else (a.a_max[0] if len(a.a_max) == 1 else a.a_max)
+    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a_max, a_peak=a.a_peak,
                             method=a.method, dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
                             execution=a.execution)
     out = Path(a.out)
@@ -43,6 +45,9 @@ def certify(a) -> int:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                 monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
                                 progress=cb, kin=kin)
+        # what the assumption buys: the same search under the robot's physical a_max
+        cert = certify_at_robot_a_max(robot, task, cert, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
+                                      refute=not a.no_refute, seed=a.seed, progress=cb, kin=kin)
     finally:
         if bar is not None:
             bar.close()
@@ -56,7 +61,8 @@ def certify(a) -> int:
         plot_run(png, p.t_s, {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
                  p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s",
                  bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} rad, a_max = "
-                         f"({', '.join(f'{v:.4g}' for v in cert.a_max_used)}) m/s^2, t_s = {cert.bounds.t_s:.3g} s, "
+                         f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
+                         f"t_s = {cert.bounds.t_s:.3g} s, "
                          f"{cert.execution.kind.value} executions"), truth="planned")
         files.append(png)
     js = out / "certificate.json"
@@ -93,9 +99,29 @@ def certify(a) -> int:
               f"({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
               f"{len(mc.wrong_verdicts)} wrong verdicts")
     phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
-    used = ("none (no certificate)" if cert.a_max_used is None
-            else "(" + ", ".join(f"{v:.4g}" for v in cert.a_max_used) + ") m/s^2")
-    print(f"a_max used: {used}; elapsed {cert.elapsed_s:.1f} s ({phases})")
+    print("a_max used: " + ("none (no certificate)" if cert.a_max_used is None else cert.a_max_used.describe()))
+    _print_at_robot_a_max(cert, a.no_refute)
+    extra = cert.at_robot_a_max
+    more = f" + {extra.elapsed_s:.1f} s at the robot's a_max" if extra.outcome is ComparisonOutcome.COMPUTED else ""
+    print(f"elapsed {cert.elapsed_s:.1f} s ({phases}){more}")
     for f in files:
         print(f"wrote {f}")
     return 0
+
+
+def _print_at_robot_a_max(cert, no_refute: bool) -> None:
+    """The v_min and refutation bound under the robot's physical a_max, or why they are not given."""
+    at = cert.at_robot_a_max
+    robot_bound = ", ".join(f"{x.value:g} {x.unit}" for x in at.a_max.axes)
+    if at.outcome is ComparisonOutcome.COINCIDES:
+        print(f"at the robot's a_max ({robot_bound}): the same bounds, the same certificate")
+        return
+    if at.outcome is ComparisonOutcome.NO_CERTIFICATE:
+        print(f"at the robot's a_max ({robot_bound}): not computed (no certificate to compare with)")
+        return
+    vmin = "none (no tried speed certifies)" if at.v_min is None else f"{at.v_min:.4f} m/s"
+    if at.v_min is not None and at.v_min_at_lower_end:
+        vmin += f" (the slowest speed tried, {at.v_low:.4f} m/s)"
+    ref = "not computed" if no_refute else ("none found" if at.refutation_bound is None
+                                            else f"{at.refutation_bound:.4f} m/s")
+    print(f"at the robot's a_max ({robot_bound}): minimal certified v_sing {vmin}; refutation bound {ref}")

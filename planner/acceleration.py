@@ -1,0 +1,178 @@
+"""The acceleration assumption of a certificate: one bound per pose axis, with its unit and its source.
+
+Every certificate assumes ``|x''_i(t)| <= a_max_i`` for the executed motion,
+per pose axis ``i``, in that axis' unit per s^2 (m/s^2 for a length, rad/s^2
+for an angle: :attr:`robots.Robot.pose_units`).  Each axis' bound comes from
+one :class:`AccelerationSource`, decided on that axis alone, so that no bound
+of one axis is ever computed from another axis:
+
+* ``given``: the caller's bound (``PlanningBounds.a_max``);
+* ``plan peak + margin``: an axis the plan accelerates gets its planned peak
+  enlarged by ``PlanningBounds.a_margin`` (room for the controller's tracking
+  error, relative to what the plan asks of that axis);
+* ``robot tracking margin``: an axis the plan does not accelerate (or
+  accelerates less than the margin) gets the robot's declared
+  ``tracking_a_margin``;
+* ``robot a_max``: without a declared margin, such an axis gets the robot's
+  physical bound ``a_max``: the only number that holds whatever the
+  controller does.
+
+See docs/planning.md, "The acceleration assumption".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+import numpy as np
+
+from robots.errors import InputError
+
+__all__ = ["AccelerationSource", "AxisAcceleration", "AccelerationAssumption", "acceleration_assumption",
+           "derived_a_max", "robot_a_max_assumption", "PLAN_AT_REST"]
+
+#: An axis whose planned peak ``|x''_i|`` is at most this fraction of the robot's
+#: ``a_max_i`` (same axis, same unit) is one the plan does not accelerate:
+#: rounding in a plan along a coordinate direction, not a motion.
+PLAN_AT_REST = 1e-9
+
+
+class AccelerationSource(StrEnum):
+    """Where one axis' acceleration bound comes from."""
+
+    PLAN_PEAK = "plan peak + margin"
+    TRACKING_MARGIN = "robot tracking margin"
+    ROBOT_A_MAX = "robot a_max"
+    GIVEN = "given"
+
+
+@dataclass(frozen=True)
+class AxisAcceleration:
+    """One pose axis' bound on ``|x''_i|``: ``value`` in ``unit`` (``"m/s^2"`` or ``"rad/s^2"``), and its source."""
+
+    value: float
+    unit: str
+    source: AccelerationSource
+
+    def summary(self) -> dict:
+        """JSON-ready ``{"value", "unit", "source"}``."""
+        return {"value": self.value, "unit": self.unit, "source": self.source.value}
+
+    def __str__(self) -> str:
+        return f"{self.value:.4g} {self.unit} ({self.source.value})"
+
+
+@dataclass(frozen=True)
+class AccelerationAssumption:
+    """The per-axis acceleration bounds a certificate assumes (one :class:`AxisAcceleration` per pose axis)."""
+
+    axes: tuple[AxisAcceleration, ...]
+
+    @property
+    def values(self) -> tuple[float, ...]:
+        """The bounds, per axis, each in its own unit (for the tracker, which reads them axis by axis)."""
+        return tuple(a.value for a in self.axes)
+
+    @property
+    def sources(self) -> tuple[AccelerationSource, ...]:
+        """The source of each axis' bound."""
+        return tuple(a.source for a in self.axes)
+
+    def summary(self) -> list[dict]:
+        """JSON-ready list, one ``{"value", "unit", "source"}`` per pose axis."""
+        return [a.summary() for a in self.axes]
+
+    def describe(self) -> str:
+        """One line: each axis' bound with its unit and source."""
+        return "; ".join(f"axis {i + 1}: {a}" for i, a in enumerate(self.axes))
+
+    def same_values(self, other: AccelerationAssumption) -> bool:
+        """Whether both assume the same bound on every axis (units checked axis by axis)."""
+        if len(self.axes) != len(other.axes):
+            return False
+        for a, o in zip(self.axes, other.axes):
+            if a.unit != o.unit:
+                raise InputError(f"acceleration bounds in {a.unit} and {o.unit} compared on one axis")
+        return all(a.value == o.value for a, o in zip(self.axes, other.axes))
+
+    @staticmethod
+    def widest(assumptions) -> AccelerationAssumption:
+        """Per axis, the largest bound of ``assumptions`` (e.g. the plans of one batch) with its source."""
+        assumptions = list(assumptions)
+        if not assumptions:
+            raise InputError("no acceleration assumption to combine")
+        out = []
+        for i in range(len(assumptions[0].axes)):
+            column = [a.axes[i] for a in assumptions]
+            if len({c.unit for c in column}) != 1:
+                raise InputError(f"axis {i + 1}: acceleration bounds in different units {sorted({c.unit for c in column})}")
+            out.append(max(column, key=lambda c: c.value))
+        return AccelerationAssumption(tuple(out))
+
+
+def robot_a_max_assumption(robot) -> AccelerationAssumption:
+    """The robot's physical ``a_max`` on every axis (source ``robot a_max``)."""
+    return AccelerationAssumption(tuple(AxisAcceleration(float(v), u, AccelerationSource.ROBOT_A_MAX)
+                                        for v, u in zip(robot.a_max, robot.acceleration_units)))
+
+
+def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
+    """The acceleration bounds a certificate of ``plan`` assumes, per axis, under the resolved bounds ``b``.
+
+    Parameters
+    ----------
+    plan : PlannedTrajectory
+        Its ``xdd`` (K, n) gives the planned peak of each axis, in that axis' unit per s^2.
+    b : PlanningBounds
+        Resolved bounds: ``a_max`` (given, per axis) or ``a_margin`` (relative).
+    robot : robots.Robot
+        Its ``pose_units``, ``tracking_a_margin`` and ``a_max``.
+
+    Returns
+    -------
+    AccelerationAssumption
+        Axis ``i`` depends only on axis ``i`` of the plan and of the robot:
+        ``given`` when ``b.a_max`` is set; else, when the plan accelerates the
+        axis (peak above :data:`PLAN_AT_REST` of ``a_max_i``), its peak times
+        ``1 + a_margin`` (or the robot's tracking margin when declared and
+        larger); else the tracking margin when declared, else the robot's
+        ``a_max_i``.
+
+    Raises
+    ------
+    InputError
+        ``b.a_max`` below the plan's peak on some axis (the message names the
+        axis, both values and the unit).
+    """
+    peak = np.max(np.abs(np.asarray(plan.xdd, float)), axis=0)
+    units = robot.acceleration_units
+    if peak.shape != (robot.n,):
+        raise InputError(f"the plan has {peak.size} pose axes, robot {robot.name} has {robot.n}")
+    if b.a_max is not None:
+        low = [i for i in range(robot.n) if b.a_max[i] < peak[i]]
+        if low:
+            raise InputError("bounds contradict the plan: " + "; ".join(
+                f"axis {i + 1}: a_max = {b.a_max[i]:g} {units[i]} is below the planned peak {peak[i]:.6g} {units[i]}"
+                for i in low) + "; raise a_max on that axis or lower a_peak")
+        return AccelerationAssumption(tuple(AxisAcceleration(float(b.a_max[i]), units[i], AccelerationSource.GIVEN)
+                                            for i in range(robot.n)))
+    margin = robot.tracking_a_margin
+    axes = []
+    for i in range(robot.n):
+        if peak[i] > PLAN_AT_REST * robot.a_max[i]:
+            planned = float(peak[i] * (1.0 + b.a_margin))
+            if margin is not None and margin[i] > planned:
+                axes.append(AxisAcceleration(margin[i], units[i], AccelerationSource.TRACKING_MARGIN))
+            else:
+                axes.append(AxisAcceleration(planned, units[i], AccelerationSource.PLAN_PEAK))
+        elif margin is not None:
+            axes.append(AxisAcceleration(margin[i], units[i], AccelerationSource.TRACKING_MARGIN))
+        else:
+            axes.append(AxisAcceleration(robot.a_max[i], units[i], AccelerationSource.ROBOT_A_MAX))
+    return AccelerationAssumption(tuple(axes))
+
+
+def derived_a_max(plan, b, robot) -> tuple[float, ...]:
+    """The values of :func:`acceleration_assumption`, per axis in its own unit (what the tracker reads)."""
+    return acceleration_assumption(plan, b, robot).values
