@@ -34,6 +34,7 @@ from planner.refute import (
     verify_counterexample,
     verify_crossing,
 )
+from planner.refute.nlp import SAMPLE_BUCKET
 from planner.simulate import max_v_sing, simulate_bounce
 from planner.sweep import cruise_for
 from problems import default_settings, interval_model, kinematics
@@ -103,8 +104,10 @@ def test_bounce_far_short_of_the_locus_admits_none():
 
 
 def test_nlp_size(on_locus):
+    """Sized for the recording extended to a multiple of SAMPLE_BUCKET samples (its last reading repeated)."""
     kin, rb, res = on_locus
-    K = rb.n_samples
+    K = -(-rb.n_samples // SAMPLE_BUCKET) * SAMPLE_BUCKET
+    assert res.counterexample.x.shape == (rb.n_samples, kin.n)
     assert res.n_variables == kin.m + kin.n * (4 * K - 1)
     assert res.n_constraints == 2 * kin.n * (K - 1) + kin.n * K + 2  # mode at the first and last sample only
 

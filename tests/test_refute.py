@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from planner.refute.nlp import SAMPLE_BUCKET
 from planner.refute import (
     BounceSearch,
     Counterexample,
@@ -83,8 +84,12 @@ def test_fast_crossing_is_not_refuted(bound):
 
 
 def test_nlp_size(slow_case):
+    """The NLP's size, for the recording extended to the next multiple of SAMPLE_BUCKET samples by
+    repeating its last reading; the counterexample itself has the recording's samples."""
     kin, rb, res = slow_case
-    K = rb.n_samples
+    K = -(-rb.n_samples // SAMPLE_BUCKET) * SAMPLE_BUCKET
+    assert K > rb.n_samples or rb.n_samples % SAMPLE_BUCKET == 0
+    assert res.counterexample.x.shape == (rb.n_samples, kin.n) and res.counterexample.u.shape[0] == rb.n_samples - 1
     assert res.n_variables == kin.m + kin.n * (4 * K - 1)
     assert res.n_constraints == 2 * kin.n * (K - 1) + kin.n * K + K
 

@@ -58,6 +58,8 @@ IPOPT_TOL = 1e-9
 #: IPOPT's constraint violation tolerance (also the "acceptable" one), in the scaled
 #: rows (eps_q- and full-acceleration units): far inside the margins above.
 IPOPT_CONSTR_VIOL_TOL = 1e-10
+#: Sample counts of the counterexample NLPs are rounded up to a multiple of this (see _build_and_solve).
+SAMPLE_BUCKET = 32
 #: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
 _MAX_CHUNK = 64
 #: Smallest move between consecutive samples a chunk always accepts, as a fraction of the smallest
@@ -272,9 +274,16 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
 def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, kind: CounterexampleKind, *,
                      max_iter: int, max_cpu_time: float, print_level: int):
     """Solve the NLP of ``kind`` from ``xi_start``; returns (Counterexample or None, status, iters, time, nv, ng)."""
-    K, n, m = rb.n_samples, kin.n, kin.m
-    ts, qm, eps, amax = rb.t_s, rb.q_meas, rb.eps_q, rb.a_max
+    K0, n, m = rb.n_samples, kin.n, kin.m
+    ts, eps, amax = rb.t_s, rb.eps_q, rb.a_max
     xc, xh = 0.5 * (rb.xi_lo + rb.xi_hi), 0.5 * (rb.xi_hi - rb.xi_lo)
+    # Solvers are built per sample count: the recording is extended to the next multiple of
+    # SAMPLE_BUCKET by repeating its last reading (the robot rests there), so recordings of
+    # nearby lengths share one.  Only the first K0 samples of a solution are kept: every
+    # constraint holds sample by sample, so they explain the original recording (the trusted
+    # check judges them against it).
+    K = -(-K0 // SAMPLE_BUCKET) * SAMPLE_BUCKET
+    qm = np.vstack([rb.q_meas, np.repeat(rb.q_meas[-1:], K - K0, axis=0)])
 
     # Initial guess: the FK of the samples with the starting geometry, in mode
     # m0 (bounce), or in m0 then -m0 (crossing).
@@ -326,10 +335,10 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
         return None, status, iters, elapsed, nv, ng
     zs = np.asarray(sol["x"], dtype=float).reshape(-1)
     s_v, xv, vv, wv, dv = np.split(zs, np.cumsum([m, n * K, n * K, n * (K - 1)]))
-    Xv, Vv, Dv = (a.reshape((n, K), order="F").T for a in (xv, vv, dv))
-    Wv = wv.reshape((n, K - 1), order="F").T
+    Xv, Vv, Dv = (a.reshape((n, K), order="F").T[:K0] for a in (xv, vv, dv))
+    Wv = wv.reshape((n, K - 1), order="F").T[:K0 - 1]
     ce = Counterexample(xi=xc + xh * s_v, x=Xv, v=Vv, u=amax[None, :] * Wv,
-                        q=qm + eps[None, :] * Dv, t_s=ts, m0=rb.m0, kind=kind)
+                        q=qm[:K0] + eps[None, :] * Dv, t_s=ts, m0=rb.m0, kind=kind)
     return ce, status, iters, elapsed, nv, ng
 
 
