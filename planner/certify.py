@@ -83,7 +83,7 @@ class SpeedTrial:
     verdict: Verdict
     max_width_pose: float  # m
     max_width_velocity: float  # m/s
-    certified_at_step: int
+    certified_at_step: int | None  # first sample of the forward tracker's certified streak; None: not certified
     forward_verdict: Verdict
 
 
@@ -230,6 +230,6 @@ def _certify_speeds(kin, imodel, task, b, speeds, progress):
                                            max_geometries=CERTIFY_WINDOW_GEOMETRIES).verdict
     return [
         SpeedTrial(float(v), verdicts[i], float(res.max_width_pose[i]), float(res.max_width_velocity[i]),
-                   int(res.certified_at_step[i]), res.verdict[i])
+                   None if res.certified_at_step[i] < 0 else int(res.certified_at_step[i]), res.verdict[i])
         for i, v in enumerate(speeds)
     ]
