@@ -323,6 +323,9 @@ def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | 
                         client = own = Client(scheduler)
                     except ValueError as exc:  # a malformed address
                         raise InputError(f"scheduler {scheduler!r}: {exc}") from None
+                    except OSError as exc:  # nobody answers there (after distributed.comm.timeouts.connect)
+                        raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc}); start it "
+                                         "(dask scheduler) or check the address") from None
                 else:
                     # dashboard on a free port: a second study on the machine must not collide
                     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
