@@ -166,3 +166,92 @@ def test_check_backends_give_the_same_report(crossing_csv, capsys):
         out[backend] = rep
     assert out["compiled"] == out["numpy"]
     assert out["compiled"]["verdict"] == "mode-changed"
+
+
+def _restamped(path, tmp_path, stamp, name):
+    """The recording at ``path`` with its time column replaced by ``stamp(t)``."""
+    lines = path.read_text().splitlines()
+    out = [lines[0]]
+    for row in lines[1:]:
+        t, rest = row.split(",", 1)
+        out.append(f"{stamp(float(t))!r},{rest}")
+    return _write(tmp_path, "\n".join(out) + "\n", name)
+
+
+def test_check_t_s_states_the_period_and_warnings_name_it(crossing_csv, tmp_path, capsys):
+    """A 2 ms recording: a warning naming --t-s (an option check has); with --t-s 0.002, none."""
+    rec = _restamped(crossing_csv, tmp_path, lambda t: 2 * t, "slow.csv")
+    assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", "forward"]) == 0
+    cap = capsys.readouterr()
+    assert "pass --t-s 0.002 to state it" in cap.err and json.loads(cap.out)["t_s"] == 0.002
+    assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", "forward", "--t-s", "0.002"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == "" and json.loads(cap.out)["t_s"] == 0.002
+    assert main(["check", str(crossing_csv), "--initial-mode", "1", "--t-s", "0.002"]) == 2  # every step is checked
+    assert "uneven sampling (step 0.001 s, sampling period 0.002 s)" in _one_line_error(capsys)
+
+
+@pytest.mark.parametrize(
+    "stamp, args, message",
+    [
+        # milliseconds: said at once, with the fix, not after a run at t_s = 1 s
+        (lambda t: 1e3 * t, ("--t-s", "0.001"), "the time column seems to be in ms: convert it to seconds"),
+        # float32 stamps at 100 s: re-stamp at the nominal period; never "resample"
+        (lambda t: float(np.float32(100.0 + t)), (), "re-stamp the time column at it (t_k = t_0 + k t_s"),
+        # 1e-9 s of clock jitter
+        (lambda t: t + 1e-9 * ((round(t * 1e3) * 7919) % 3 - 1), (), "float32 stamps or clock jitter?"),
+    ],
+)
+def test_imprecise_stamps_get_advice_that_keeps_eps_q(crossing_csv, tmp_path, capsys, stamp, args, message):
+    rec = _restamped(crossing_csv, tmp_path, stamp, "stamped.csv")
+    assert main(["check", str(rec), "--initial-mode", "1", "--no-progress", *args]) == 2
+    err = _one_line_error(capsys)
+    assert message in err and "resample or" not in err, err
+
+
+def test_ms_stamps_without_t_s_are_named_in_the_warning(crossing_csv, tmp_path, capsys):
+    rec = _restamped(crossing_csv, tmp_path, lambda t: 1e3 * t, "ms.csv")
+    assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", "forward"]) == 0
+    err = capsys.readouterr().err
+    assert "the time column seems to be in ms: convert it to seconds" in err, err
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("# logged by the controller\nt,q1,q2\n0,1,1\n0.001,1,1\n", "line 1 starts with '#'"),
+        ("T,Q1,Q2\n0,1,1\n0.001,1,1\n", "column names are lower-case"),
+        ("t;q1;q2\n0;1;1\n", "semicolons"),
+    ],
+)
+def test_header_hints(tmp_path, capsys, text, message):
+    p = _write(tmp_path, text)
+    assert main(["check", str(p), "--initial-mode", "1"]) == 2
+    err = _one_line_error(capsys)
+    assert "missing column(s)" in err and message in err, err
+
+
+def test_gzip_file_is_named(crossing_csv, tmp_path, capsys):
+    import gzip
+
+    p = tmp_path / "rec.csv.gz"
+    p.write_bytes(gzip.compress(crossing_csv.read_bytes()))
+    assert main(["check", str(p), "--initial-mode", "1"]) == 2
+    err = _one_line_error(capsys)
+    assert "gzip-compressed: decompress them first" in err and "semicolons" not in err, err
+
+
+def test_a_failed_figure_does_not_cost_the_verdict(crossing_csv, tmp_path, capsys, monkeypatch):
+    """The figure is drawn after the verdict is printed: a write that fails (full disk) is reported after it."""
+    import sys
+
+    def full_disk(path, *a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(sys.modules["planner.cli.track"], "plot_run", full_disk)
+    code = main(["check", str(crossing_csv), "--initial-mode", "1", "--json", "--plot", str(tmp_path / "f.png")])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert json.loads(out)["verdict"] == "mode-changed"
+    assert err.count("\n") == 1 and "the verdict above stands, but the figure was not written" in err
+    assert "No space left on device" in err and not (tmp_path / "f.png").exists()
