@@ -255,3 +255,54 @@ def test_a_failed_figure_does_not_cost_the_verdict(crossing_csv, tmp_path, capsy
     assert json.loads(out)["verdict"] == "mode-changed"
     assert err.count("\n") == 1 and "the verdict above stands, but the figure was not written" in err
     assert "No space left on device" in err and not (tmp_path / "f.png").exists()
+
+
+CERTIFY_NARROW = ["certify", "--v-low", "0.9", "--v-high", "1.3", "--tol", "0.1", "--monte-carlo", "0", "--no-progress"]
+
+
+def test_certify_names_the_gap_and_times_the_bounce(tmp_path, capsys):
+    """The printed gap is the JSON's gap_mps (a difference) with the ratio named beside it; the bounce search's
+    time is its own run time, not the wait left after the other phases; certified_at_step is null or a step."""
+    import re
+
+    assert main([*CERTIFY_NARROW, "--out", str(tmp_path / "c")]) == 0
+    out = capsys.readouterr().out
+    report = json.loads((tmp_path / "c" / "certificate.json").read_text())
+    line = next(v for v in out.splitlines() if v.startswith("gap"))
+    diff, ratio = map(float, re.fullmatch(r"gap \(mode-changed\): v_min - refutation bound = ([0-9.]+) m/s "
+                                          r"\(gap_mps\); ratio v_min / refutation bound = ([0-9.]+)", line).groups())
+    assert diff == pytest.approx(report["gap_mps"], abs=5e-5)
+    assert ratio == pytest.approx(report["v_min_mps"] / report["refutation_bound_mps"], abs=5e-4)
+    assert report["bounce"] is not None and report["timings_s"]["bounce"] > 1.0  # a search of seconds
+    steps = [t["certified_at_step"] for t in report["trials"]]
+    assert None in steps and all(s is None or (isinstance(s, int) and s >= 0) for s in steps), steps
+    assert all((t["certified_at_step"] is None) == (t["forward_verdict"] != "mode-changed") for t in report["trials"])
+
+
+def test_ctrl_c_stops_certify_promptly_with_130(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it): exit 130 within seconds, one line, and the
+    background worker process gone."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", *CERTIFY_NARROW, "--out", str(tmp_path / "c")],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=root,
+                            start_new_session=True)
+    try:
+        time.sleep(8.0)  # the speed search and the counterexample searches are running
+        assert proc.poll() is None
+        workers = open(f"/proc/{proc.pid}/task/{proc.pid}/children").read().split()
+        t0 = time.perf_counter()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        waited = time.perf_counter() - t0
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and err == "crosscert: interrupted\n", err
+    assert waited < 5.0, f"exited {waited:.1f} s after Ctrl-C"
+    assert workers and not any(os.path.exists(f"/proc/{w}") for w in workers)

@@ -12,7 +12,9 @@ every command takes ``--robot``.
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
 
 from robots.errors import CrosscertError
 from robots.registry import get_entry
@@ -36,6 +38,28 @@ _COMMANDS = {"check": check, "monitor": monitor, "simulate": simulate, "sweep": 
              "certify": certify, "study": study, "robots": robots}
 
 
+class _Interrupts:
+    """SIGINT raises KeyboardInterrupt, as by default, and is remembered: a C extension (CasADi's SWIG
+    wrappers) may turn the KeyboardInterrupt raised inside one of its calls into another exception."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self.previous = None
+
+    def _handler(self, signum, frame):
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+
 def main(argv=None) -> int:
     """Entry point of the ``crosscert`` script; returns the exit code.
 
@@ -44,6 +68,17 @@ def main(argv=None) -> int:
     argv : list of str, optional
         The arguments after the program name (default: ``sys.argv[1:]``).
     """
+    with _Interrupts() as interrupts:
+        try:
+            return _main(argv)
+        except Exception:
+            if not interrupts.seen:
+                raise
+            print("crosscert: interrupted", file=sys.stderr)  # an interrupt a C extension disguised
+            return EXIT_INTERRUPTED
+
+
+def _main(argv) -> int:
     try:
         argv = sys.argv[1:] if argv is None else list(argv)
         a = build_parser(robot_of(argv)).parse_args(argv)
