@@ -280,8 +280,8 @@ class TrajectoryReader:
             return
         self.t_s = step
         if nominal is not None:
-            self.warnings.append(f"{self.name}, line {line}: sampling period {step:.9g} s (the first step of the time "
-                                 f"column) differs from the robot's nominal {nominal:.9g} s" + _unit_hint(step, nominal)
+            self.warnings.append(f"{self.name}, line {line}: sampling period {step:.9g} s differs from the robot's "
+                                 f"nominal {nominal:.9g} s (the first step of the time column)" + _unit_hint(step, nominal)
                                  + f"; if {step:.9g} s is right, pass --t-s {step:.9g} to state it")
 
     def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
