@@ -88,7 +88,7 @@ class SpeedTrial:
     verdict: Verdict
     max_width_pose: float  # m
     max_width_velocity: float  # m/s
-    certified_at_step: int
+    certified_at_step: int | None  # first sample of the forward tracker's certified streak; None: not certified
     forward_verdict: Verdict
 
 
@@ -194,7 +194,7 @@ class CertifiedRun:
         """The row of the search's table."""
         f = self.forward
         return SpeedTrial(float(self.plan.v_sing), self.verdict, float(f.max_width_pose), float(f.max_width_velocity),
-                          int(f.certified_at_step), f.verdict)
+                          None if f.certified_at_step < 0 else int(f.certified_at_step), f.verdict)
 
 
 def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None) -> CertifiedRun:

@@ -169,7 +169,7 @@ def effective_deviation(kin, x_path, q_plan, xi_plan, xi) -> np.ndarray:
     Q, ok = kin.ik_batch(X, xi, Qp)
     if not np.all(ok):
         k = int(np.nonzero(~ok)[0][0])
-        raise SimulationError(f"{robot.name}: inverse kinematics failed at path point {k} for geometry {list(xi)}")
+        raise SimulationError(f"{robot.name}: inverse kinematics failed at path point {k} for geometry {[float(v) for v in xi]}")
     D = Q - Qp
     for i, j in _offsets(robot):
         D[:, i] += xi[j] - xi_plan[j]

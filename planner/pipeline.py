@@ -13,7 +13,7 @@ import importlib.metadata as md
 import logging
 import time
 import threading
-from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Executor, Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -56,10 +56,12 @@ class CrossingCertificate:
     counterexample exists: no sound tracker can certify at or below it.
     ``execution`` is the class of admissible executions the certificate
     covers (:mod:`planner.execution`); ``timings_s`` the wall time of each
-    phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``, and
+    phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``,
     ``refutation``: the wait for the background searches left after the
-    Monte Carlo run).  ``robot_name``, ``param_names`` (of the geometry
-    vector ``xi``) and ``task`` say what was certified.  ``enclosures`` is the
+    Monte Carlo run, and ``bounce``: the bounce search's own run time, which
+    overlaps the other phases when it ran in the background worker).
+    ``robot_name``, ``param_names`` (of the geometry vector ``xi``) and
+    ``task`` say what was certified.  ``enclosures`` is the
     forward tracker's run at ``v_min``; ``window`` the window passes on the
     same inputs when the forward run alone did not certify (their verdict is
     then the certificate's).  ``bounce`` brackets, at ``v_min``, the turn-back
@@ -153,7 +155,7 @@ class CrossingCertificate:
                 {"v_sing_mps": r.v_sing, "verdict": r.verdict.value, "forward_verdict": r.forward_verdict.value,
                  "max_width_pose_m": r.max_width_pose,
                  "max_width_velocity_mps": r.max_width_velocity,
-                 "certified_at_step": None if r.certified_at_step < 0 else r.certified_at_step}
+                 "certified_at_step": r.certified_at_step}
                 for r in self.trials
             ],
             "refutation": [
@@ -272,7 +274,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         ref_job = bounce_job = None
         if refuter is not None and v_min is not None and bounce:
             # the bounces of the task at v_min: where mode-unchanged is certified and where it cannot be
-            bounce_job = (pool.submit(bounce_gap, robot, task, b, v_min, starts=starts) if pool is not None
+            bounce_job = (pool.submit(timed, bounce_gap, robot, task, b, v_min, starts=starts) if pool is not None
                           else None)
         if refuter is not None:
             refuter.drop_from(top)
@@ -295,12 +297,14 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         gap = None
         if refuter is not None and v_min is not None and bounce:
             try:
-                gap = bounce_job.result() if bounce_job is not None else None
+                gap, ran = bounce_job.result() if bounce_job is not None else (None, 0.0)
             except Exception as exc:  # as for the refutation: a failed worker is no result; run it here
                 log.warning("background bounce search failed (%r); searching in this process", exc)
             if gap is None:
-                gap = bounce_gap(robot, task, b, v_min, starts=starts, kin=kin, imodel=imodel)
+                gap, ran = timed(bounce_gap, robot, task, b, v_min, starts=starts, kin=kin, imodel=imodel)
         lap("bounce", t1)
+        if gap is not None:
+            clock["bounce"] = ran  # its own run time, in the background (beside other phases) or here
     finally:
         if refuter is not None:
             refuter.close()
@@ -326,6 +330,13 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         bounce=gap,
         acceleration_units=robot.acceleration_units,
     )
+
+
+def timed(fn, *args, **kwargs):
+    """``(fn(*args, **kwargs), seconds it took)``: module-level, so that an executor can run it elsewhere."""
+    t0 = time.perf_counter()
+    value = fn(*args, **kwargs)
+    return value, time.perf_counter() - t0
 
 
 #: Kinematic models built in this process for :func:`refute_speed`, by robot value.
@@ -387,6 +398,7 @@ class Refuter:
         self._kin = kin
         self._executor = executor
         self._own = own_executor
+        self._closed = False  # after close(): no search starts any more (an interrupted certification ends)
         self._futures: dict[float, Future] = {}
         self._speeds: set = set()
         self._rows: dict = {}
@@ -419,6 +431,8 @@ class Refuter:
         with self._lock:
             self._speeds.add(v)
         if v not in self._rows:
+            if self._closed:
+                raise CancelledError("the counterexample searches were stopped")
             row = None
             if self._executor is not None:
                 with self._lock:
@@ -428,19 +442,25 @@ class Refuter:
                 try:
                     row = future.result()
                 except Exception as exc:
+                    if self._closed:  # stopped by close() (an interrupt): no search here either
+                        raise CancelledError("the counterexample searches were stopped") from None
                     # e.g. a robot defined in a script the worker cannot import: go on here (a
                     # genuine error of the search is raised again by the run here), possibly on
                     # the helper thread, so with a model of its own (CasADi functions are not to
                     # be called from two threads at once)
                     log.warning("background counterexample search failed (%r); searching in this process", exc)
-                    self.close()
+                    self._stop_executor()
                     self._executor = None
                     self._kin = None
             self._rows[v] = row if row is not None else refute_speed(*self._args, v, kin=self._kin)
         return self._rows[v]
 
     def close(self) -> None:
-        """Cancel what has not started; shut the executor down if this object made it."""
+        """Cancel what has not started, start nothing more; shut the executor down if this object made it."""
+        self._closed = True
+        self._stop_executor()
+
+    def _stop_executor(self) -> None:
         with self._lock:
             futures = list(self._futures.values())
         for f in futures:

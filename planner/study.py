@@ -10,7 +10,10 @@ benchmark task, run where the caller says:
 
 Each finished case is appended to the output CSV as it arrives, so a study
 that stops loses nothing done: run it again with the same output and the
-finished cases are skipped.  A case that raises becomes a row with its error.
+finished cases are skipped.  A last row cut short (the process killed while
+writing it, a full disk) is cut off the file by :func:`repair_results`
+before anything is appended, and its case runs again; a malformed row
+elsewhere is ignored, so a case never has two rows.  A case that raises becomes a row with its error.
 A worker that dies loses only the case it was running: the Dask scheduler
 runs it again elsewhere (``distributed.scheduler.allowed-failures`` times).
 """
@@ -20,6 +23,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import hashlib
+import io
 import itertools
 import json
 import logging
@@ -39,7 +43,8 @@ from robots.registry import DEFAULT_ROBOT, get_entry
 from .pipeline import certify_crossing, package_versions
 from .task import Method, PlanningBounds, benchmark_task, parse_option
 
-__all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "design_sweep", "read_results", "scaled_box"]
+__all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "design_sweep", "read_results", "repair_results",
+           "scaled_box"]
 
 log = logging.getLogger(__name__)
 
@@ -175,14 +180,79 @@ def run_cases(cases: list[StudyCase], settings: dict) -> list[dict]:
     return [run_case(c, settings) for c in cases]
 
 
+def _complete(row: list) -> bool:
+    """A CSV record is a whole result row: every column, and the versions JSON object that ends it."""
+    if len(row) != len(COLUMNS):
+        return False
+    try:
+        return isinstance(json.loads(row[-1]), dict)
+    except ValueError:
+        return False
+
+
+def _records(path: Path):
+    """``(record, end)`` for each CSV record of ``path``: its cells and the byte offset just after it."""
+    with path.open(newline="", encoding="utf-8", errors="surrogateescape") as fh:
+        end = 0
+
+        def lines():
+            nonlocal end
+            for line in fh:
+                end += len(line.encode("utf-8", errors="surrogateescape"))
+                yield line
+
+        reader = csv.reader(lines())
+        try:
+            for row in reader:
+                yield row, end
+        except csv.Error:  # e.g. a NUL byte: the rest is one malformed record
+            yield [], path.stat().st_size
+
+
 def read_results(path) -> list[dict]:
-    """The rows already in a study's CSV (a last line cut by a crash is dropped)."""
+    """The whole result rows already in a study's CSV, as dicts of text (malformed rows are left out)."""
     p = Path(path)
     if not p.exists():
         return []
-    with p.open(newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    return [r for r in rows if r.get("versions")]
+    rows = [r for r, _ in _records(p)]
+    return [dict(zip(COLUMNS, r)) for r in rows[1:] if _complete(r)]
+
+
+def repair_results(path) -> str | None:
+    """Cut a torn last row off a study's CSV; return what was done (a warning to show), or None.
+
+    A row is torn when the process writing it was killed, or the disk filled,
+    before its end: it lacks columns or its closing versions field.  Rows
+    are appended one whole line at a time, so only the last one can be torn;
+    it is cut off (the file is truncated in place, its mode kept) so that the
+    next row starts on a line of its own, and its case, no longer in the
+    file, runs again.  A last row complete but for its line end gets one.
+    """
+    p = Path(path)
+    if not p.is_file() or p.stat().st_size == 0:
+        return None
+    records = list(_records(p))
+    size = p.stat().st_size
+    if len(records) < 2:
+        return None
+    row, _ = records[-1]
+    keep = records[-2][1]
+    if _complete(row):
+        with p.open("rb") as fh:
+            fh.seek(size - 1)
+            last = fh.read(1)
+        if last not in (b"\n", b"\r"):
+            with p.open("ab") as fh:
+                fh.write(b"\r\n")
+        return None
+    with p.open("rb") as fh:
+        fh.seek(keep)
+        torn = fh.read(size - keep)
+    os.truncate(p, keep)
+    text = torn.decode("utf-8", errors="replace").strip()
+    shown = text if len(text) <= 60 else text[:57] + "..."
+    return (f"{p}: its last row was cut short ({len(torn)} bytes: {shown!r}), probably by a process killed while "
+            "writing it; the row was removed and its case runs again")
 
 
 def _append(path: Path, rows: Iterable[dict]) -> None:
@@ -236,6 +306,9 @@ def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | 
     per_task = int(V.number("cases_per_task", cases_per_task, lo=1))
     settings = {"robot": robot, "bounds": dict(bounds or {}), "certify": dict(certify or {})}
     cases = study_cases(grid)
+    torn = repair_results(out)
+    if torn is not None:
+        log.warning("%s", torn)
     done = {r["case_id"] for r in read_results(out)}
     todo = [c for c in cases if c.case_id not in done]
     log.info("study: %d cases, %d already in %s", len(cases), len(cases) - len(todo), out)
@@ -247,7 +320,13 @@ def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | 
                 from dask.distributed import Client, LocalCluster
 
                 if scheduler is not None:
-                    client = own = Client(scheduler)
+                    try:
+                        client = own = Client(scheduler)
+                    except ValueError as exc:  # a malformed address
+                        raise InputError(f"scheduler {scheduler!r}: {exc}") from None
+                    except OSError as exc:  # nobody answers there (after distributed.comm.timeouts.connect)
+                        raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc}); start it "
+                                         "(dask scheduler) or check the address") from None
                 else:
                     # dashboard on a free port: a second study on the machine must not collide
                     cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
@@ -268,7 +347,12 @@ def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | 
                 own.close()
                 if cluster is not None:
                     cluster.close()
-    table = pd.read_csv(out, dtype={"case_id": str}, keep_default_na=True) if out.exists() else pd.DataFrame(columns=COLUMNS)
-    table = table[table["versions"].notna() & table["case_id"].isin({c.case_id for c in cases})]
+    text = io.StringIO()
+    w = csv.DictWriter(text, fieldnames=COLUMNS)
+    w.writeheader()
+    w.writerows(read_results(out))  # whole rows only: a malformed line is no row
+    text.seek(0)
+    table = pd.read_csv(text, dtype={"case_id": str}, keep_default_na=True)
+    table = table[table["case_id"].isin({c.case_id for c in cases})]
     return table.drop_duplicates("case_id", keep="last").reset_index(drop=True)
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import pickle
+import signal
 import subprocess
 import sys
 import threading
@@ -33,6 +34,9 @@ class WorkerStopped(CrosscertError):
 
 def serve() -> None:
     """The child's loop: answer every frame read on stdin until it closes."""
+    # Ctrl-C reaches the whole process group: the parent decides (it kills this process when the
+    # result is no longer wanted), so that a search never half-ends on its own
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     channel = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # solver banners and C-level prints go to stderr, never into the channel
     requests = sys.stdin.buffer

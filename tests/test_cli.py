@@ -166,3 +166,143 @@ def test_check_backends_give_the_same_report(crossing_csv, capsys):
         out[backend] = rep
     assert out["compiled"] == out["numpy"]
     assert out["compiled"]["verdict"] == "mode-changed"
+
+
+def _restamped(path, tmp_path, stamp, name):
+    """The recording at ``path`` with its time column replaced by ``stamp(t)``."""
+    lines = path.read_text().splitlines()
+    out = [lines[0]]
+    for row in lines[1:]:
+        t, rest = row.split(",", 1)
+        out.append(f"{stamp(float(t))!r},{rest}")
+    return _write(tmp_path, "\n".join(out) + "\n", name)
+
+
+def test_check_t_s_states_the_period_and_warnings_name_it(crossing_csv, tmp_path, capsys):
+    """A 2 ms recording: a warning naming --t-s (an option check has); with --t-s 0.002, none."""
+    rec = _restamped(crossing_csv, tmp_path, lambda t: 2 * t, "slow.csv")
+    assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", "forward"]) == 0
+    cap = capsys.readouterr()
+    assert "pass --t-s 0.002 to state it" in cap.err and json.loads(cap.out)["t_s"] == 0.002
+    assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", "forward", "--t-s", "0.002"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == "" and json.loads(cap.out)["t_s"] == 0.002
+    assert main(["check", str(crossing_csv), "--initial-mode", "1", "--t-s", "0.002"]) == 2  # every step is checked
+    assert "uneven sampling (step 0.001 s, sampling period 0.002 s)" in _one_line_error(capsys)
+
+
+@pytest.mark.parametrize(
+    "stamp, args, message",
+    [
+        # milliseconds: said at once, with the fix, not after a run at t_s = 1 s
+        (lambda t: 1e3 * t, ("--t-s", "0.001"), "the time column seems to be in ms: convert it to seconds"),
+        # float32 stamps at 100 s: re-stamp at the nominal period; never "resample"
+        (lambda t: float(np.float32(100.0 + t)), (), "re-stamp the time column at it (t_k = t_0 + k t_s"),
+        # 1e-9 s of clock jitter
+        (lambda t: t + 1e-9 * ((round(t * 1e3) * 7919) % 3 - 1), (), "float32 stamps or clock jitter?"),
+    ],
+)
+def test_imprecise_stamps_get_advice_that_keeps_eps_q(crossing_csv, tmp_path, capsys, stamp, args, message):
+    rec = _restamped(crossing_csv, tmp_path, stamp, "stamped.csv")
+    assert main(["check", str(rec), "--initial-mode", "1", "--no-progress", *args]) == 2
+    err = _one_line_error(capsys)
+    assert message in err and "resample or" not in err, err
+
+
+def test_ms_stamps_without_t_s_are_named_in_the_warning(crossing_csv, tmp_path, capsys):
+    rec = _restamped(crossing_csv, tmp_path, lambda t: 1e3 * t, "ms.csv")
+    assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", "forward"]) == 0
+    err = capsys.readouterr().err
+    assert "the time column seems to be in ms: convert it to seconds" in err, err
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("# logged by the controller\nt,q1,q2\n0,1,1\n0.001,1,1\n", "line 1 starts with '#'"),
+        ("T,Q1,Q2\n0,1,1\n0.001,1,1\n", "column names are lower-case"),
+        ("t;q1;q2\n0;1;1\n", "semicolons"),
+    ],
+)
+def test_header_hints(tmp_path, capsys, text, message):
+    p = _write(tmp_path, text)
+    assert main(["check", str(p), "--initial-mode", "1"]) == 2
+    err = _one_line_error(capsys)
+    assert "missing column(s)" in err and message in err, err
+
+
+def test_gzip_file_is_named(crossing_csv, tmp_path, capsys):
+    import gzip
+
+    p = tmp_path / "rec.csv.gz"
+    p.write_bytes(gzip.compress(crossing_csv.read_bytes()))
+    assert main(["check", str(p), "--initial-mode", "1"]) == 2
+    err = _one_line_error(capsys)
+    assert "gzip-compressed: decompress them first" in err and "semicolons" not in err, err
+
+
+def test_a_failed_figure_does_not_cost_the_verdict(crossing_csv, tmp_path, capsys, monkeypatch):
+    """The figure is drawn after the verdict is printed: a write that fails (full disk) is reported after it."""
+    import sys
+
+    def full_disk(path, *a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(sys.modules["planner.cli.track"], "plot_run", full_disk)
+    code = main(["check", str(crossing_csv), "--initial-mode", "1", "--json", "--plot", str(tmp_path / "f.png")])
+    out, err = capsys.readouterr()
+    assert code == 2
+    assert json.loads(out)["verdict"] == "mode-changed"
+    assert err.count("\n") == 1 and "the verdict above stands, but the figure was not written" in err
+    assert "No space left on device" in err and not (tmp_path / "f.png").exists()
+
+
+CERTIFY_NARROW = ["certify", "--v-low", "0.9", "--v-high", "1.3", "--tol", "0.1", "--monte-carlo", "0", "--no-progress"]
+
+
+def test_certify_names_the_gap_and_times_the_bounce(tmp_path, capsys):
+    """The printed gap is the JSON's gap_mps (a difference) with the ratio named beside it; the bounce search's
+    time is its own run time, not the wait left after the other phases; certified_at_step is null or a step."""
+    import re
+
+    assert main([*CERTIFY_NARROW, "--out", str(tmp_path / "c")]) == 0
+    out = capsys.readouterr().out
+    report = json.loads((tmp_path / "c" / "certificate.json").read_text())
+    line = next(v for v in out.splitlines() if v.startswith("gap"))
+    diff, ratio = map(float, re.fullmatch(r"gap \(mode-changed\): v_min - refutation bound = ([0-9.]+) m/s "
+                                          r"\(gap_mps\); ratio v_min / refutation bound = ([0-9.]+)", line).groups())
+    assert diff == pytest.approx(report["gap_mps"], abs=5e-5)
+    assert ratio == pytest.approx(report["v_min_mps"] / report["refutation_bound_mps"], abs=5e-4)
+    assert report["bounce"] is not None and report["timings_s"]["bounce"] > 1.0  # a search of seconds
+    steps = [t["certified_at_step"] for t in report["trials"]]
+    assert None in steps and all(s is None or (isinstance(s, int) and s >= 0) for s in steps), steps
+    assert all((t["certified_at_step"] is None) == (t["forward_verdict"] != "mode-changed") for t in report["trials"])
+
+
+def test_ctrl_c_stops_certify_promptly_with_130(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it): exit 130 within seconds, one line, and the
+    background worker process gone."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", *CERTIFY_NARROW, "--out", str(tmp_path / "c")],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=root,
+                            start_new_session=True)
+    try:
+        time.sleep(8.0)  # the speed search and the counterexample searches are running
+        assert proc.poll() is None
+        workers = open(f"/proc/{proc.pid}/task/{proc.pid}/children").read().split()
+        t0 = time.perf_counter()
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        waited = time.perf_counter() - t0
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and err == "crosscert: interrupted\n", err
+    assert waited < 5.0, f"exited {waited:.1f} s after Ctrl-C"
+    assert workers and not any(os.path.exists(f"/proc/{w}") for w in workers)

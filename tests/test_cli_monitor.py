@@ -188,3 +188,73 @@ def test_lagged_events_are_true_and_come_later(monkeypatch, capsys, csv_text, na
     assert all(e["t"] == pytest.approx(run.t[e["k"]]) for e in events)
     assert all(e["mode"] in (0, run.mode_true[e["k"]]) for e in events), events
     assert last["verdict"] in {v.value for v in CATALOGUE[name].expected}
+
+
+def test_interrupted_stream_gives_no_verdict_on_the_whole(monkeypatch, capsys, csv_text):
+    """Cut before the crossing: the prefix says mode-unchanged, the field a machine reads says unknown."""
+    lines = csv_text("crossing_1458").splitlines()
+    lines[41] = "0.04,abc,1.0"  # sample 40, line 42
+    code, out, err = _monitor(monkeypatch, capsys, "\n".join(lines) + "\n", "-", *FLAGS)
+    last = out[-1]
+    assert code == 2 and last["interrupted"] is True
+    assert last["verdict"] == "unknown" and last["verdict_so_far"] == "mode-unchanged" and last["steps"] == 40
+    code, text, _ = _monitor(monkeypatch, capsys, "\n".join(lines) + "\n", "-", "--initial-mode", "1")
+    assert "verdict: unknown (input interrupted; on the 40 samples read: mode-unchanged)" in text
+    code, out, _ = _monitor(monkeypatch, capsys, csv_text("crossing_1458"), "-", *FLAGS)
+    assert out[-1]["verdict"] == out[-1]["verdict_so_far"] == "mode-changed"  # a whole stream: the same
+
+
+class _InterruptedStdin(io.StringIO):
+    """stdin that raises KeyboardInterrupt (Ctrl-C) once ``after`` lines were read."""
+
+    def __init__(self, text, after):
+        super().__init__(text)
+        self.left = after
+
+    def __next__(self):
+        self.left -= 1
+        if self.left < 0:
+            raise KeyboardInterrupt
+        return super().__next__()
+
+
+def test_ctrl_c_exits_130_with_the_summary_so_far(monkeypatch, capsys, csv_text):
+    monkeypatch.setattr(sys, "stdin", _InterruptedStdin(csv_text("crossing_1458"), 60))
+    code = main(["monitor", "-", *FLAGS])
+    out, err = capsys.readouterr()
+    last = json.loads(out.splitlines()[-1])
+    assert code == 130 and err == "crosscert: interrupted\n"
+    assert last["interrupted"] is True and last["verdict"] == "unknown" and last["steps"] == 59  # the header and 59 samples
+
+
+@pytest.mark.parametrize("errors", ["strict", "surrogateescape"])
+def test_gzip_on_stdin_is_named(monkeypatch, capsys, csv_text, errors):
+    import gzip
+
+    data = gzip.compress(csv_text("crossing_1458").encode())
+    monkeypatch.setattr(sys, "stdin", io.TextIOWrapper(io.BytesIO(data), encoding="utf-8", errors=errors))
+    assert main(["monitor", "-", *FLAGS]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "gzip-compressed: decompress them first" in err and "semicolons" not in err, err
+
+
+def test_closed_reader_is_a_quiet_end(csv_text):
+    """``crosscert monitor ... | head -1``: the reader goes away; no error, no traceback, exit 141 (as cat)."""
+    rows = csv_text("crossing_1458").splitlines(keepends=True)
+    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parents[1])
+    try:
+        proc.stdin.writelines(rows[:3])  # header, samples 0 and 1: the first event
+        proc.stdin.flush()
+        assert json.loads(proc.stdout.readline())["event"] == "mode-gained"
+        proc.stdout.close()  # head -1 has its line
+        try:
+            proc.stdin.writelines(rows[3:])  # the next event and the summary meet a closed pipe
+            proc.stdin.close()
+        except BrokenPipeError:  # the monitor already ended
+            pass
+        assert proc.wait(timeout=120) == 141
+        assert proc.stderr.read() == ""
+    finally:
+        proc.kill()

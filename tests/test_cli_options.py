@@ -82,7 +82,12 @@ CASES = [
     (["check", "{rec}", "--x0=0,1,2"], "expected 4 comma-separated numbers"),
     (CHECK + ["--initial-mode", "2"], "invalid choice"),
     (CHECK + ["--reasoning", "psychic"], "invalid choice"),
-    (["monitor", "{rec}", "--initial-mode", "1", "--lag", "5000"], "--lag = 5000 samples is out of range"),
+    (["monitor", "{rec}", "--initial-mode", "1", "--lag", "5000"],
+     "--lag = 5000 samples is out of range: it must lie in [0, 1000] samples"),  # 0, the default, is in range
+    (["check", "{rec}", "--x0=0.1,0,0,0.1"], "--x0: component 1 has lower bound 0.1 above upper bound 0"),
+    (["monitor", "{rec}", "--x0=0,0.1,0.2,0.1"], "--x0: component 2 has lower bound 0.2 above upper bound 0.1"),
+    (CHECK + ["--t-s", "0"], "--t-s = 0 s is out of range"),
+    (CHECK + ["--t-s", "11"], "--t-s = 11 s is out of range"),
     (["monitor", "{rec}", "--initial-mode", "1", "--lag", "-3"], "not a non-negative whole number"),
     (["check", "{d}", "--initial-mode", "1"], "is a directory"),
     (["check", "{d}/none.csv", "--initial-mode", "1"], "no such file"),
@@ -111,6 +116,10 @@ CASES = [
       "-o", "{d}/r.csv", "--plot", "{d}/p.jpg"], "must end in .png"),
     (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
       "-o", "{d}/r.csv", "--robot", "delta"], "unknown robot 'delta'"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--scheduler", "notanaddress"], "--scheduler 'notanaddress' is not the address of a Dask"),
+    (["study", os.path.join(os.path.dirname(__file__), "..", "docs", "examples", "study_grid.toml"),
+      "-o", "{d}/r.csv", "--scheduler", "tcp://host:port"], "write tcp://HOST:PORT"),
     (["study", "{rec}", "-o", "{d}/r.csv"], "is not valid TOML"),
     (["study", "{d}/none.toml", "-o", "{d}/r.csv"], "no such file"),
     (["study", "{d}", "-o", "{d}/r.csv"], "is a directory"),
@@ -156,5 +165,31 @@ def test_help_shows_defaults_and_robots_and_version(capsys):
     assert "(default: 0.01)" in out and "(default: 60.0)" in out and "(default: 0.0)" in out
     assert "one of 3rpr, dextar, gough-stewart" in out and "``" not in out
     with pytest.raises(SystemExit):
+        main(["--help"])  # the README: `crosscert --help` lists the robots
+    assert "3rpr, dextar, gough-stewart" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
         main(["--version"])
     assert capsys.readouterr().out.startswith("crosscert ")
+
+
+@pytest.mark.parametrize("argv, shown", [
+    (["check", "--help"], ["default of dextar: 9.23998e-05 rad", "default of dextar: 80 m/s^2", "0.001 s"]),
+    (["monitor", "--robot", "3rpr", "--help"], ["default of 3rpr: 5e-06 rad", "(80, 80, 200) m/s^2",
+                                                "(0.1, 0.1, 1) m/s"]),
+    (["certify", "--robot=gough-stewart", "--help"], ["default of gough-stewart: 5e-06 rad"]),
+])
+def test_help_gives_the_robot_defaults_with_values(argv, shown, capsys):
+    """Robot defaults in --help are values, of --robot's robot (the default robot without one)."""
+    with pytest.raises(SystemExit):
+        main(argv)
+    out = " ".join(capsys.readouterr().out.split())
+    assert "robot default" not in out
+    for text in shown:
+        assert text in out, text
+
+
+def test_robots_list_gives_units(capsys):
+    assert main(["robots"]) == 0
+    out = capsys.readouterr().out
+    assert "dextar: n = 2, m = 7, t_s = 0.001 s, eps_q = 9.23998e-05 rad, a_max = (80, 80) m/s^2" in out
+    assert "xd0 = (0.1, 0.1) m/s" in out

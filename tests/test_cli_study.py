@@ -45,6 +45,8 @@ BAD = [
     ("grid = 3\n", "[grid] must be a table"),
     ("[bounds]\na_peak = 60.0\n", "no [grid] table"),
     ("seed = 1\n[grid]\na_max = [80.0]\n", "unknown entry 'seed'"),
+    ("[grid]\nwidth_scale = [1e6]\n", "[grid] width_scale = 1e+06 is out of range"),
+    ("[grid]\n\"width_scale.lengths\" = [0.5, 200.0]\n", "[grid] width_scale.lengths = 200 is out of range"),
     ("[grid]\na_max = [", "is not valid TOML"),
     ("t,q1,q2\n0,1.9,1.2\n", "is not valid TOML"),
     ("[grid]\na_max = [" + ", ".join(str(50.0 + i) for i in range(101)) + "]\nwidth_scale = ["
@@ -135,3 +137,107 @@ def test_study_without_dask_says_what_to_install(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "distributed" else real(name, *a))
     assert main(["study", str(EXAMPLE), "-o", str(tmp_path / "r.csv")]) == 2
     assert "pip install 'crosscert[study]'" in capsys.readouterr().err
+
+
+def _fake_rows(calls):
+    """A ``run_cases`` that certifies nothing: one complete row per case, and the cases it was given."""
+    import json
+
+    from planner.study import GRID_KEYS
+
+    def run_cases(cases, settings):
+        calls.extend(c.case_id for c in cases)
+        return [{"case_id": c.case_id, **{k: c.values.get(k, "") for k in GRID_KEYS}, "v_min_mps": 1.0,
+                 "refutation_bound_mps": 0.9, "verdict": "mode-changed", "trials": 3, "a_max_used_mps2": "",
+                 "elapsed_s": 0.1, "error": "", "versions": json.dumps({"crosscert": "test"})} for c in cases]
+
+    return run_cases
+
+
+@pytest.fixture
+def fake_study(monkeypatch):
+    """``crosscert study`` on a thread with a fake ``run_cases``: the CSV handling without certifications."""
+    from concurrent.futures import ThreadPoolExecutor
+    import functools
+
+    import sys
+
+    import planner.study as study_mod
+
+    cli_study = sys.modules["planner.cli.study"]  # the package's name `study` is the command function
+
+    calls = []
+    monkeypatch.setattr(study_mod, "run_cases", _fake_rows(calls))
+    monkeypatch.setattr(cli_study, "design_sweep",
+                        functools.partial(study_mod.design_sweep, executor=ThreadPoolExecutor(max_workers=1)))
+    return calls
+
+
+def _grid(tmp_path, values, name="g.toml"):
+    p = tmp_path / name
+    p.write_text(f"robot = 'dextar'\n[grid]\na_max = {values}\n[certify]\nrefute = false\n")
+    return p
+
+
+def test_torn_last_row_is_cut_off_with_one_warning_and_its_case_runs_again(tmp_path, fake_study, capsys):
+    grid, res = _grid(tmp_path, [70.0, 80.0, 90.0]), tmp_path / "res.csv"
+    argv = ["study", str(grid), "--no-progress", "-o", str(res)]
+    assert main(argv) == 0 and len(fake_study) == 3
+    capsys.readouterr()
+    whole = res.read_bytes()
+    last = _rows(res)[-1]["case_id"]
+    res.write_bytes(whole[:-25])  # killed while writing the last row
+    res.chmod(0o640)
+    fake_study.clear()
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "crosscert: warning:" in err and "cut short" in err, err
+    assert fake_study == [last]  # the torn case, once
+    rows = _rows(res)
+    assert len(rows) == 3 and len({r["case_id"] for r in rows}) == 3
+    assert res.read_bytes() == whole and oct(res.stat().st_mode & 0o777) == "0o640"
+    fake_study.clear()
+    assert main(argv) == 0 and fake_study == []  # nothing torn, nothing to run
+    assert capsys.readouterr().err == ""
+
+
+def test_a_row_merged_onto_a_torn_one_is_no_crash(tmp_path, fake_study, capsys):
+    """A file an older version left corrupt (a new row appended onto a torn one): the line is ignored."""
+    grid, res = _grid(tmp_path, [70.0, 80.0]), tmp_path / "res.csv"
+    argv = ["study", str(grid), "--no-progress", "-o", str(res)]
+    assert main(argv) == 0
+    lines = res.read_text().splitlines(keepends=True)
+    res.write_text(lines[0] + lines[1][:30] + lines[1] + lines[2])
+    fake_study.clear()
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert len(fake_study) == 1 and "2 cases (1 already in" in out  # the merged line is no row: its case ran
+
+
+def test_two_grids_in_one_csv_are_refused(tmp_path, fake_study, capsys):
+    res = tmp_path / "res.csv"
+    assert main(["study", str(_grid(tmp_path, [70.0, 80.0])), "--no-progress", "-o", str(res)]) == 0
+    capsys.readouterr()
+    before = res.read_bytes()
+    other = _grid(tmp_path, [100.0], "other.toml")
+    assert main(["study", str(other), "--no-progress", "-o", str(res)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds 2 row(s) of another grid (e.g. a_max = 70" in err, err
+    assert res.read_bytes() == before
+    grown = _grid(tmp_path, [70.0, 80.0, 90.0], "grown.toml")  # a value added: the same study, grown
+    assert main(["study", str(grown), "--no-progress", "-o", str(res)]) == 0
+    assert len(_rows(res)) == 3
+
+
+def test_scheduler_that_cannot_be_reached_is_one_line(tmp_path, capsys):
+    """A well-formed address nobody listens on: one line, exit 2, no row written."""
+    import dask
+
+    res = tmp_path / "res.csv"
+    grid = _grid(tmp_path, [70.0])
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        assert main(["study", str(grid), "--no-progress", "-o", str(res), "--scheduler", "tcp://127.0.0.1:1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert err.startswith("crosscert: error: cannot reach the Dask scheduler at tcp://127.0.0.1:1"), err
+    assert not res.exists()

@@ -120,4 +120,5 @@ def test_check_warns_and_still_answers(tmp_path, capsys, simulated_recording):
     f.write_text("t,q1,q2\n" + "".join(f"{i},{q}\n" for i in range(30)))  # times written in ms
     assert main(["check", str(f), "--initial-mode", "1", "--no-progress"]) == 0
     err = capsys.readouterr().err
-    assert "crosscert: warning:" in err and "times in ms?" in err
+    assert "crosscert: warning:" in err and "seems to be in ms: convert it to seconds" in err
+    assert "pass --t-s 1 to state it" in err  # an option check has

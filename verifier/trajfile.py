@@ -43,6 +43,8 @@ TIME_STEP_RTOL = 1e-6
 #: step between two of them is off by up to two such spacings however even
 #: the clock was (two more for the period the steps are compared with).
 STAMP_ULPS = 4
+#: What a reading error adds when the data start with the gzip magic bytes.
+GZIP_HINT = " (the data look gzip-compressed: decompress them first, e.g. zcat FILE.gz | crosscert monitor -)"
 #: Rows read per block by :func:`read_trajectory` (memory grows by blocks, not rows).
 _BLOCK_ROWS = 65536
 #: A number as a CSV cell may write it: ASCII digits, optional sign, point and
@@ -61,6 +63,19 @@ def parse_number(text: str) -> float:
     if not _NUMBER.fullmatch(t):
         raise ValueError(f"{text!r} is not a decimal number")
     return float(t)
+
+
+#: Largest relative step deviation read as imprecise stamps rather than a changed period: float32 stamps
+#: near 1000 s are 6e-5 s apart (6 % of a 1 ms period); clock jitter is far smaller.
+JITTER_RTOL = 0.1
+
+
+def _unit_hint(step: float, t_s: float) -> str:
+    """`` (times in ms?)`` when ``step`` is ``t_s`` written in ms or us, else an empty string."""
+    for factor, unit in ((1e3, "ms"), (1e6, "us")):
+        if abs(step - factor * t_s) <= 1e-6 * factor * t_s:
+            return f" (the time column seems to be in {unit}: convert it to seconds)"
+    return ""
 
 
 def step_tolerance(t_prev: float, t: float, t_s: float) -> float:
@@ -164,7 +179,10 @@ class TrajectoryReader:
                 if any(c.strip() for c in row):
                     self.line += 1
                     return row
-        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        except UnicodeDecodeError as exc:
+            hint = GZIP_HINT if bytes(exc.object[:2]) == b"\x1f\x8b" else " (not UTF-8 text: is it a CSV file?)"
+            raise TrajectoryFileError(f"{self.name}: cannot read as CSV ({exc}){hint}") from None
+        except (OSError, csv.Error) as exc:
             raise TrajectoryFileError(f"{self.name}: cannot read as CSV ({exc})") from None
         return None
 
@@ -181,7 +199,7 @@ class TrajectoryReader:
         missing = [c for c in ["t"] + qcols if c not in header]
         if missing:
             raise TrajectoryFileError(f"{self.name}: missing column(s) {', '.join(missing)}; "
-                                      f"expected t,{','.join(qcols)}[,{','.join(qdcols)}]{self._delimiter_hint(row)}")
+                                      f"expected t,{','.join(qcols)}[,{','.join(qdcols)}]{self._header_hint(row)}")
         extra = [c for c in header if c not in ["t"] + qcols + qdcols + xcols]
         if extra:
             raise TrajectoryFileError(
@@ -194,6 +212,22 @@ class TrajectoryReader:
             if any(c in header for c in group) and not all(c in header for c in group):
                 raise TrajectoryFileError(f"{self.name}: give all of {','.join(group)} or none")
         self.header = header
+
+    def _header_hint(self, row) -> str:
+        """Why a first row is no header: compressed data, a comment line, upper-case names, another separator."""
+        text = ",".join(row)
+        if text[:1] == "\x1f" and text[1:2] in ("\x8b", "\udc8b", "\ufffd"):
+            return GZIP_HINT
+        if "\x00" in text or "\ufffd" in text or any("\udc80" <= c <= "\udcff" for c in text):
+            return " (the data are not text: is it a CSV file?)"
+        if text.lstrip().startswith("#"):
+            return (" (line 1 starts with '#': comment lines are not read; remove them, e.g. grep -v '^#', so that "
+                    "the header is the first line)")
+        names = [c.strip() for c in row]
+        wanted = {"t", *self._cols["q"], *self._cols["qd"], *self._cols["x"]}
+        if any(c.lower() in wanted and c not in wanted for c in names):
+            return " (column names are lower-case: t, q1, q2, ...; rename the header's columns)"
+        return self._delimiter_hint(row)
 
     @staticmethod
     def _delimiter_hint(row) -> str:
@@ -241,18 +275,36 @@ class TrajectoryReader:
         if nominal is not None and abs(step - nominal) <= step_tolerance(t_prev, t, nominal):
             self.t_s = float(nominal)  # the controller's period, not a stamp difference rounded at 1.7e9 s
             return
+        if nominal is not None and abs(step - nominal) <= JITTER_RTOL * nominal:
+            self.t_s = float(nominal)  # imprecise stamps of the nominal period: check_step says how to re-stamp
+            return
         self.t_s = step
         if nominal is not None:
             self.warnings.append(f"{self.name}, line {line}: sampling period {step:.9g} s differs from the robot's "
-                                 f"nominal {nominal:.9g} s (times in ms? pass --t-s to state it)")
+                                 f"nominal {nominal:.9g} s (the first step of the time column)" + _unit_hint(step, nominal)
+                                 + f"; if {step:.9g} s is right, pass --t-s {step:.9g} to state it")
 
     def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
-        """Raise unless the step ``t - t_prev`` ending on ``line`` is within :func:`step_tolerance` of ``t_s``."""
-        if abs((t - t_prev) - t_s) > step_tolerance(t_prev, t, t_s):
+        """Raise unless the step ``t - t_prev`` ending on ``line`` is within :func:`step_tolerance` of ``t_s``.
+
+        The advice never is to resample: interpolated readings are no longer
+        within ``eps_q`` of the true joints.  Stamps that are merely imprecise
+        (float32, clock jitter) are re-stamped at the nominal period instead.
+        """
+        step = t - t_prev
+        if abs(step - t_s) > step_tolerance(t_prev, t, t_s):
+            unit = _unit_hint(step, t_s)
+            if unit:
+                advice = f"{unit}; the time column is read in s"
+            elif abs(step - t_s) <= JITTER_RTOL * t_s:
+                advice = (f"; the steps differ by {abs(step - t_s):.3g} s only (float32 stamps or clock jitter?): if "
+                          "the samples were taken at a fixed period, re-stamp the time column at it "
+                          "(t_k = t_0 + k t_s, readings unchanged); never resample the readings")
+            else:
+                advice = ("; the tracker assumes one constant sampling period: split the file where the period "
+                          "changes (do not resample: interpolated readings break the eps_q bound)")
             raise TrajectoryFileError(
-                f"{self.name}, line {line}: uneven sampling (step {t - t_prev:.9g} s, {what} {t_s:.9g} s); "
-                "the tracker assumes one constant sampling period: resample or split the file"
-            )
+                f"{self.name}, line {line}: uneven sampling (step {step:.9g} s, {what} {t_s:.9g} s){advice}")
 
     def __iter__(self):
         """Yield ``(line, values)``: the line number and its values in header order (array)."""

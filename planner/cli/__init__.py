@@ -2,19 +2,25 @@
 simulate, sweep, run a design study, list and validate robots.
 
 Exit codes: 0 a verdict was given, 2 bad input or usage (one line on stderr,
-no traceback), 3 the data contradict the assumptions (inconsistent).  Robots
-come from :mod:`robots.registry`; every command takes ``--robot``.
+no traceback), 3 the data contradict the assumptions (inconsistent), 130
+interrupted (Ctrl-C), 141 the reader of the standard output went away (a
+closed pipe, as in ``crosscert monitor ... | head -1``: a quiet end, as
+``cat`` under ``set -o pipefail``).  Robots come from :mod:`robots.registry`;
+every command takes ``--robot``.
 """
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
+import threading
 
 from robots.errors import CrosscertError
 from robots.registry import get_entry
 
 from .checks import check_command
-from .parser import UsageError, build_parser
+from .parser import UsageError, build_parser, robot_of
 from .planning import certify, plan
 from .robots import robots
 from .simulation import simulate, sweep
@@ -23,8 +29,35 @@ from .track import check, monitor
 
 __all__ = ["build_parser", "main"]
 
+#: Exit code of an interrupted command (128 + SIGINT, the shell's convention).
+EXIT_INTERRUPTED = 130
+#: Exit code when the standard output was closed by its reader (128 + SIGPIPE, what ``cat`` gets).
+EXIT_BROKEN_PIPE = 141
+
 _COMMANDS = {"check": check, "monitor": monitor, "simulate": simulate, "sweep": sweep, "plan": plan,
              "certify": certify, "study": study, "robots": robots}
+
+
+class _Interrupts:
+    """SIGINT raises KeyboardInterrupt, as by default, and is remembered: a C extension (CasADi's SWIG
+    wrappers) may turn the KeyboardInterrupt raised inside one of its calls into another exception."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self.previous = None
+
+    def _handler(self, signum, frame):
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __enter__(self):
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
 
 
 def main(argv=None) -> int:
@@ -35,9 +68,20 @@ def main(argv=None) -> int:
     argv : list of str, optional
         The arguments after the program name (default: ``sys.argv[1:]``).
     """
+    with _Interrupts() as interrupts:
+        try:
+            return _main(argv)
+        except Exception:
+            if not interrupts.seen:
+                raise
+            print("crosscert: interrupted", file=sys.stderr)  # an interrupt a C extension disguised
+            return EXIT_INTERRUPTED
+
+
+def _main(argv) -> int:
     try:
         argv = sys.argv[1:] if argv is None else list(argv)
-        a = build_parser().parse_args(argv)
+        a = build_parser(robot_of(argv)).parse_args(argv)
         a.argv = argv
         check_command(a, get_entry(a.robot))  # every option, before any work
         return _COMMANDS[a.command](a)
@@ -49,7 +93,24 @@ def main(argv=None) -> int:
         return 2
     except KeyboardInterrupt:
         print("crosscert: interrupted", file=sys.stderr)
-        return 2
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _silence_stdout()
+        return EXIT_BROKEN_PIPE
     except OSError as exc:
         print(f"crosscert: error: {exc}", file=sys.stderr)
         return 2
+
+
+def _silence_stdout() -> None:
+    """After the reader of stdout went away: send what is still buffered to /dev/null, so that the
+    interpreter's last flush does not fail again (and print a traceback) on the closed pipe."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # not a real file (a test's capture)
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)

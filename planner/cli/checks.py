@@ -29,7 +29,7 @@ from robots.registry import get_entry
 from verifier.files import check_output_path
 
 from ..simulate import ramp_length
-from ..study import COLUMNS, study_cases
+from ..study import COLUMNS, GRID_KEYS, read_results, study_cases
 from ..task import Method, PlanningBounds, benchmark_task
 from .parser import TABLE2_SPEEDS
 from .setup import floats_option
@@ -74,6 +74,10 @@ MAX_CASES = 10_000
 MAX_WORKERS = 256
 #: Slowest speed a certification tries (certify_crossing default), m/s.
 _V_LOW = 0.6
+#: Largest ``width_scale`` of a study: a calibration box 100 times the robot's is far beyond any calibration.
+MAX_WIDTH_SCALE = 100.0
+#: Schemes of the Dask scheduler addresses ``study --scheduler`` takes with a HOST:PORT.
+_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
 
 
 def _in(name: str, v, lo: float, hi: float, *, lo_open: bool = True, unit: str = "") -> None:
@@ -161,6 +165,12 @@ def _tracker(a, robot) -> None:
     _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
     _in("--xd0", a.xd0, 0.0, 1e3, lo_open=False, unit=" m/s")
     _in("--t-s", getattr(a, "t_s", None), 0.0, 10.0, unit=" s")
+    if a.x0 is not None:
+        v = floats_option(a.x0, 2 * robot.n, "--x0")
+        for i, (lo, hi) in enumerate(zip(v[0::2], v[1::2])):
+            if lo > hi:
+                raise InputError(f"--x0: component {i + 1} has lower bound {lo:g} above upper bound {hi:g}; "
+                                 "write the box as XLO,XHI,YLO,YHI,... (each lower bound first)")
 
 
 def check_command(a, entry) -> None:
@@ -183,7 +193,7 @@ def check_command(a, entry) -> None:
             if a.plot is not None:
                 _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
         elif a.lag:
-            _in("--lag", a.lag, 0, MAX_LAG, unit=" samples")
+            _in("--lag", a.lag, 0, MAX_LAG, lo_open=False, unit=" samples")
         return
     if cmd in ("simulate", "plan", "certify"):
         _in("--a-peak", a.a_peak, 0.0, 1e6, unit=" m/s^2")
@@ -255,9 +265,53 @@ def _study_output(path) -> None:
                              "or the output of an earlier run of this study")
 
 
+def _scheduler(address) -> None:
+    """``study --scheduler``: the form of a Dask scheduler address (a reachable one is the run's business)."""
+    if address is None:
+        return
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    try:
+        scheme, location = parse_address(address, strict=False)
+        if scheme in _SCHEMES:
+            parse_host_port(location)
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"--scheduler {address!r} is not the address of a Dask scheduler ({exc}); "
+                         "write tcp://HOST:PORT, e.g. tcp://127.0.0.1:8786") from None
+
+
+def _same_study(path, cases, grid_file) -> None:
+    """``study -o``: the rows already in the CSV are cases of this grid (one CSV holds one study)."""
+    ids = {c.case_id for c in cases}
+    foreign = [r for r in read_results(path) if r["case_id"] not in ids]
+    if foreign:
+        r = foreign[0]
+        inputs = ", ".join(f"{k} = {r[k]}" for k in GRID_KEYS if r.get(k, "") != "")
+        raise InputError(f"--output: {path} holds {len(foreign)} row(s) of another grid (e.g. {inputs or 'no input'}) "
+                         f"that {grid_file} does not have; one CSV holds one study: choose a new -o, or the grid "
+                         "that wrote it (values may be added to a grid, not removed)")
+
+
+def _width_scales(name: str, values, robot) -> None:
+    """A study's ``width_scale`` values: at most :data:`MAX_WIDTH_SCALE`, and no parameter of the box changes sign."""
+    lo, hi = robot.xi_lo_array, robot.xi_hi_array
+    centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    offsets = np.isin(np.arange(robot.m), [j for j in (robot.joint_offsets or ()) if j is not None])
+    scaled = {"width_scale.lengths": ~offsets, "width_scale.offsets": offsets}.get(name, np.ones(robot.m, bool))
+    for v in values:
+        _in(f"[grid] {name}", v, 0.0, MAX_WIDTH_SCALE)
+        flips = np.flatnonzero(scaled & (centre != 0) & (v * half >= np.abs(centre)))
+        if flips.size:
+            i = int(flips[0])
+            raise InputError(f"[grid] {name} = {v:g} widens the calibration box of {robot.name} past zero for "
+                             f"parameter {robot.param_names[i]} (centre {centre[i]:g}, half-width {half[i]:g} before "
+                             "scaling): a length would change sign; choose a smaller scale")
+
+
 def _study(a) -> None:
     """``study``: the options, the grid file (read once, kept as ``a.spec``), and the size of the study."""
     _in("--workers", a.workers, 1, MAX_WORKERS, lo_open=False)
+    _scheduler(a.scheduler)
     _study_output(a.output)
     _output_file(a.plot, "--plot", (".png",))
     spec = read_grid(a.grid)
@@ -267,6 +321,7 @@ def _study(a) -> None:
     cases = study_cases(grid)
     if len(cases) > MAX_CASES:
         raise InputError(f"{a.grid}: the grid has {len(cases)} cases, more than {MAX_CASES}; drop some values")
+    _same_study(a.output, cases, a.grid)
     values = {k: [c.values[k] for c in cases] for k in grid}
     for v in values.get("eps_q", ()):
         _in("[grid] eps_q", v, 0.0, MAX_JOINT_ERROR, unit=" rad")
@@ -285,6 +340,8 @@ def _study(a) -> None:
     runs = cert.get("monte_carlo_runs", 50)
     for name in sorted(set(values.get("robot", [a.robot]))):
         entry = get_entry(name)
+        for k in ("width_scale", "width_scale.lengths", "width_scale.offsets"):
+            _width_scales(k, sorted(set(values.get(k, ()))), entry.robot)
         dynamic = bounds.get("method") == Method.DYNAMIC or Method.DYNAMIC in values.get("method", ())
         kw = dict(bounds, dynamics=entry.require_dynamics() if dynamic else None)
         try:

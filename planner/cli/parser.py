@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import importlib.metadata as md
 
-from robots.registry import DEFAULT_ROBOT, available_robots
+import numpy as np
+
+from robots.registry import DEFAULT_ROBOT, ROBOTS, available_robots
 from verifier.step import Backend
 from verifier.tracker import VelocityModel
 from verifier.trajfile import parse_number
@@ -14,7 +16,8 @@ from verifier.window import Reasoning
 from ..execution import ExecutionKind
 from ..task import Method
 
-__all__ = ["build_parser", "UsageError", "TABLE2_SPEEDS", "number", "numbers", "count"]
+__all__ = ["build_parser", "robot_of", "ACC_UNIT", "VEL_UNIT", "UsageError", "TABLE2_SPEEDS", "number", "numbers",
+           "count"]
 
 #: Table II speeds of the paper, m/s, and two slower ones.
 TABLE2_SPEEDS = (1.458, 1.354, 1.264, 1.185, 1.053, 0.9)
@@ -71,21 +74,52 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+#: Units of the per-axis acceleration and velocity bounds of a pose (positions in m, angles in rad).
+ACC_UNIT = "m/s^2 (rad/s^2 on angles)"
+VEL_UNIT = "m/s (rad/s on angles)"
+
+
+def robot_of(argv) -> str:
+    """The robot ``argv`` names with ``--robot`` (a registered one), else the default: its values show in ``--help``."""
+    argv = list(argv)
+    for i, arg in enumerate(argv):
+        name = arg.split("=", 1)[1] if arg.startswith("--robot=") else (
+            argv[i + 1] if arg == "--robot" and i + 1 < len(argv) else None)
+        if name in ROBOTS:
+            return name
+    return DEFAULT_ROBOT
+
+
+def _values(v) -> str:
+    """A robot default as ``help`` shows it: one number, or one per axis in brackets."""
+    vals = [float(x) for x in np.atleast_1d(v)]
+    return f"{vals[0]:g}" if len(set(vals)) == 1 else "(" + ", ".join(f"{x:g}" for x in vals) + ")"
+
+
+def _robot_default(robot: str, attr: str, unit: str) -> str:
+    """``help`` text of a default the robot supplies, with its value for ``robot``."""
+    return f"default of {robot}: {_values(getattr(ROBOTS[robot].robot, attr))} {unit}; see crosscert robots"
+
+
 def _robot_option(p):
     p.add_argument("--robot", default=DEFAULT_ROBOT, help=f"robot: one of {', '.join(available_robots())}")
 
 
-def _tracker_options(p):
-    """The tracker-bound options ``check`` and ``monitor`` share."""
+def _tracker_options(p, robot):
+    """The tracker-bound options ``check`` and ``monitor`` share (defaults shown for ``robot``)."""
     _robot_option(p)
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--initial-mode", type=int, choices=(1, -1), help="known assembly mode at the first sample (+1/-1)")
     g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
     p.add_argument("--a-max", type=number,
                    help="end-effector acceleration bound, m/s^2, every pose axis (robots whose axes are all lengths; "
-                        "robot default)")
-    p.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
-    p.add_argument("--xd0", type=number, help="initial velocity bound, m/s (all components; robot default)")
+                        + _robot_default(robot, "a_max", ACC_UNIT) + ")")
+    p.add_argument("--eps-q", type=number, help="encoder error bound, rad (" + _robot_default(robot, "eps_q", "rad") + ")")
+    p.add_argument("--xd0", type=number, help="initial velocity bound, m/s, every pose axis (robots whose axes are all "
+                                              "lengths; " + _robot_default(robot, "xd0", VEL_UNIT) + ")")
+    p.add_argument("--t-s", type=number, help="sampling period, s: every step of the time column (in s) must equal "
+                                              "it (default: inferred from the time column, the first step fixing it; "
+                                              + _robot_default(robot, "t_s", "s") + ")")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
                    help="joint-data error model (paper = quantisation only, NOT sound)")
     p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
@@ -98,12 +132,14 @@ def _task_options(p):
     p.add_argument("--goal", help="goal pose at rest in the other mode, SI (default: 60 mm after it)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The argument parser of ``crosscert``."""
+def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
+    """The argument parser of ``crosscert``; ``--help`` shows the defaults of ``robot`` (a registered name)."""
     p = _Parser(prog="crosscert", formatter_class=_Formatter,
                 description="Certify whether a parallel robot's motion through a Type 2 singularity changes its "
                             "assembly mode, from joint encoders alone, with interval analysis. Exit codes: 0 a "
-                            "verdict, 2 bad input or usage, 3 the data contradict the assumptions (inconsistent).")
+                            "verdict, 2 bad input or usage, 3 the data contradict the assumptions (inconsistent), "
+                            "130 interrupted. Robots (--robot of every command): "
+                            f"{', '.join(available_robots())}; 'crosscert robots' lists them with their defaults.")
     p.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
@@ -112,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     c = command("check", "certify the assembly mode of a recorded joint trajectory")
     c.add_argument("trajectory", help="CSV file: t,q1..qn[,qd1..qdn] (s, rad, rad/s)")
-    _tracker_options(c)
+    _tracker_options(c, robot)
     c.add_argument("--reasoning", choices=[r.value for r in Reasoning], default=Reasoning.WINDOW.value,
                    help="'window': when the forward tracker leaves the verdict open, contract the whole recording "
                         "forward and backward under each final-mode hypothesis; 'forward': the tracker alone")
@@ -123,8 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
     mo = command("monitor", "certify the assembly mode online, from samples read one line at a time")
     mo.add_argument("trajectory", nargs="?", default="-",
                     help="CSV stream t,q1..qn[,qd1..qdn]: '-' for stdin, a named pipe or a file")
-    _tracker_options(mo)
-    mo.add_argument("--t-s", type=number, help="sampling period, s (default: fixed by the first two samples)")
+    _tracker_options(mo, robot)
     mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
     mo.add_argument("--lag", type=count, default=0,
                     help="window reasoning with a fixed lag: the mode of sample k is reported once sample k + LAG is "
@@ -150,7 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "comma-separated; one number for every axis when they share a unit (default: per axis, the "
                          "planned peak + 10%% where the plan accelerates, else the robot's tracking margin or a_max; "
                          "docs/planning.md)")
-    ce.add_argument("--eps-q", type=number, help="encoder error bound, rad (robot default)")
+    ce.add_argument("--eps-q", type=number, help="encoder error bound, rad (" + _robot_default(robot, "eps_q", "rad") + ")")
     ce.add_argument("--tracking-error", type=number, default=0.0, help="extra joint tracking error allowed, rad")
     ce.add_argument("--execution", choices=[k.value for k in ExecutionKind], default=ExecutionKind.CARTESIAN.value,
                     help="executions the certificate covers: 'cartesian' follow the planned path with any geometry "

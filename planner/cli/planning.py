@@ -85,8 +85,10 @@ def certify(a) -> int:
         print(f"note: certification is not monotone here; also certified below v_min at "
               f"{', '.join(f'{v:.4f}' for v in cert.certified_below_v_min)} m/s")
     print(f"refutation bound (no sound tracker certifies at or below): {ref}")
-    if cert.v_min is not None and cert.v_min > 0 and cert.refutation_bound:
-        print(f"gap (mode-changed): v_min / refutation bound = {cert.v_min / cert.refutation_bound:.3f}")
+    if cert.v_min is not None and cert.refutation_bound:
+        # the JSON's gap_mps is the difference; the ratio is printed beside it, named as such
+        print(f"gap (mode-changed): v_min - refutation bound = {cert.v_min - cert.refutation_bound:.4f} m/s "
+              f"(gap_mps); ratio v_min / refutation bound = {cert.v_min / cert.refutation_bound:.3f}")
     g = cert.bounce
     if g is not None:
         cf = "none (not at 30 mm)" if g.certified_from is None else f"{1e3 * g.certified_from:.1f} mm"

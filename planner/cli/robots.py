@@ -10,6 +10,8 @@ from robots.registry import ROBOTS, get_entry
 from robots.validation import validate
 from verifier.validation import INTERVAL_CHECKS
 
+from .parser import ACC_UNIT, VEL_UNIT
+
 __all__ = ["robots"]
 
 
@@ -19,8 +21,9 @@ def _row(entry) -> str:
     extras = [name for name, has in (("dynamics", entry.dynamics is not None),
                                       ("benchmark crossing", entry.benchmark is not None),
                                       ("reference motion", entry.motion is not None)) if has]
-    return (f"{entry.name}: n = {r.n}, m = {r.m}, t_s = {r.t_s:g} s, eps_q = {r.eps_q:g}, a_max = {fmt(r.a_max)}, "
-            f"xd0 = {fmt(r.xd0)}; ships {', '.join(extras) if extras else 'no task'}")
+    return (f"{entry.name}: n = {r.n}, m = {r.m}, t_s = {r.t_s:g} s, eps_q = {r.eps_q:g} rad, "
+            f"a_max = {fmt(r.a_max)} {ACC_UNIT}, xd0 = {fmt(r.xd0)} {VEL_UNIT}; "
+            f"ships {', '.join(extras) if extras else 'no task'}")
 
 
 def robots(a) -> int:

@@ -19,6 +19,7 @@ flattened with dots.
 from __future__ import annotations
 
 import math
+import sys
 import textwrap
 import time
 import tomllib
@@ -27,7 +28,7 @@ from pathlib import Path
 from robots.errors import InputError
 from verifier.files import atomic_write
 
-from ..study import GRID_KEYS, design_sweep, read_results, study_cases
+from ..study import GRID_KEYS, design_sweep, read_results, repair_results, study_cases
 from .setup import progress_bar
 
 __all__ = ["study", "read_grid", "plot_study", "CERTIFY_KEYS", "BOUNDS_KEYS", "MAX_GRID_BYTES"]
@@ -150,6 +151,9 @@ def study(a) -> int:
     robot = spec["robot"] or a.robot
     grid = spec["grid"]
     cases = study_cases(grid)
+    torn = repair_results(a.output)
+    if torn is not None:
+        print(f"crosscert: warning: {torn}", file=sys.stderr)
     done = {r["case_id"] for r in read_results(a.output)}
     todo = sum(c.case_id not in done for c in cases)
     bar, cb = progress_bar(todo, not a.no_progress and todo > 0, "study")

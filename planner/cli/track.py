@@ -26,6 +26,10 @@ INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box
                      "violated by the data")
 
 
+#: Exit code of ``check --plot`` when the figure could not be written (the verdict is printed before):
+#: a file asked for is missing, as for any bad output path.
+EXIT_NO_FIGURE = 2
+
 #: Longest recording (samples) ``check`` keeps in memory for window reasoning (16 MB of readings for
 #: n = 6; the tubes of the passes take about 16 geometries x 2 hypotheses x 64 bytes per sample more).
 WINDOW_MAX_SAMPLES = 200_000
@@ -35,7 +39,7 @@ _LATENCY_BIN_RATIO = 0.01
 _LOG_BIN_RATIO = float(np.log1p(_LATENCY_BIN_RATIO))
 _LATENCY_BINS = 3000
 #: Keys of the monitor's summary that say nothing about a file read at once.
-_MONITOR_ONLY = ("latency_us_mean", "latency_us_p99", "latency_us_max", "interrupted", "error")
+_MONITOR_ONLY = ("latency_us_mean", "latency_us_p99", "latency_us_max", "interrupted", "error", "verdict_so_far")
 
 
 def _print_warnings(reader) -> None:
@@ -60,7 +64,7 @@ def check(a) -> int:
     bar, cb = progress_bar(None, not a.no_progress and not a.json, "tracking")
     try:
         with open_trajectory(a.trajectory) as (src, name):
-            reader = TrajectoryReader(src, robot.n, name, nominal_t_s=robot.t_s,
+            reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
                                       q_range=(robot.q_lo_array, robot.q_hi_array))
             for line, values in reader:
                 t, q = reader.columns(values)[:2]
@@ -94,9 +98,6 @@ def check(a) -> int:
                 out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
                                      else -out["initial_mode"])
     out["elapsed_s"] = time.perf_counter() - t0
-    if a.plot:
-        plot_run(a.plot, run.t_s, run.recorded(), title=f"{Path(name).name}: {out['verdict']}",
-                 bounds=run.bounds_text())
     if a.json:
         print(json.dumps(out))
     else:
@@ -112,6 +113,16 @@ def check(a) -> int:
         print(f"elapsed: {out['elapsed_s']:.2f} s")
     if out["inconsistent_at_step"] is not None:
         print(INCONSISTENT_HINT.format(k=out["inconsistent_at_step"]), file=sys.stderr)
+    if a.plot:
+        # after the verdict: a figure that cannot be written must not cost it
+        sys.stdout.flush()
+        try:
+            plot_run(a.plot, run.t_s, run.recorded(), title=f"{Path(name).name}: {out['verdict']}",
+                     bounds=run.bounds_text())
+        except (CrosscertError, OSError) as exc:
+            print(f"crosscert: error: the verdict above stands, but the figure was not written: {exc}",
+                  file=sys.stderr)
+            return EXIT_NO_FIGURE
     return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
 
 
@@ -261,15 +272,24 @@ class Monitor:
                 f"velocity model {s.velocity_model}")
 
     def summary(self, error: str | None = None) -> dict:
-        """The verdict so far (rules of :func:`verifier.tracker.verdict_of`), counts and latencies (us)."""
+        """The verdict, counts and latencies (us).
+
+        ``verdict_so_far`` is the verdict on the samples read (rules of
+        :func:`verifier.tracker.verdict_of`); ``verdict`` is the same unless
+        the input was interrupted (``error``), when it is ``unknown``: a
+        prefix says nothing about the samples that never came.
+        """
         st = None if self.tracker is None else self.tracker.state
         bad = -1 if st is None else int(st.bad_at[0])
         init = 0 if st is None else int(st.init_mode[0])
         final = int(st.mode[0]) if st is not None and bad < 0 else 0
         if self.lagger is not None and bad < 0:
             final = int(self.mode_now)
+        so_far = verdict_of(init, final, bad >= 0).value
         return {
-            "verdict": verdict_of(init, final, bad >= 0).value,
+            # a verdict is about the whole recording: an interrupted one has only a prefix's
+            "verdict": Verdict.UNKNOWN.value if error is not None else so_far,
+            "verdict_so_far": so_far,
             "initial_mode": init,
             "final_mode": final,
             "certified_at_step": int(st.streak[0]) if final else None,
@@ -293,7 +313,8 @@ class Monitor:
         if self.a.json:
             print(json.dumps(out), flush=True)
         else:
-            print(f"verdict: {out['verdict']}" + (" (so far: input interrupted)" if error else ""))
+            print(f"verdict: {out['verdict']}" + (f" (input interrupted; on the {out['steps']} samples read: "
+                                                   f"{out['verdict_so_far']})" if error else ""))
             for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
                 print(f"{key}: {out[key]}")
             if out["steps"]:
@@ -334,6 +355,8 @@ def monitor(a) -> int:
                 mon.feed(line, t, q, reader.t_s)
             if mon.samples < 2:
                 raise TrajectoryFileError(f"{reader.name}: at least two samples are needed, got {mon.samples}")
+        except BrokenPipeError:
+            raise  # the reader of our output is gone: no summary to print, a quiet end (main)
         except (CrosscertError, OSError, KeyboardInterrupt) as exc:
             mon.finish(error=str(exc) or type(exc).__name__)
             raise
