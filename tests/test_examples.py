@@ -1,3 +1,4 @@
+import pytest
 """The scripts in docs/examples run as documented.
 
 ``test_slow_sweep_bounds_quick`` runs ``docs/examples/sweep_bounds.py --quick``
@@ -18,7 +19,9 @@ SCRIPT = ROOT / "docs" / "examples" / "sweep_bounds.py"
 ROW = re.compile(r"^\|\s*([0-9.]+)\s*\|\s*([0-9.]+)\s*\|(.*)\|\s*$")
 
 
+@pytest.mark.slow
 def test_slow_sweep_bounds_quick(tmp_path):
+    """docs/examples/sweep_bounds.py --quick end to end (about a minute on 2 cores: under the slow marker)."""
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH")) if p)
     env["MPLBACKEND"] = "Agg"
