@@ -1,9 +1,8 @@
-import pytest
 """The scripts in docs/examples run as documented.
 
 ``test_slow_sweep_bounds_quick`` runs ``docs/examples/sweep_bounds.py --quick``
 in a subprocess (about a minute on 2 cores: four certifications at
-tol 0.05 m/s).  Skip it with ``pytest -k "not slow"``.
+tol 0.05 m/s): under the ``slow`` marker, run by ``pytest -m slow``.
 """
 
 import json
@@ -12,6 +11,8 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "docs" / "examples" / "sweep_bounds.py"
