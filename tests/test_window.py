@@ -153,7 +153,7 @@ def test_planning_run_at_one_metre_per_second(speed, certified):
     b = PlanningBounds().resolved(DEXTAR)
     plan = plan_crossing(kin, benchmark_task(entry), speed, b)
     cls = execution_class(kin, plan, b)
-    s = tracker_settings(DEXTAR, b, derived_a_max(plan, b), cls)
+    s = tracker_settings(DEXTAR, b, derived_a_max(plan, b, DEXTAR), cls)
     res = track_window(interval_model(), plan.q, s, initial_mode=1, xi_box=cls.xi_box, max_geometries=4)
     assert res.forward_verdict is Verdict.UNKNOWN
     assert res.verdict is (Verdict.MODE_CHANGED if certified else Verdict.UNKNOWN), res.summary()
