@@ -13,6 +13,7 @@ from verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
 from ..pipeline import certify_crossing
+from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
 from ..task import Method, PlanningBounds
 from .setup import progress_bar, task_setup
@@ -41,14 +42,19 @@ def certify(a) -> int:
                             execution=a.execution)
     out = Path(a.out)
     bar, cb = progress_bar(None, not a.no_progress, "certify")
+    # one worker process for both certifications' counterexample searches: the second reuses the
+    # first's imports and NLP solvers (planner.refute builds one per sample count)
+    pool = None if a.no_refute else SubprocessExecutor()
     try:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                 monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
-                                progress=cb, kin=kin)
+                                progress=cb, kin=kin, executor=pool)
         # what the assumption buys: the same search under the robot's physical a_max
         cert = certify_at_robot_a_max(robot, task, cert, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
-                                      refute=not a.no_refute, seed=a.seed, progress=cb, kin=kin)
+                                      refute=not a.no_refute, seed=a.seed, progress=cb, kin=kin, executor=pool)
     finally:
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
         if bar is not None:
             bar.close()
     report = cert.summary()
