@@ -254,12 +254,22 @@ class SegmentCrossing:
         Segment length, m.
     m0 : int
         Assembly mode at the start (+1 or -1); the goal is in ``-m0``.
+    s_grid, q_grid : ndarray, shapes (N,) and (N, n)
+        Arc lengths (m) of the scan and the joints (rad) there, on the working
+        branch: :meth:`joints_at` interpolates them as Newton guesses.
     """
 
     s_star: float
     u: np.ndarray
     length: float
     m0: int
+    s_grid: np.ndarray = field(default=None, repr=False)
+    q_grid: np.ndarray = field(default=None, repr=False)
+
+    def joints_at(self, s) -> np.ndarray:
+        """Joints (K, n) interpolated from the scan at arc lengths ``s`` (K,) m: guesses on the working branch."""
+        s = np.asarray(s, dtype=float)
+        return np.stack([np.interp(s, self.s_grid, self.q_grid[:, j]) for j in range(self.q_grid.shape[1])], axis=1)
 
 
 def crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
@@ -312,5 +322,6 @@ def _crossing_on_segment(kin, task: CrossingTask, xi) -> SegmentCrossing:
     scan = LineScan(s, Q, kin.det_batch(X, Q, xi), True, True, math.nan, math.nan)
     ka, kb = sign_changes(scan.det)
     s_star = locate_crossing(kin, task.start, u, xi, scan, int(ka[0]), int(kb[0]))
-    u.setflags(write=False)
-    return SegmentCrossing(s_star, u, L, int(m0))
+    for a in (u, s, Q):
+        a.setflags(write=False)
+    return SegmentCrossing(s_star, u, L, int(m0), s, Q)
