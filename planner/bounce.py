@@ -19,7 +19,7 @@ SI units: m, m/s.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -34,7 +34,8 @@ from .sweep import cruise_for
 from .generate.crossing import crossing_point_and_joints
 from .task import CrossingTask, PlanningBounds
 
-__all__ = ["BounceGap", "bounce_gap", "BOUNCE_DISTANCES", "BOUNCE_FLOOR_TOL"]
+__all__ = ["BounceGap", "BounceVerdicts", "bounce_gap", "bounce_verdicts", "bounce_floor", "gap_of", "BOUNCE_DISTANCES",
+           "BOUNCE_FLOOR_TOL"]
 
 #: Turn-back distances tried, m: every 2 mm from 0 to 30 mm.
 BOUNCE_DISTANCES = tuple(round(0.002 * i, 6) for i in range(16))
@@ -90,71 +91,76 @@ class BounceGap:
         }
 
 
-def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *, starts=None,
-               distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None,
-               exhaustive: bool = False) -> BounceGap:
-    """Certified and refuted turn-back distances of the task's bounces at ``speed`` (module docstring).
+@dataclass(frozen=True, eq=False)
+class BounceVerdicts:
+    """The tracker's side of :func:`bounce_gap`: verdicts on the bounces tried, and ``certified_from``.
 
-    Module-level so that any executor can run it in another process.
-
-    The tracker is asked by bisection over ``distances``: the farthest first
-    (not certified: no ``certified_from``), then the middle of the bracket
-    between the nearest certified and the farthest uncertified distance
-    (the nearest distance is presumed uncertified until the bracket reaches
-    it).  The crossing searches then run on every third distance below
-    ``certified_from`` and bisect up to it: a bounce certified
-    ``mode-unchanged`` has no crossing explanation, so the floor lies below.
-    Both results keep their meaning when the family is not monotone in the
-    distance: every tried distance from ``certified_from`` on is certified,
-    and the floor is a verified counterexample.
-
-    Parameters
+    Attributes
     ----------
-    robot : robots.Robot
-    task : CrossingTask
-    bounds : PlanningBounds
-        ``t_s``, ``eps_q`` and ``a_peak`` (of the bounces' ramps) are used.
     speed : float
         Approach speed, m/s.
-    starts : sequence of array_like (m,), optional
-        Starting geometries of the crossing searches (default: the box centre).
-    distances : sequence of float
-        Turn-back distances, m.
-    tol : float
-        Resolution of the crossing floor, m.
-    exhaustive : bool
-        Track every distance and search crossings on every third one (no
-        bisection of the tracker's side; for tests and studies of the whole family).
+    distances : tuple of float
+        Turn-back distances tried, m (increasing).
+    verdicts : tuple of Verdict
+        The tracker's verdict (window reasoning) at each.
+    certified_from : float or None
+        Smallest tried distance (m) from which every tried bounce is certified ``mode-unchanged``.
+    readings : dict
+        ``{distance: q_meas (K, n)}`` of the bounces tried, rad (the crossing searches read the same ones).
     """
-    kin = KinematicModel(robot) if kin is None else kin
+
+    speed: float
+    distances: tuple
+    verdicts: tuple
+    certified_from: float | None
+    readings: dict = field(repr=False)
+
+
+class _Bounces:
+    """The task's bounces at one approach speed: readings by turn-back distance, simulated once each."""
+
+    def __init__(self, robot, task: CrossingTask, bounds: PlanningBounds, speed: float, kin=None, readings=None):
+        self.kin = KinematicModel(robot) if kin is None else kin
+        self.b = bounds.resolved(robot)
+        self.speed = float(speed)
+        xi = robot.xi_center
+        self.point, self.q_point, self.m0 = crossing_point_and_joints(self.kin, task, xi)
+        self.u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
+        self.readings = dict(readings or {})
+
+    def recording(self, d):
+        """``(q_meas, t_s)`` of the bounce turning back ``d`` m before the true locus (centre geometry)."""
+        if d not in self.readings:
+            b = self.b
+            run = simulate_bounce(self.kin, self.point, self.u, self.speed, xi_true=self.kin.robot.xi_center,
+                                  t_s=b.t_s, eps_q=b.eps_q, t_rest=0.02, a_peak=b.a_peak,
+                                  cruise=max(5e-3, cruise_for(self.speed, b.a_peak) - d / 2),
+                                  working_guess=self.q_point, seed=0, short=d)
+            self.readings[d] = run.q_meas
+        return self.readings[d], self.b.t_s
+
+
+def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *,
+                    distances=BOUNCE_DISTANCES, kin=None, imodel=None, exhaustive: bool = False) -> BounceVerdicts:
+    """The tracker's verdicts on the task's bounces at ``speed``, by bisection over ``distances`` (m).
+
+    The farthest first (not certified: no ``certified_from``), then the
+    middle of the bracket between the nearest certified and the farthest
+    uncertified distance (the nearest is presumed uncertified until the
+    bracket reaches it).  ``exhaustive`` tracks every distance.  Every tried
+    distance from ``certified_from`` on is certified, monotone family or not.
+    """
+    fam = _Bounces(robot, task, bounds, speed, kin)
     imodel = IntervalModel(robot) if imodel is None else imodel
-    b = bounds.resolved(robot)
-    xi = robot.xi_center
-    point, q_point, m0 = crossing_point_and_joints(kin, task, xi)
-    u = (task.goal - task.start) / np.linalg.norm(task.goal - task.start)
     distances = tuple(sorted({float(d) for d in distances}))
-
-    recordings: dict = {}
-
-    def recording(d):  # the tracker and the crossing search read the same bounce: simulate it once
-        if d not in recordings:
-            recordings[d] = _bounce_readings(d)
-        return recordings[d]
-
-    def _bounce_readings(d):
-        run = simulate_bounce(kin, point, u, speed, xi_true=xi, t_s=b.t_s, eps_q=b.eps_q, t_rest=0.02,
-                              a_peak=b.a_peak, cruise=max(5e-3, cruise_for(speed, b.a_peak) - d / 2),
-                              working_guess=q_point, seed=0, short=d)
-        return run.q_meas, b.t_s
-
-    s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q)
+    s = TrackerSettings.for_robot(robot, t_s=fam.b.t_s, eps_q=fam.b.eps_q)
     verdicts: dict[float, Verdict] = {}
 
     def unchanged(i: int) -> bool:
         d = distances[i]
         if d not in verdicts:
-            q, _ = recording(d)
-            x0 = initial_box_from_mode(imodel, q[0], m0, s)
+            q, _ = fam.recording(d)
+            x0 = initial_box_from_mode(imodel, q[0], fam.m0, s)
             verdicts[d] = track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES).verdict
         return verdicts[d] is Verdict.MODE_UNCHANGED
 
@@ -176,12 +182,71 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, 
         if verdicts[d] is not Verdict.MODE_UNCHANGED:
             break
         certified_from = d
+    tried = tuple(sorted(verdicts))
+    return BounceVerdicts(fam.speed, tried, tuple(verdicts[d] for d in tried), certified_from, dict(fam.readings))
+
+
+def bounce_floor(robot, task: CrossingTask, bounds: PlanningBounds, tracked: BounceVerdicts, *, starts=None,
+                 distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, exhaustive: bool = False):
+    """The crossing floor of the bounces of ``tracked`` (:func:`planner.refute.crossing_floor`).
+
+    Module-level so that any executor can run it in another process.  The
+    searches run on every third distance below ``tracked.certified_from``
+    and bisect up to it (a bounce certified ``mode-unchanged`` has no
+    crossing explanation, so the floor lies below); ``exhaustive`` searches
+    every third distance and bisects between them only.  Returns a
+    :class:`planner.refute.CrossingFloor`.
+    """
+    fam = _Bounces(robot, task, bounds, tracked.speed, kin, readings=tracked.readings)
+    distances = tuple(sorted({float(d) for d in distances}))
+    certified_from = tracked.certified_from
     scan = distances[::3]
     if certified_from is not None and not exhaustive:
         scan = tuple(d for d in scan if d < certified_from) or distances[:1]
-    floor = refute.crossing_floor(kin, recording, scan, tol=tol, m0=m0, xi_starts=starts,
-                                  bounds={"eps_q": b.eps_q}, max_cpu_time=BOUNCE_CPU_TIME,
-                                  upper=None if exhaustive else certified_from)
-    tried = tuple(sorted(verdicts))
-    return BounceGap(float(speed), tried, tuple(verdicts[d] for d in tried), certified_from, floor.floor,
+    return refute.crossing_floor(fam.kin, fam.recording, scan, tol=tol, m0=fam.m0, xi_starts=starts,
+                                 bounds={"eps_q": fam.b.eps_q}, max_cpu_time=BOUNCE_CPU_TIME,
+                                 upper=None if exhaustive else certified_from)
+
+
+def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *, starts=None,
+               distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None,
+               exhaustive: bool = False) -> BounceGap:
+    """Certified and refuted turn-back distances of the task's bounces at ``speed`` (module docstring).
+
+    :func:`bounce_verdicts` (the tracker's side, by bisection over
+    ``distances``) then :func:`bounce_floor` (the crossing searches, below
+    ``certified_from``).  Both results keep their meaning when the family is
+    not monotone in the distance: every tried distance from
+    ``certified_from`` on is certified, and the floor is a verified
+    counterexample.
+
+    Parameters
+    ----------
+    robot : robots.Robot
+    task : CrossingTask
+    bounds : PlanningBounds
+        ``t_s``, ``eps_q`` and ``a_peak`` (of the bounces' ramps) are used.
+    speed : float
+        Approach speed, m/s.
+    starts : sequence of array_like (m,), optional
+        Starting geometries of the crossing searches (default: the box centre).
+    distances : sequence of float
+        Turn-back distances, m.
+    tol : float
+        Resolution of the crossing floor, m.
+    exhaustive : bool
+        Track every distance and search crossings on every third one (no
+        bisection of the tracker's side; for tests and studies of the whole family).
+    """
+    kin = KinematicModel(robot) if kin is None else kin
+    tracked = bounce_verdicts(robot, task, bounds, speed, distances=distances, kin=kin, imodel=imodel,
+                              exhaustive=exhaustive)
+    floor = bounce_floor(robot, task, bounds, tracked, starts=starts, distances=distances, tol=tol, kin=kin,
+                         exhaustive=exhaustive)
+    return gap_of(tracked, floor)
+
+
+def gap_of(tracked: BounceVerdicts, floor) -> BounceGap:
+    """The :class:`BounceGap` of the tracker's side and the crossing searches."""
+    return BounceGap(tracked.speed, tracked.distances, tracked.verdicts, tracked.certified_from, floor.floor,
                      tuple(floor.rows))

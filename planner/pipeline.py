@@ -27,7 +27,7 @@ from verifier.window import WindowResult
 
 from . import execution as ex_
 from . import refute
-from .bounce import BounceGap, bounce_gap
+from .bounce import BounceGap, bounce_floor, bounce_verdicts, gap_of
 from .certify import search_v_min
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .acceleration import AccelerationAssumption, derived_a_max
@@ -271,11 +271,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             plan, cls, enc, win, a_used = run.plan, run.execution, run.forward, run.window, run.acceleration
         t1 = lap("certificate", t1)
         top = v_min if v_min is not None else max(t.v_sing for t in trials)
-        ref_job = bounce_job = None
-        if refuter is not None and v_min is not None and bounce:
-            # the bounces of the task at v_min: where mode-unchanged is certified and where it cannot be
-            bounce_job = (pool.submit(timed, bounce_gap, robot, task, b, v_min, starts=starts) if pool is not None
-                          else None)
+        ref_job = bounce_job = tracked = None
+        bounce_s = 0.0
         if refuter is not None:
             refuter.drop_from(top)
             if refute_in_background:
@@ -283,6 +280,13 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
                 helper = ThreadPoolExecutor(max_workers=1)
                 ref_job = helper.submit(refutation_search, refuter, top, tol)
                 helper.shutdown(wait=False)
+        if refuter is not None and v_min is not None and bounce:
+            # the bounces of the task at v_min: the tracker's side here (this process has the
+            # kernels loaded), then the crossing searches on the worker, beside the Monte Carlo run
+            tracked, bounce_s = timed(bounce_verdicts, robot, task, b, v_min, kin=kin, imodel=imodel)
+            if pool is not None:
+                bounce_job = pool.submit(timed, bounce_floor, robot, task, b, tracked, starts=starts)
+            t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
         if v_min is not None and monte_carlo_runs:
             mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
                                           execution=cls)
@@ -295,16 +299,20 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             ref_bound = ref = None
         t1 = lap("refutation", t1)
         gap = None
-        if refuter is not None and v_min is not None and bounce:
+        if tracked is not None:
+            floor = None
             try:
-                gap, ran = bounce_job.result() if bounce_job is not None else (None, 0.0)
+                floor, ran = bounce_job.result() if bounce_job is not None else (None, 0.0)
             except Exception as exc:  # as for the refutation: a failed worker is no result; run it here
                 log.warning("background bounce search failed (%r); searching in this process", exc)
-            if gap is None:
-                gap, ran = timed(bounce_gap, robot, task, b, v_min, starts=starts, kin=kin, imodel=imodel)
+            if floor is None:
+                floor, ran = timed(bounce_floor, robot, task, b, tracked, starts=starts, kin=kin)
+            gap = gap_of(tracked, floor)
         lap("bounce", t1)
         if gap is not None:
-            clock["bounce"] = ran  # its own run time, in the background (beside other phases) or here
+            # its own run time: the tracker's side here plus the crossing searches (in the background,
+            # beside other phases, or here)
+            clock["bounce"] = bounce_s + ran
     finally:
         if refuter is not None:
             refuter.close()

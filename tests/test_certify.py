@@ -108,7 +108,7 @@ def test_minimal_speed_and_monte_carlo_confirmation(task, kin, imodel):
 
 @pytest.mark.slow
 def test_default_certification_of_the_benchmark_task(task, kin, imodel):
-    """The main job with every default (``crosscert certify``, 15-25 s): the catalogue's v_min
+    """The main job with every default (``certify_crossing``, about 15 s): the catalogue's v_min
     within 0.01 m/s, its refutation bound, a clean Monte Carlo confirmation."""
     expected = BENCHMARK.expected
     cert = certify_crossing(DEXTAR, task, kin=kin, imodel=imodel)

@@ -214,8 +214,9 @@ def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndar
 # --------------------------------------------------------------------- NLP
 #: Solvers built in this process, by (robot, samples, kind, IPOPT options): most recently used last.
 _SOLVERS: OrderedDict = OrderedDict()
-#: How many solvers :data:`_SOLVERS` keeps (each holds its expression graph and IPOPT's workspace).
-_SOLVER_CACHE_SIZE = 16
+#: How many solvers :data:`_SOLVERS` keeps: each holds its expression graph and IPOPT's workspace,
+#: 30-50 MB for the DexTAR's 200-500 samples; a bisection asks within one or two sample buckets.
+_SOLVER_CACHE_SIZE = 3
 
 
 def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind, ipopt: dict) -> ParametricSolver:
@@ -230,6 +231,8 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     if solver is not None:
         _SOLVERS.move_to_end(key)
         return solver
+    while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:  # make room first: the peak memory is the cache's size
+        _SOLVERS.popitem(last=False)
     n, m = kin.n, kin.m
     qm, eps, amax = ca.SX.sym("qm", n, K), ca.SX.sym("eps", n), ca.SX.sym("amax", n)
     ts, xc, xh = ca.SX.sym("ts"), ca.SX.sym("xc", m), ca.SX.sym("xh", m)
@@ -266,8 +269,6 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     obj = ca.sumsqr(Ws) / (n * (K - 1))
     solver = ParametricSolver(kind.value, z, p, obj, g, ipopt=ipopt)
     _SOLVERS[key] = solver
-    while len(_SOLVERS) > _SOLVER_CACHE_SIZE:
-        _SOLVERS.popitem(last=False)
     return solver
 
 
