@@ -215,7 +215,7 @@ def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndar
 #: Solvers built in this process, by (robot, samples, kind, IPOPT options): most recently used last.
 _SOLVERS: OrderedDict = OrderedDict()
 #: How many solvers :data:`_SOLVERS` keeps: each holds its expression graph and IPOPT's workspace,
-#: 30-50 MB for the DexTAR's 200-500 samples; a bisection asks within one or two sample buckets.
+#: 30-50 MB for 200-500 samples of a two-joint robot; a bisection asks within one or two sample buckets.
 _SOLVER_CACHE_SIZE = 3
 
 
