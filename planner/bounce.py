@@ -141,7 +141,8 @@ class _Bounces:
 
 
 def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *,
-                    distances=BOUNCE_DISTANCES, kin=None, imodel=None, exhaustive: bool = False) -> BounceVerdicts:
+                    distances=BOUNCE_DISTANCES, kin=None, imodel=None, exhaustive: bool = False,
+                    parallel: bool = True) -> BounceVerdicts:
     """The tracker's verdicts on the task's bounces at ``speed``, by bisection over ``distances`` (m).
 
     The farthest first (not certified: no ``certified_from``), then the
@@ -149,6 +150,7 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: fl
     uncertified distance (the nearest is presumed uncertified until the
     bracket reaches it).  ``exhaustive`` tracks every distance.  Every tried
     distance from ``certified_from`` on is certified, monotone family or not.
+    ``parallel``: window passes over numba's threads (the same verdicts).
     """
     fam = _Bounces(robot, task, bounds, speed, kin)
     imodel = IntervalModel(robot) if imodel is None else imodel
@@ -161,7 +163,8 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: fl
         if d not in verdicts:
             q, _ = fam.recording(d)
             x0 = initial_box_from_mode(imodel, q[0], fam.m0, s)
-            verdicts[d] = track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES).verdict
+            verdicts[d] = track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES,
+                                       parallel=parallel).verdict
         return verdicts[d] is Verdict.MODE_UNCHANGED
 
     if exhaustive:

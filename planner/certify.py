@@ -145,11 +145,12 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
 
 def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int,
                         *, execution: ex_.ExecutionClass | None = None, kin=None, a_max=None,
-                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES) -> WindowResult:
+                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES, parallel: bool = True) -> WindowResult:
     """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
 
     ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
-    certifies every admissible execution, as for :func:`certify_plan`.
+    certifies every admissible execution, as for :func:`certify_plan`.  ``parallel``: the geometry
+    sub-boxes over numba's threads (the same boxes either way).
     """
     robot = imodel.robot
     b = bounds.resolved(robot)
@@ -157,7 +158,7 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
     s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
-                        max_geometries=max_geometries)
+                        max_geometries=max_geometries, parallel=parallel)
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,11 +198,13 @@ class CertifiedRun:
                           None if f.certified_at_step < 0 else int(f.certified_at_step), f.verdict)
 
 
-def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None) -> CertifiedRun:
+def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel: bool = True) -> CertifiedRun:
     """Plan ``task`` at ``v_sing`` (m/s) and certify that plan alone (forward run, then window passes if undecided).
 
     What the certificate of ``v_sing`` is: its verdict ``MODE_CHANGED``
     certifies every admissible execution of the plan (module docstring).
+    ``parallel``: window passes over numba's threads (the same boxes; off
+    where another process holds the other cores).
     """
     b = bounds.resolved(kin.robot)
     plan = plan_crossing(kin, task, v_sing, b)
@@ -211,7 +214,8 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None) -> Certif
     forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
     window = None
     if forward.verdict is Verdict.UNKNOWN and b.reasoning is Reasoning.WINDOW:
-        window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=acceleration.values)
+        window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=acceleration.values,
+                                     parallel=parallel)
     return CertifiedRun(plan, cls, acceleration, forward, window)
 
 
@@ -234,7 +238,8 @@ class SpeedSearch:
     runs: dict = field(repr=False)
 
 
-def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None) -> SpeedSearch:
+def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None,
+                 parallel: bool = True) -> SpeedSearch:
     """Smallest certified ``v_sing`` in ``[v_low, v_high]`` to ``tol`` (m/s), by bisection.
 
     The fastest speed ``v_high`` is certified first; if it is not, there is
@@ -255,7 +260,8 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
 
     ``observe(trial)`` (optional) is called with each :class:`SpeedTrial` as
     it completes (the pipeline passes certified speeds to the counterexample
-    searches running meanwhile); ``progress(k)`` after each tracked sample.
+    searches running meanwhile); ``progress(k)`` after each tracked sample;
+    ``parallel`` as for :func:`certify_speed`.
     """
     robot = kin.robot
     b = bounds.resolved(robot)
@@ -267,7 +273,7 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
 
     def certified(v) -> bool:
         if v not in runs:
-            runs[v] = certify_speed(kin, imodel, task, b, v, progress=progress)
+            runs[v] = certify_speed(kin, imodel, task, b, v, progress=progress, parallel=parallel)
             if observe is not None:
                 observe(runs[v].trial())
         return runs[v].verdict is Verdict.MODE_CHANGED

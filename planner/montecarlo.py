@@ -102,7 +102,8 @@ BATCH_RUNS = 200
 
 def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
                              a_max=None, progress=None, execution: ex_.ExecutionClass | None = None,
-                             executor: Executor | None = None, batch_runs: int = BATCH_RUNS) -> MonteCarloResult:
+                             executor: Executor | None = None, batch_runs: int = BATCH_RUNS,
+                             parallel: bool = True) -> MonteCarloResult:
     """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
 
     Each execution ``r``: geometry uniform in ``[xi]`` (every 5th at a random
@@ -134,7 +135,8 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     cls = execution_class(kin, plan, b) if execution is None else execution
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
     if executor is None:
-        return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress)
+        return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress,
+                                parallel=parallel)
     futures = [executor.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, min(runs, start + batch_runs))
                for start in range(0, runs, batch_runs)]
     return merge_results([f.result() for f in futures])
@@ -142,7 +144,7 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
 
 def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings: TrackerSettings,
                      cls: ex_.ExecutionClass, seed: int, start: int, stop: int, *, models=None,
-                     progress=None) -> MonteCarloResult:
+                     progress=None, parallel: bool = True) -> MonteCarloResult:
     """Executions ``start .. stop - 1`` of a Monte Carlo confirmation (module-level: any executor can run it).
 
     ``b`` are resolved bounds; ``models`` the robot's ``(KinematicModel,
@@ -167,14 +169,14 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
     q = np.stack(qs)
     boxes = [initial_box_from_mode(imodel, q[i, 0], m0, settings) for i in range(len(qs))]
     x0 = (np.array([bx[0] for bx in boxes]), np.array([bx[1] for bx in boxes]))
-    res, rec = track_batch(imodel, q, settings, x0, record=True, progress=progress)
+    res, rec = track_batch(imodel, q, settings, x0, record=True, progress=progress, parallel=parallel)
     verdicts = list(res.verdict)
     if b.reasoning is Reasoning.WINDOW:
         # the forward boxes are checked for containment below; the window decides what they left open
         for i in range(len(qs)):
             if verdicts[i] is Verdict.UNKNOWN:
                 verdicts[i] = track_window(imodel, q[i], settings, x0=(x0[0][i], x0[1][i]),
-                                           max_geometries=MC_WINDOW_GEOMETRIES).verdict
+                                           max_geometries=MC_WINDOW_GEOMETRIES, parallel=parallel).verdict
     misses, failures, wrong = [], [], []
     for i, r in enumerate(range(start, stop)):
         inside = (np.all(rec["x_lo"][i] <= plan.x) and np.all(plan.x <= rec["x_hi"][i])

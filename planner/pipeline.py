@@ -247,6 +247,10 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         pool = (executor or SubprocessExecutor()) if refute_in_background else None
         refuter = Refuter(robot, task, b, m0, starts, kin, pool, own_executor=executor is None)
         refuter.submit(scan)
+    # numba's threads for the tracking, unless the counterexample worker runs beside it: it holds the
+    # other core, the serial kernels are as fast then (benchmarks/README.md), and the first run after
+    # an install does not compile the threaded ones
+    threads = not (refute and refute_in_background)
     # wall time of each phase (the refutation's is the wait left after the Monte Carlo run)
     clock = {"setup": time.perf_counter() - t0}
 
@@ -260,7 +264,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         # a certified speed is the refutation's ceiling: no counterexample is searched at or above it
         observe = None if refuter is None else (
             lambda t: refuter.drop_from(t.v_sing) if t.verdict is Verdict.MODE_CHANGED else None)
-        search = search_v_min(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress, observe=observe)
+        search = search_v_min(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress, observe=observe,
+                              parallel=threads)
         v_min, trials = search.v_min, list(search.trials)
         t1 = lap("search", t1)
         # the search certified each speed alone, on its own plan, class and a_max: its run at
@@ -283,13 +288,14 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         if refuter is not None and v_min is not None and bounce:
             # the bounces of the task at v_min: the tracker's side here (this process has the
             # kernels loaded), then the crossing searches on the worker, beside the Monte Carlo run
-            tracked, bounce_s = timed(bounce_verdicts, robot, task, b, v_min, kin=kin, imodel=imodel)
+            tracked, bounce_s = timed(bounce_verdicts, robot, task, b, v_min, kin=kin, imodel=imodel,
+                                      parallel=threads)
             if pool is not None:
                 bounce_job = pool.submit(timed, bounce_floor, robot, task, b, tracked, starts=starts)
             t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
         if v_min is not None and monte_carlo_runs:
             mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
-                                          execution=cls)
+                                          execution=cls, parallel=threads)
         t1 = lap("monte_carlo", t1)
         if ref_job is not None:
             ref_bound, ref = ref_job.result()

@@ -38,7 +38,7 @@ class _Run:
 def _answers(monkeypatch, certifies):
     asked = []
 
-    def fake(kin, imodel, task, b, v, progress=None):
+    def fake(kin, imodel, task, b, v, progress=None, parallel=True):
         asked.append(v)
         return _Run(v, certifies(v))
 
