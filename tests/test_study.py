@@ -36,7 +36,8 @@ def test_a_study_on_dask_equals_the_same_cases_run_serially(client, tmp_path):
     table = design_sweep(GRID, out=tmp_path / "s.csv", certify=FAST, client=client)
     assert len(table) == 4 and table["error"].isna().all()
     settings = {"robot": "dextar", "bounds": {}, "certify": FAST}
-    for case in study_cases(GRID):
+    cases = study_cases(GRID)
+    for case in (cases[0], cases[-1]):  # two of the four re-run here (each a certification): the first and the last
         row = _by_case(table)[case.case_id]
         serial = run_case(case, settings)
         assert row.v_min_mps == pytest.approx(serial["v_min_mps"], abs=0) and row.verdict == serial["verdict"]
