@@ -1,10 +1,11 @@
 """The whole certification of a crossing: speed search, certificate, Monte Carlo, refutation bound.
 
-:func:`certify_crossing` plans and certifies speeds (:mod:`planner.certify`),
-re-certifies the slowest certified one alone, confirms it by Monte Carlo
-(:mod:`planner.montecarlo`) and, meanwhile, searches verified
-counterexamples below it (:mod:`planner.refute`) on an executor with the
-``concurrent.futures`` interface.  It returns a :class:`CrossingCertificate`.
+:func:`certify_crossing` bisects the speed, each speed planned and certified
+alone (:mod:`planner.certify`; the run at the slowest certified one is the
+certificate), confirms it by Monte Carlo (:mod:`planner.montecarlo`) and,
+meanwhile, searches verified counterexamples below it (:mod:`planner.refute`)
+on an executor with the ``concurrent.futures`` interface, and brackets the
+task's bounces (:mod:`planner.bounce`).  It returns a :class:`CrossingCertificate`.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ class CrossingCertificate:
     counterexample exists: no sound tracker can certify at or below it.
     ``execution`` is the class of admissible executions the certificate
     covers (:mod:`planner.execution`); ``timings_s`` the wall time of each
-    phase, s (``setup``, ``search``, ``certificate``, ``monte_carlo``,
+    phase, s (``setup``, ``search``, ``certificate`` (0 since the search's run is the certificate), ``monte_carlo``,
     ``refutation``: the wait for the background searches left after the
     Monte Carlo run, and ``bounce``: the bounce search's own run time, which
     overlaps the other phases when it ran in the background worker).
