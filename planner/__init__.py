@@ -23,7 +23,7 @@ import logging
 
 from .acceleration import AccelerationAssumption, AccelerationSource, AxisAcceleration, acceleration_assumption
 from .assumption_cost import AtRobotAMax, ComparisonOutcome, certify_at_robot_a_max
-from .certify import SpeedTrial, certify_plan, execution_class, minimal_v_sing
+from .certify import CertifiedRun, SpeedSearch, SpeedTrial, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
 from .execution import ExecutionClass, cartesian_class, in_class, joint_class
 from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
@@ -57,6 +57,10 @@ __all__ = [
     "certify_plan",
     "execution_class",
     "minimal_v_sing",
+    "search_v_min",
+    "certify_speed",
+    "SpeedSearch",
+    "CertifiedRun",
     "MonteCarloResult",
     "monte_carlo_confirmation",
     "CrossingCertificate",
