@@ -91,7 +91,7 @@ class MonteCarloResult:
         }
 
 
-#: Largest joint change (rad) from the planned joints that a geometry of the box may cause on the same
+#: Largest joint change (rad; m for a prismatic joint) from the planned joints that a geometry of the box may cause on the same
 #: leg branch (the calibration boxes move joints by milliradians; another branch is radians away).
 _SAME_BRANCH = 0.2
 #: Interval and kinematic models built in this process for :func:`monte_carlo_runs`, by robot value.

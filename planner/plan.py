@@ -26,7 +26,7 @@ __all__ = ["plan_crossing", "speed_ceiling", "derived_a_max"]
 #: Path grid of the time-optimal law, m: fine enough that the cone program's
 #: finite differences do not limit the speed at the crossing (~0.1 mm).
 TIME_OPTIMAL_GRID_STEP = 1e-4
-#: Largest joint change (rad) between a planned pose and its nearest scan point (<= 0.25 mm away)
+#: Largest joint change (rad; m for a prismatic joint) between a planned pose and its nearest scan point (<= 0.25 mm away)
 #: that keeps the working branch; beyond it the plan's joints come from a continuation instead.
 _SCAN_NEIGHBOURHOOD = 0.05
 #: Relative shrink of the speed ceiling, so a plan at the ceiling is feasible
@@ -103,8 +103,9 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     XDD = a[:, None] * u[None]
     # one batched Newton from the segment's scan (0.5 mm apart, on the working branch); the
     # continuation along the path where a pose does not converge next to it
-    Q, ok = kin.ik_batch(X, xi, c.joints_at(s))
-    if not ok.all() or np.max(np.abs(Q - c.joints_at(s))) > _SCAN_NEIGHBOURHOOD:
+    guess = c.joints_at(s)
+    Q, ok = kin.ik_batch(X, xi, guess)
+    if not ok.all() or np.max(np.abs(Q - guess)) > _SCAN_NEIGHBOURHOOD:
         try:
             Q = kin.ik_path(X, xi, task.working_guess)
         except SimulationError as exc:
