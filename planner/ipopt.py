@@ -75,10 +75,5 @@ def solve_with_ipopt(name: str, z, obj, g, *, z0, lbx, ubx, lbg, ubg, ipopt: dic
     ipopt : dict
         IPOPT options of this problem (tolerances, caps), on top of :data:`STRICT_BOUNDS`.
     """
-    solver = ca.nlpsol(name, "ipopt", {"x": z, "f": obj, "g": g},
-                       {"ipopt": {**STRICT_BOUNDS, **ipopt}, "print_time": False})
-    t0 = time.perf_counter()
-    sol = solver(x0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
-    elapsed = time.perf_counter() - t0
-    stats = solver.stats()
-    return IpoptRun(sol, stats, str(stats.get("return_status", "unknown")), elapsed)
+    none = type(z).sym("p", 0)  # no parameters: a solver for this one problem
+    return ParametricSolver(name, z, none, obj, g, ipopt=ipopt).solve(p=[], z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
