@@ -308,3 +308,39 @@ def test_ctrl_c_stops_certify_promptly_with_130(tmp_path):
     assert proc.returncode == 130 and err == "crosscert: interrupted\n", err
     assert waited < 5.0, f"exited {waited:.1f} s after Ctrl-C"
     assert workers and not any(os.path.exists(f"/proc/{w}") for w in workers)
+
+
+def test_an_interrupt_swallowed_by_a_c_callback_is_sent_again(tmp_path):
+    """Ctrl-C that lands in a ctypes callback (numba's cache notifications while kernels compile) is only
+    printed as "Exception ignored" by Python: the CLI sends it again until the command ends, quietly."""
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    script = tmp_path / "swallow.py"
+    script.write_text(
+        "import ctypes, os, signal, sys, threading, time\n"
+        "from planner.cli import _Interrupts\n"
+        "def busy():\n"
+        "    t = time.time()\n"
+        "    while time.time() - t < 1.0:\n"
+        "        pass\n"
+        "callback = ctypes.CFUNCTYPE(None)(busy)\n"
+        "with _Interrupts() as interrupts:\n"
+        "    try:\n"
+        "        threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()\n"
+        "        callback()  # the interrupt lands in here and is swallowed\n"
+        "        t = time.time()\n"
+        "        while time.time() - t < 20.0:\n"
+        "            pass\n"
+        "        print('never interrupted')\n"
+        "    except KeyboardInterrupt:\n"
+        "        sys.exit(interrupts.report())\n")
+    root = Path(__file__).resolve().parents[1]
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, cwd=root, timeout=60,
+                          env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    waited = time.perf_counter() - t0
+    assert proc.returncode == 130 and proc.stderr == "crosscert: interrupted\n", (proc.stdout, proc.stderr)
+    assert waited < 10.0, waited

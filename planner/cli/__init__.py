@@ -38,26 +38,72 @@ _COMMANDS = {"check": check, "monitor": monitor, "simulate": simulate, "sweep": 
              "certify": certify, "study": study, "robots": robots}
 
 
+#: Seconds after which an interrupt is sent again while the command has not ended (see :class:`_Interrupts`).
+_RESEND_S = 1.0
+
+
 class _Interrupts:
-    """SIGINT raises KeyboardInterrupt, as by default, and is remembered: a C extension (CasADi's SWIG
-    wrappers) may turn the KeyboardInterrupt raised inside one of its calls into another exception."""
+    """SIGINT raises KeyboardInterrupt, as by default, and is remembered.
+
+    C code may swallow it: a C extension (CasADi's SWIG wrappers) may turn the
+    KeyboardInterrupt raised inside one of its calls into another exception,
+    and one raised inside a ctypes callback (numba's cache notifications, while
+    kernels compile) is only printed as "Exception ignored".  So, until the
+    command has ended or reported the interrupt, it is sent again every
+    ``_RESEND_S`` seconds (longer than the clean-up it interrupts), and
+    swallowed KeyboardInterrupts print nothing.
+    """
 
     def __init__(self) -> None:
         self.seen = False
+        self.reported = False
         self.previous = None
+        self._hook = None
+        self._done = threading.Event()
 
     def _handler(self, signum, frame):
         self.seen = True
+        if not self._done.is_set():
+            timer = threading.Timer(_RESEND_S, self._resend)
+            timer.daemon = True
+            timer.start()
         raise KeyboardInterrupt
+
+    def _resend(self) -> None:
+        if not self._done.is_set():
+            os.kill(os.getpid(), signal.SIGINT)
+
+    def _unraisable(self, unraisable) -> None:
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):  # a swallowed interrupt is sent again
+            self._hook(unraisable)
+
+    def report(self) -> int:
+        """Say "interrupted" once on stderr; the exit code.  The interrupt has been handled: it is not sent again."""
+        self._done.set()
+        if not self.reported:
+            self.reported = True
+            print("crosscert: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+    def finish(self) -> None:
+        """The command has ended: no interrupt is sent again."""
+        self._done.set()
 
     def __enter__(self):
         if threading.current_thread() is threading.main_thread():
             self.previous = signal.signal(signal.SIGINT, self._handler)
+            self._hook, sys.unraisablehook = sys.unraisablehook, self._unraisable
         return self
 
     def __exit__(self, *exc) -> None:
+        self._done.set()
         if self.previous is not None:
             signal.signal(signal.SIGINT, self.previous)
+            sys.unraisablehook = self._hook
+
+
+#: The interrupts of the command running in this process (None outside :func:`main`).
+_INTERRUPTS: _Interrupts | None = None
 
 
 def main(argv=None) -> int:
@@ -68,14 +114,22 @@ def main(argv=None) -> int:
     argv : list of str, optional
         The arguments after the program name (default: ``sys.argv[1:]``).
     """
+    global _INTERRUPTS
     with _Interrupts() as interrupts:
+        _INTERRUPTS = interrupts
         try:
-            return _main(argv)
+            try:
+                return _main(argv)
+            finally:
+                interrupts.finish()
+        except KeyboardInterrupt:  # one sent again just as the command ended
+            return interrupts.report()
         except Exception:
             if not interrupts.seen:
                 raise
-            print("crosscert: interrupted", file=sys.stderr)  # an interrupt a C extension disguised
-            return EXIT_INTERRUPTED
+            return interrupts.report()  # an interrupt a C extension disguised
+        finally:
+            _INTERRUPTS = None
 
 
 def _main(argv) -> int:
@@ -92,6 +146,8 @@ def _main(argv) -> int:
         print(f"crosscert: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        if _INTERRUPTS is not None:
+            return _INTERRUPTS.report()
         print("crosscert: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
