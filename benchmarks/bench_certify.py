@@ -39,7 +39,6 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 PHASES = ("setup", "search", "certificate", "monte_carlo", "refutation", "bounce")
 #: Parts of the work in the ``--profile`` table: (label, module path suffix, function name).  Times are
@@ -73,9 +72,9 @@ def children_cpu_s() -> float:
 
 def child(repeat: int, method: str, foreground: bool) -> list:
     """``repeat`` runs of certify_crossing in this process; one dict per run."""
-    from planner import PlanningBounds, benchmark_task, certify_crossing
-    from robots import DEFAULT_ROBOT, KinematicModel, get_entry
-    from verifier.model import IntervalModel
+    from crosscert.planner import PlanningBounds, benchmark_task, certify_crossing
+    from crosscert.robots import DEFAULT_ROBOT, KinematicModel, get_entry
+    from crosscert.verifier.model import IntervalModel
 
     entry = get_entry(DEFAULT_ROBOT)
     DEXTAR = entry.robot
@@ -101,10 +100,10 @@ def profile(method: str) -> None:
     import cProfile
     import pstats
 
-    from planner import PlanningBounds, benchmark_task, certify_crossing
-    from planner.certify import certify_speed
-    from robots import DEFAULT_ROBOT, KinematicModel, get_entry
-    from verifier.model import IntervalModel
+    from crosscert.planner import PlanningBounds, benchmark_task, certify_crossing
+    from crosscert.planner.certify import certify_speed
+    from crosscert.robots import DEFAULT_ROBOT, KinematicModel, get_entry
+    from crosscert.verifier.model import IntervalModel
 
     entry = get_entry(DEFAULT_ROBOT)
     robot, task = entry.robot, benchmark_task(entry)

@@ -41,17 +41,15 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from planner.simulate import simulate_crossing, simulate_motion  # noqa: E402
-from planner.sweep import cruise_for  # noqa: E402
-from robots import KinematicModel, available_robots, get_entry  # noqa: E402
-from verifier.model import IntervalModel  # noqa: E402
-from verifier.step import Tracker  # noqa: E402
-from verifier.tracker import TrackerSettings, initial_box_from_mode, track_batch  # noqa: E402
+from crosscert.planner.simulate import simulate_crossing, simulate_motion  # noqa: E402
+from crosscert.planner.sweep import cruise_for  # noqa: E402
+from crosscert.robots import KinematicModel, available_robots, get_entry  # noqa: E402
+from crosscert.verifier.model import IntervalModel  # noqa: E402
+from crosscert.verifier.step import Tracker  # noqa: E402
+from crosscert.verifier.tracker import TrackerSettings, initial_box_from_mode, track_batch  # noqa: E402
 
 
 def recording(entry, v_sing: float, v_motion: float):

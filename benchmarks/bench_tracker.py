@@ -65,18 +65,16 @@ from collections import Counter  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from planner.sweep import cruise_for as sweep_cruise_for  # noqa: E402
-from planner.simulate import random_geometry, simulate_crossing  # noqa: E402
-from robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
-import verifier.tracker as tracker_module  # noqa: E402
-from verifier.model import IntervalModel  # noqa: E402
-from verifier.step import Tracker  # noqa: E402
-from verifier.tracker import (  # noqa: E402
+from crosscert.planner.sweep import cruise_for as sweep_cruise_for  # noqa: E402
+from crosscert.planner.simulate import random_geometry, simulate_crossing  # noqa: E402
+from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
+import crosscert.verifier.tracker as tracker_module  # noqa: E402
+from crosscert.verifier.model import IntervalModel  # noqa: E402
+from crosscert.verifier.step import Tracker  # noqa: E402
+from crosscert.verifier.tracker import (  # noqa: E402
     SampleStream,
     TrackerSettings,
     Verdict,
@@ -163,7 +161,7 @@ def load_now() -> str:
 
 def kernel_cache_stats() -> dict:
     """numba's on-disk cache hits and misses (= compilations) of the two step drivers in this process."""
-    from verifier.compiled import step as kernels
+    from crosscert.verifier.compiled import step as kernels
 
     out = {}
     for name in ("run_serial", "run_parallel"):
@@ -577,9 +575,9 @@ def extrapolate(rows: list, batch: list) -> dict:
 
 # --- part 5: the command line on a 6.42 s recording ---------------------------------
 def crosscert_cmd() -> list:
-    """The ``crosscert`` script of this interpreter's environment, else ``python -m planner.cli``."""
+    """The ``crosscert`` script of this interpreter's environment, else ``python -m crosscert``."""
     script = Path(sys.executable).parent / "crosscert"
-    return [str(script)] if script.exists() else [sys.executable, "-m", "planner.cli"]
+    return [str(script)] if script.exists() else [sys.executable, "-m", "crosscert"]
 
 
 def run_command(cmd, shell: bool = False):

@@ -24,11 +24,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from problems import default_settings, interval_model, kinematics, simulate  # noqa: E402
-from planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
-from planner.sweep import cruise_for  # noqa: E402
-from robots import DEXTAR, benchmark_crossing  # noqa: E402
-from verifier.tracker import initial_box_from_mode, track  # noqa: E402
-from verifier.window import FixedLagWindow, track_window  # noqa: E402
+from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
+from crosscert.planner.sweep import cruise_for  # noqa: E402
+from crosscert.robots import DEXTAR, benchmark_crossing  # noqa: E402
+from crosscert.verifier.tracker import initial_box_from_mode, track  # noqa: E402
+from crosscert.verifier.window import FixedLagWindow, track_window  # noqa: E402
 
 
 def _run(fn, v, xi, **kw):

@@ -27,7 +27,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 
 __all__ = ["AccelerationSource", "AxisAcceleration", "AccelerationAssumption", "acceleration_assumption",
            "derived_a_max", "robot_a_max_assumption", "PLAN_AT_REST"]

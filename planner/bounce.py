@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robots import KinematicModel
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode
-from verifier.window import track_window
+from crosscert.robots import KinematicModel
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode
+from crosscert.verifier.window import track_window
 
 from . import refute
 from .simulate import simulate_bounce

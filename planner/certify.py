@@ -52,12 +52,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robots import KinematicModel
-from robots import validators as V
-from robots.errors import InputError
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, TrackResult, Verdict, track
-from verifier.window import Reasoning, WindowResult, track_window
+from crosscert.robots import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, TrackResult, Verdict, track
+from crosscert.verifier.window import Reasoning, WindowResult, track_window
 
 from . import execution as ex_
 from .acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max

@@ -45,7 +45,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from robots.errors import InputError, SimulationError
+from crosscert.robots.errors import InputError, SimulationError
 
 __all__ = ["ExecutionKind", "ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
 

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
-from robots.errors import SimulationError
-from robots.kinematics import KinematicModel
+from crosscert.robots.errors import SimulationError
+from crosscert.robots.kinematics import KinematicModel
 
 __all__ = ["LineScan", "valid_poses", "scan_line", "refine_edge", "sign_changes", "joints_along",
            "locate_crossing", "valid_extent", "nearest_crossing"]

@@ -15,12 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robots import KinematicModel
-from robots import validators as V
-from robots.errors import InputError
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
-from verifier.window import Reasoning, track_window
+from crosscert.robots import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
+from crosscert.verifier.window import Reasoning, track_window
 
 from . import execution as ex_
 from .certify import execution_class

@@ -19,12 +19,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robots import KinematicModel
-from robots import validators as V
-from robots.errors import InputError, SimulationError
-from verifier.model import IntervalModel
-from verifier.tracker import TrackResult, Verdict
-from verifier.window import WindowResult
+from crosscert.robots import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackResult, Verdict
+from crosscert.verifier.window import WindowResult
 
 from . import execution as ex_
 from . import refute

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
 
 from .acceleration import derived_a_max
 from .generate import GenerationLimits, generate_crossing

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from robots import validators as V
+from crosscert.robots import validators as V
 
 __all__ = ["SampleAlignment", "align_to_samples"]
 

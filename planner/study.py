@@ -36,9 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, ModelError
-from robots.registry import DEFAULT_ROBOT, get_entry
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, ModelError
+from crosscert.robots.registry import DEFAULT_ROBOT, get_entry
 
 from .pipeline import certify_crossing, package_versions
 from .task import Method, PlanningBounds, benchmark_task, parse_option

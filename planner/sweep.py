@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track_batch
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track_batch
 
 from .simulate import ramp_length, simulate_crossing
 

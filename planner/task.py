@@ -20,11 +20,11 @@ from enum import Enum, StrEnum
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
-from robots.registry import RobotEntry
-from verifier.trajectory import Trajectory
-from verifier.window import Reasoning
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.robots.registry import RobotEntry
+from crosscert.verifier.trajectory import Trajectory
+from crosscert.verifier.window import Reasoning
 
 from .execution import ExecutionKind
 from .locus import LineScan, locate_crossing, sign_changes

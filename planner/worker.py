@@ -23,7 +23,7 @@ import sys
 import threading
 from concurrent.futures import Executor, Future
 
-from robots.errors import CrosscertError
+from crosscert.robots.errors import CrosscertError
 
 __all__ = ["SubprocessExecutor", "WorkerStopped"]
 
@@ -73,7 +73,7 @@ class SubprocessExecutor(Executor):
         self._queue: list[tuple[Future, bytes | None, BaseException | None]] = []
         self._stopped: str | None = None
         self._shutdown = False
-        self._proc = subprocess.Popen([sys.executable, "-m", "planner.worker"], stdin=subprocess.PIPE,
+        self._proc = subprocess.Popen([sys.executable, "-m", "crosscert.planner.worker"], stdin=subprocess.PIPE,
                                       stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         self._thread = threading.Thread(target=self._loop, name="crosscert-worker", daemon=True)
         self._thread.start()

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.simulate import random_geometry
-from robots import DEXTAR, benchmark_crossing
-from robots.dextar import elbows_out_ik, mode_by_cross_product
+from crosscert.planner.simulate import random_geometry
+from crosscert.robots import DEXTAR, benchmark_crossing
+from crosscert.robots.dextar import elbows_out_ik, mode_by_cross_product
 
 #: Fraction of ``a_max`` used at every instant (the rest absorbs rounding).
 A_FRACTION = 0.999

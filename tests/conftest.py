@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 
 import problems
-from robots import get_entry
+from crosscert.robots import get_entry
 
 
 @pytest.fixture(scope="session")
@@ -48,8 +48,8 @@ def task():
 @pytest.fixture(scope="session")
 def simulated_recording(tmp_path_factory, kin, bench):
     """A recording file of a simulated benchmark crossing at 1.3 m/s (readings only), as ``simulate`` writes it."""
-    from planner.simulate import simulate_crossing
-    from verifier.trajfile import write_trajectory
+    from crosscert.planner.simulate import simulate_crossing
+    from crosscert.verifier.trajfile import write_trajectory
 
     run = simulate_crossing(kin, bench.point, bench.direction, 1.3, working_guess=bench.q_point, t_rest=0.1)
     path = tmp_path_factory.mktemp("recording") / "crossing.csv"

@@ -21,12 +21,12 @@ from functools import lru_cache
 import numpy as np
 from numba import njit
 
-from planner.simulate import random_geometry, simulate_bounce, simulate_crossing
-from planner.sweep import cruise_for
-from planner.task import CrossingTask, Method, benchmark_task
-from robots import DEXTAR, KinematicModel, available_robots, benchmark_crossing, get_entry
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, Verdict
+from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing
+from crosscert.planner.sweep import cruise_for
+from crosscert.planner.task import CrossingTask, Method, benchmark_task
+from crosscert.robots import DEXTAR, KinematicModel, available_robots, benchmark_crossing, get_entry
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, Verdict
 
 T_REST = 0.05  # s: enough for the boxes to settle (they settle in a few samples)
 # every run starts at least 35 mm before the locus (planner.sweep.cruise_for)

@@ -8,11 +8,11 @@ import types
 import numpy as np
 import pytest
 
-from planner import PlanningBounds
-from planner.acceleration import AccelerationAssumption, AccelerationSource, AxisAcceleration, acceleration_assumption
-from planner.cli import main
-from robots import DEXTAR, GOUGH_STEWART, RPR3, PoseUnit
-from robots.errors import CrosscertError, InputError, ModelError
+from crosscert.planner import PlanningBounds
+from crosscert.planner.acceleration import AccelerationAssumption, AccelerationSource, AxisAcceleration, acceleration_assumption
+from crosscert.planner.cli import main
+from crosscert.robots import DEXTAR, GOUGH_STEWART, RPR3, PoseUnit
+from crosscert.robots.errors import CrosscertError, InputError, ModelError
 
 SRC = AccelerationSource
 

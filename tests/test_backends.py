@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from problems import CATALOGUE, default_settings, interval_model, run_of, simulate
-from verifier.step import Tracker, configure
-from verifier.tracker import VelocityModel, initial_box_from_mode, track, track_batch
+from crosscert.verifier.step import Tracker, configure
+from crosscert.verifier.tracker import VelocityModel, initial_box_from_mode, track, track_batch
 
 _probe = np.random.default_rng(5).uniform(-7.0, 7.0, 20000)
 TRIG_SAME = bool(np.all(np.sin(_probe) == [math.sin(v) for v in _probe])
@@ -133,7 +133,7 @@ def test_online_tracker_equals_track(backend, imodel, settings):
 
 
 def test_unknown_backend_is_refused(imodel, settings):
-    from robots.errors import InputError
+    from crosscert.robots.errors import InputError
 
     with pytest.raises(InputError, match="backend"):
         configure(imodel, settings, "fortran")
@@ -142,7 +142,7 @@ def test_unknown_backend_is_refused(imodel, settings):
 @pytest.mark.parametrize("name", ["crossing_1458", "bounce_0800"])
 def test_initial_box_backends_agree(name, imodel, settings):
     """The branch and prune of the first sample: same boxes, same modes."""
-    from verifier.step import pose_solutions
+    from crosscert.verifier.step import pose_solutions
 
     run = run_of(CATALOGUE[name])
     model, s = imodel, settings
@@ -178,7 +178,7 @@ def test_threads_change_nothing():
 def test_read_only_readings_use_the_same_kernel(imodel, settings):
     """A read-only recording (a frozen plan's joints) runs the kernel compiled
     for writable arrays: no second compilation, the same boxes."""
-    from verifier.compiled.step import run_serial
+    from crosscert.verifier.compiled.step import run_serial
 
     run = run_of(CATALOGUE["crossing_1458"])
     model, s = imodel, settings

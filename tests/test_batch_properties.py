@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from problems import simulate
-from verifier.tracker import SampleStream, Verdict, initial_box_from_mode, track, track_batch
+from crosscert.verifier.tracker import SampleStream, Verdict, initial_box_from_mode, track, track_batch
 
 FIELDS = ("x_lo", "x_hi", "xd_lo", "xd_hi", "mode")
 #: scenarios and samples per backend: whole runs (padded at rest to the longest, through the

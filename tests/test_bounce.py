@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from planner.bounce import bounce_gap
-from planner.task import PlanningBounds
-from robots import DEXTAR
-from verifier.tracker import Verdict
+from crosscert.planner.bounce import bounce_gap
+from crosscert.planner.task import PlanningBounds
+from crosscert.robots import DEXTAR
+from crosscert.verifier.tracker import Verdict
 
 
 def test_bounces_are_certified_only_beyond_the_crossing_floor(task, kin, imodel):

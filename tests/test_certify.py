@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from planner import (
+from crosscert.planner import (
     certify_crossing,
     certify_plan,
     minimal_v_sing,
@@ -13,13 +13,13 @@ from planner import (
     plan_crossing,
     speed_ceiling,
 )
-from planner.cli import main
-from planner.certify import certify_plan_window
-from planner.task import CrossingTask, PlanningBounds
+from crosscert.planner.cli import main
+from crosscert.planner.certify import certify_plan_window
+from crosscert.planner.task import CrossingTask, PlanningBounds
 from problems import PLANNING, check_certified_speed, check_contains, check_plan_limits
-from robots import DEXTAR, DEXTAR_DYNAMICS
-from robots.errors import InputError, SimulationError
-from verifier.tracker import Verdict
+from crosscert.robots import DEXTAR, DEXTAR_DYNAMICS
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.verifier.tracker import Verdict
 
 BENCHMARK = PLANNING["dextar_benchmark"]
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from problems import CATALOGUE, run_of
-from planner.cli import build_parser, main
-from verifier.trajfile import write_trajectory
+from crosscert.planner.cli import build_parser, main
+from crosscert.verifier.trajfile import write_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -248,7 +248,7 @@ def test_a_failed_figure_does_not_cost_the_verdict(crossing_csv, tmp_path, capsy
     def full_disk(path, *a, **k):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(sys.modules["planner.cli.track"], "plot_run", full_disk)
+    monkeypatch.setattr(sys.modules["crosscert.planner.cli.track"], "plot_run", full_disk)
     code = main(["check", str(crossing_csv), "--initial-mode", "1", "--json", "--plot", str(tmp_path / "f.png")])
     out, err = capsys.readouterr()
     assert code == 2
@@ -292,7 +292,7 @@ def test_ctrl_c_stops_certify_promptly_with_130(tmp_path):
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", *CERTIFY_NARROW, "--out", str(tmp_path / "c")],
+    proc = subprocess.Popen([sys.executable, "-m", "crosscert", *CERTIFY_NARROW, "--out", str(tmp_path / "c")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=root,
                             start_new_session=True)
     try:
@@ -321,7 +321,7 @@ def test_an_interrupt_swallowed_by_a_c_callback_is_sent_again(tmp_path):
     script = tmp_path / "swallow.py"
     script.write_text(
         "import ctypes, os, signal, sys, threading, time\n"
-        "from planner.cli import _Interrupts\n"
+        "from crosscert.planner.cli import _Interrupts\n"
         "def busy():\n"
         "    t = time.time()\n"
         "    while time.time() - t < 1.0:\n"

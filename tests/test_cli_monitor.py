@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from problems import CATALOGUE, default_settings, interval_model, run_of
-from planner.cli import main
-from verifier.tracker import track
-from verifier.trajfile import write_trajectory
+from crosscert.planner.cli import main
+from crosscert.verifier.tracker import track
+from crosscert.verifier.trajfile import write_trajectory
 
 FLAGS = ["--initial-mode", "1", "--json"]
 
@@ -135,7 +135,7 @@ def test_piped_through_a_subprocess(csv_text):
     """A real pipe: each event is read before the next sample is written; then the summary line."""
     rows = csv_text("crossing_1458").splitlines(keepends=True)
     expected = _events("crossing_1458")[0]
-    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "crosscert", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=Path(__file__).resolve().parents[1])
     out = queue.Queue()
@@ -163,7 +163,7 @@ def test_piped_through_a_subprocess(csv_text):
 
 def test_latency_statistics_in_constant_memory():
     """The histogram's p99 is never below the true one and at most 1 % above; its size does not grow."""
-    from planner.cli.track import LatencyStats
+    from crosscert.planner.cli.track import LatencyStats
 
     rng = np.random.default_rng(7)
     values = rng.lognormal(11.0, 1.0, 50_000).astype(int)
@@ -241,7 +241,7 @@ def test_gzip_on_stdin_is_named(monkeypatch, capsys, csv_text, errors):
 def test_closed_reader_is_a_quiet_end(csv_text):
     """``crosscert monitor ... | head -1``: the reader goes away; no error, no traceback, exit 141 (as cat)."""
     rows = csv_text("crossing_1458").splitlines(keepends=True)
-    proc = subprocess.Popen([sys.executable, "-m", "planner.cli", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, "-m", "crosscert", "monitor", "-", *FLAGS], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=Path(__file__).resolve().parents[1])
     try:

@@ -10,8 +10,8 @@ import time
 import numpy as np
 import pytest
 
-from planner.cli import main
-from verifier.trajfile import write_trajectory
+from crosscert.planner.cli import main
+from crosscert.verifier.trajfile import write_trajectory
 
 SIM = ["simulate", "--v-sing", "1.2", "-o", "{d}/o.csv"]
 PLAN = ["plan", "--v-sing", "1.2", "-o", "{d}/p.csv"]
@@ -151,7 +151,7 @@ def test_bad_option_is_refused_before_any_work(argv, message, tmp_path, recordin
 
 
 def test_every_command_is_in_the_table():
-    from planner.cli import _COMMANDS
+    from crosscert.planner.cli import _COMMANDS
 
     tried = {c[0][0] for c in CASES}
     assert tried == set(_COMMANDS)

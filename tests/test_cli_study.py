@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from planner.cli import main
-from planner.cli.study import read_grid
+from crosscert.planner.cli import main
+from crosscert.planner.cli.study import read_grid
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "docs" / "examples" / "study_grid.toml"
 
@@ -143,7 +143,7 @@ def _fake_rows(calls):
     """A ``run_cases`` that certifies nothing: one complete row per case, and the cases it was given."""
     import json
 
-    from planner.study import GRID_KEYS
+    from crosscert.planner.study import GRID_KEYS
 
     def run_cases(cases, settings):
         calls.extend(c.case_id for c in cases)
@@ -162,9 +162,9 @@ def fake_study(monkeypatch):
 
     import sys
 
-    import planner.study as study_mod
+    import crosscert.planner.study as study_mod
 
-    cli_study = sys.modules["planner.cli.study"]  # the package's name `study` is the command function
+    cli_study = sys.modules["crosscert.planner.cli.study"]  # the package's name `study` is the command function
 
     calls = []
     monkeypatch.setattr(study_mod, "run_cases", _fake_rows(calls))

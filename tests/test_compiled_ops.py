@@ -26,9 +26,9 @@ import pytest
 from numba import njit
 
 from problems import libm_trig
-from verifier import interval as I
-from verifier.compiled import ops
-from verifier.compiled import vectorized as V
+from crosscert.verifier import interval as I
+from crosscert.verifier.compiled import ops
+from crosscert.verifier.compiled import vectorized as V
 
 INF = math.inf
 MAX = float(np.finfo(np.float64).max)

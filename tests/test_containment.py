@@ -34,10 +34,10 @@ import pytest
 
 from adversarial import A_FRACTION, EDGE, V0_FRACTION, far_scenarios, near_scenarios
 from problems import interval_model
-from robots import DEXTAR
-from verifier.contractors import mode_of
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, initial_box_from_mode, track_batch
+from crosscert.robots import DEXTAR
+from crosscert.verifier.contractors import mode_of
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, initial_box_from_mode, track_batch
 
 FAR_SEED = 1  # seeds of the scenario families (each scenario derives its own)
 NEAR_SEED = 2

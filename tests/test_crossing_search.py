@@ -17,7 +17,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from planner.refute import (
+from crosscert.planner.refute import (
     MODE_MARGIN,
     BounceSearch,
     CounterexampleKind,
@@ -34,13 +34,13 @@ from planner.refute import (
     verify_counterexample,
     verify_crossing,
 )
-from planner.refute.nlp import SAMPLE_BUCKET
-from planner.simulate import max_v_sing, simulate_bounce
-from planner.sweep import cruise_for
+from crosscert.planner.refute.nlp import SAMPLE_BUCKET
+from crosscert.planner.simulate import max_v_sing, simulate_bounce
+from crosscert.planner.sweep import cruise_for
 from problems import default_settings, interval_model, kinematics
-from robots import DEXTAR, benchmark_crossing
-from robots.errors import InputError, SimulationError
-from verifier.tracker import Verdict, track
+from crosscert.robots import DEXTAR, benchmark_crossing
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.verifier.tracker import Verdict, track
 
 SPEED = 1.2  # m/s, approach speed of the bounces
 FAR = 0.03  # m: a bounce turning back this far before the locus admits no crossing

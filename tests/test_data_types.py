@@ -8,13 +8,13 @@ import pkgutil
 import numpy as np
 import pytest
 
-import planner
-import robots
-import verifier
-from planner import Method, PlannedTrajectory, PlanningBounds, plan_crossing
-from planner.execution import ExecutionKind
-from planner.task import CrossingTask
-from robots.errors import InputError
+from crosscert import planner
+from crosscert import robots
+from crosscert import verifier
+from crosscert.planner import Method, PlannedTrajectory, PlanningBounds, plan_crossing
+from crosscert.planner.execution import ExecutionKind
+from crosscert.planner.task import CrossingTask
+from crosscert.robots.errors import InputError
 
 
 def _dataclasses():
@@ -43,7 +43,7 @@ def test_array_fields_do_not_make_equality_raise(name):
 
 
 def test_the_scan_sees_the_data_types():
-    assert "planner.task.CrossingTask" in DATACLASSES and "verifier.trajectory.Trajectory" in DATACLASSES
+    assert "crosscert.planner.task.CrossingTask" in DATACLASSES and "crosscert.verifier.trajectory.Trajectory" in DATACLASSES
 
 
 def test_task_and_plan_arrays_are_read_only(task, kin):

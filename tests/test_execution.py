@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from planner import certify_plan, execution_class, plan_crossing
-from planner.execution import cartesian_class, effective_deviation, in_class, joint_class
-from planner.simulate import random_geometry
-from planner.task import PlanningBounds
+from crosscert.planner import certify_plan, execution_class, plan_crossing
+from crosscert.planner.execution import cartesian_class, effective_deviation, in_class, joint_class
+from crosscert.planner.simulate import random_geometry
+from crosscert.planner.task import PlanningBounds
 from problems import check_contains
-from robots import DEXTAR
-from robots.errors import InputError
-from verifier.tracker import Verdict
+from crosscert.robots import DEXTAR
+from crosscert.robots.errors import InputError
+from crosscert.verifier.tracker import Verdict
 
 
 @pytest.fixture(scope="module")

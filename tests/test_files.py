@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-from robots.errors import InputError
-from verifier.files import atomic_write, check_output_path
+from crosscert.robots.errors import InputError
+from crosscert.verifier.files import atomic_write, check_output_path
 
 
 def _text(s):
@@ -85,7 +85,7 @@ def test_sigterm_during_a_write_leaves_no_temporary(tmp_path):
     script = textwrap.dedent(f"""
         import sys, time
         sys.path.insert(0, {os.getcwd()!r})
-        from verifier.files import atomic_write
+        from crosscert.verifier.files import atomic_write
 
         def slow(fh):
             fh.write("begin")

@@ -17,15 +17,15 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from planner.certify import certify_plan
-from planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
-from planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
+from crosscert.planner.certify import certify_plan
+from crosscert.planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
+from crosscert.planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
 from problems import interval_model, kinematics
-from robots import DEXTAR, benchmark_crossing
-from robots.dextar import DEXTAR_DYNAMICS, dextar_mass_points
-from robots.dynamics import LumpedDynamics, criterion_residual, uncontrolled_direction
-from robots.errors import InputError, ModelError, SimulationError
-from verifier.tracker import Verdict
+from crosscert.robots import DEXTAR, benchmark_crossing
+from crosscert.robots.dextar import DEXTAR_DYNAMICS, dextar_mass_points
+from crosscert.robots.dynamics import LumpedDynamics, criterion_residual, uncontrolled_direction
+from crosscert.robots.errors import InputError, ModelError, SimulationError
+from crosscert.verifier.tracker import Verdict
 
 V_SING = 1.3  # m/s
 LIMITS = GenerationLimits(qd_max=30.0, qdd_max=3000.0)

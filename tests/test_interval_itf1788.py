@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from verifier import interval as I
-from verifier.compiled import vectorized as V
+from crosscert.verifier import interval as I
+from crosscert.verifier.compiled import vectorized as V
 
 
 def _itf_dir() -> Path:

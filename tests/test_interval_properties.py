@@ -33,8 +33,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from problems import libm_trig
-from verifier import interval as I
-from verifier.compiled import vectorized as V
+from crosscert.verifier import interval as I
+from crosscert.verifier.compiled import vectorized as V
 
 MAX = float(np.finfo(np.float64).max)
 TINY = float(np.finfo(np.float64).tiny)  # smallest normal

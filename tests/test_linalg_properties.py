@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from verifier.linalg import linear_enclosure
+from crosscert.verifier.linalg import linear_enclosure
 
 B = 60  # systems per size
 SAMPLES = 16  # point systems per interval system, besides the corners

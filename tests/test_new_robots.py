@@ -15,16 +15,16 @@ import casadi as ca
 import numpy as np
 import pytest
 
-import verifier  # noqa: F401  (registers the interval checks of robots.validate)
-from planner.cli import main
-from planner.simulate import random_geometry, simulate_bounce, simulate_crossing, simulate_motion
-from robots import KinematicModel, get_entry, get_robot, validate
-from robots.gough_stewart import HOME, gs_ik, mode_by_plucker
-from robots.rpr3 import RPR3, mode_by_leg_lines, rpr3_ik
-from robots.errors import ModelError
-from robots.validation import CheckOutcome
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
+from crosscert import verifier  # noqa: F401  (registers the interval checks of robots.validate)
+from crosscert.planner.cli import main
+from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing, simulate_motion
+from crosscert.robots import KinematicModel, get_entry, get_robot, validate
+from crosscert.robots.gough_stewart import HOME, gs_ik, mode_by_plucker
+from crosscert.robots.rpr3 import RPR3, mode_by_leg_lines, rpr3_ik
+from crosscert.robots.errors import ModelError
+from crosscert.robots.validation import CheckOutcome
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
 
 N_RPR3 = 20  # seeded geometries, each tracked through a crossing and a bounce
 N_GS = 8  # seeded simulated motions of the Gough-Stewart platform

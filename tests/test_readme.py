@@ -2,7 +2,7 @@
 
 Python blocks run in order in one namespace; the shell block of "Checking a
 recorded trajectory" runs in a scratch folder with ``crosscert`` standing for
-``python -m planner.cli`` of this interpreter.
+``python -m crosscert`` of this interpreter.
 """
 
 import re
@@ -36,7 +36,7 @@ def test_the_python_examples_run(capsys):
 def test_the_recording_commands_run(tmp_path):
     section = README.read_text().split("## Checking a recorded trajectory", 1)[1]
     block = re.search(r"```sh\n(.*?)```", section, flags=re.S).group(1)
-    cli = f"{sys.executable} -m planner.cli"
+    cli = f"{sys.executable} -m crosscert"
     for line in block.strip().splitlines():
         command = re.sub(r"\bcrosscert\b", cli, line.split("  #")[0].strip())
         done = subprocess.run(command, shell=True, cwd=tmp_path, capture_output=True, text=True, timeout=600)

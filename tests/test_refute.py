@@ -13,8 +13,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from planner.refute.nlp import SAMPLE_BUCKET
-from planner.refute import (
+from crosscert.planner.refute.nlp import SAMPLE_BUCKET
+from crosscert.planner.refute import (
     BounceSearch,
     Counterexample,
     RecordingBounds,
@@ -28,8 +28,8 @@ from planner.refute import (
     verify_bounce,
 )
 from problems import kinematics, simulate
-from robots import DEXTAR
-from robots.errors import InputError
+from crosscert.robots import DEXTAR
+from crosscert.robots.errors import InputError
 
 SLOW, FAST = 0.6, 1.458  # m/s: refuted (notes: up to ~0.8) / certified by the tracker
 
@@ -200,7 +200,7 @@ def test_ipopt_status_maps_to_its_outcome(status):
 
 def test_no_ipopt_status_maps_to_a_found_counterexample():
     """Only the independent check makes a counterexample: no solver status may claim one."""
-    from planner.refute.problem import IPOPT_OUTCOMES
+    from crosscert.planner.refute.problem import IPOPT_OUTCOMES
 
     assert len(IPOPT_OUTCOMES) >= 20
     assert SearchOutcome.FOUND not in set(IPOPT_OUTCOMES.values())

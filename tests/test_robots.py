@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from robots import (
+from crosscert.robots import (
     DEXTAR,
     ROBOTS,
     KinematicModel,
@@ -20,8 +20,8 @@ from robots import (
     get_robot,
     singular_y,
 )
-from robots.dextar import distal_joints, mode_by_cross_product
-from robots.errors import InputError, ModelError, SimulationError, UnknownRobotError
+from crosscert.robots.dextar import distal_joints, mode_by_cross_product
+from crosscert.robots.errors import InputError, ModelError, SimulationError, UnknownRobotError
 
 
 def eq7_numpy(x, q, xi):

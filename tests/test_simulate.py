@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-import planner.simulate as sim
-from planner.simulate import (
+import crosscert.planner.simulate as sim
+from crosscert.planner.simulate import (
     RAMP_PEAK,
     bounce_time_law,
     crossing_time_law,
@@ -19,9 +19,9 @@ from planner.simulate import (
     simulate_bounce,
     simulate_crossing,
 )
-from robots import DEXTAR, singular_y
-from robots.dextar import mode_by_cross_product
-from robots.errors import InputError, SimulationError
+from crosscert.robots import DEXTAR, singular_y
+from crosscert.robots.dextar import mode_by_cross_product
+from crosscert.robots.errors import InputError, SimulationError
 
 V_SING = 1.458  # fastest crossing of Table II, m/s
 
@@ -133,7 +133,7 @@ def test_derivatives_match_finite_differences(fine_runs):
 
 def test_joint_derivatives_are_exact(crossing, xi_true):
     """qd, qdd against 5-point stencils of the closed-form IK on the time law (no simulator IK)."""
-    from robots import elbows_out_ik
+    from crosscert.robots import elbows_out_ik
 
     law, p, u = crossing.time_law, crossing.crossing_point, crossing.direction
     h = 2e-5

@@ -14,14 +14,14 @@ from types import SimpleNamespace
 
 import pytest
 
-import planner.certify as certify_mod
-import planner.pipeline as pipeline_mod
-from planner.certify import search_v_min
-from planner.pipeline import Refuter, refutation_search
-from planner.task import PlanningBounds
-from robots import DEXTAR
-from robots.errors import InputError
-from verifier.tracker import Verdict
+import crosscert.planner.certify as certify_mod
+import crosscert.planner.pipeline as pipeline_mod
+from crosscert.planner.certify import search_v_min
+from crosscert.planner.pipeline import Refuter, refutation_search
+from crosscert.planner.task import PlanningBounds
+from crosscert.robots import DEXTAR
+from crosscert.robots.errors import InputError
+from crosscert.verifier.tracker import Verdict
 
 
 class _Run:

@@ -9,11 +9,11 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
-from planner import PlanningBounds, plan_crossing  # noqa: E402
-from planner.certify import execution_class  # noqa: E402
-from planner.montecarlo import monte_carlo_confirmation  # noqa: E402
-from planner.study import design_sweep, read_results, run_case, study_cases  # noqa: E402
-from robots.errors import InputError  # noqa: E402
+from crosscert.planner import PlanningBounds, plan_crossing  # noqa: E402
+from crosscert.planner.certify import execution_class  # noqa: E402
+from crosscert.planner.montecarlo import monte_carlo_confirmation  # noqa: E402
+from crosscert.planner.study import design_sweep, read_results, run_case, study_cases  # noqa: E402
+from crosscert.robots.errors import InputError  # noqa: E402
 
 #: Cheap certifications: no refutation, no Monte Carlo, a coarse speed resolution (~3 s a case).
 FAST = {"refute": False, "monte_carlo_runs": 0, "tol": 0.05}

@@ -4,13 +4,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from robots import DEXTAR
-from verifier import interval as I
-from verifier.contractors import hc4_pose, newton
-from robots.errors import ModelError
-from verifier.linalg import linear_enclosure
-from verifier.model import IntervalModel
-from verifier.tape import Tape
+from crosscert.robots import DEXTAR
+from crosscert.verifier import interval as I
+from crosscert.verifier.contractors import hc4_pose, newton
+from crosscert.robots.errors import ModelError
+from crosscert.verifier.linalg import linear_enclosure
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tape import Tape
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def test_second_order_term_matches_casadi(model):
 
 
 def test_contractors_never_lose_the_solution(model):
-    from robots import KinematicModel
+    from crosscert.robots import KinematicModel
 
     kin = KinematicModel(DEXTAR)
     rng = np.random.default_rng(4)
@@ -123,7 +123,7 @@ def test_hc4_on_a_square_keeps_both_signs():
 
 
 def test_gauss_seidel_leaves_an_unconstrained_component_alone():
-    from verifier.linalg import gauss_seidel
+    from crosscert.verifier.linalg import gauss_seidel
 
     # 0 * y = 0: any y solves it; the box must not shrink to [0, 0]
     A = np.array([[[0.0, 0.0], [0.0, 1.0]]])

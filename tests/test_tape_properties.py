@@ -23,10 +23,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from verifier import interval as I
-from verifier.compiled import vectorized as V
-from verifier.compiled.tape import forward, output
-from verifier.tape import OPCODES, Tape
+from crosscert.verifier import interval as I
+from crosscert.verifier.compiled import vectorized as V
+from crosscert.verifier.compiled.tape import forward, output
+from crosscert.verifier.tape import OPCODES, Tape
 
 N_SYM = 3
 N_GRAPHS = 120

@@ -26,7 +26,7 @@ import pytest
 import toppra.algorithm
 from toppra.constraint import JointAccelerationConstraint, JointVelocityConstraint
 
-from planner.timescale import (  # noqa: E402
+from crosscert.planner.timescale import (  # noqa: E402
     FEAS_RTOL,
     LinearPathConstraint,
     PathSamples,
@@ -37,8 +37,8 @@ from planner.timescale import (  # noqa: E402
     sample_path,
     time_optimal_scaling,
 )
-from robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
-from robots.errors import InputError, SimulationError  # noqa: E402
+from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
+from crosscert.robots.errors import InputError, SimulationError  # noqa: E402
 
 V_SING = 1.458  # fastest crossing of Table II, m/s
 HALF = 35e-3  # path extent on each side of the crossing point, m

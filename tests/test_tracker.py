@@ -12,8 +12,8 @@ from problems import (
     run_of,
     simulate,
 )
-from robots.errors import InputError
-from verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track, track_batch
+from crosscert.robots.errors import InputError
+from crosscert.verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track, track_batch
 
 
 def _holds(box, point):

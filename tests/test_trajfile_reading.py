@@ -9,10 +9,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from planner.cli import main
-from robots import DEXTAR
-from robots.errors import TrajectoryFileError
-from verifier.trajfile import TrajectoryReader, parse_number, read_trajectory, step_tolerance
+from crosscert.planner.cli import main
+from crosscert.robots import DEXTAR
+from crosscert.robots.errors import TrajectoryFileError
+from crosscert.verifier.trajfile import TrajectoryReader, parse_number, read_trajectory, step_tolerance
 
 Q = "1.9223,1.2191"
 

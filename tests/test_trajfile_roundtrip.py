@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from verifier.trajfile import read_trajectory, write_trajectory
+from crosscert.verifier.trajfile import read_trajectory, write_trajectory
 
 #: values a float64 column may hold that decimal printing gets wrong most easily
 SPECIAL = np.array([0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 2.225073858507201e-308,

@@ -21,13 +21,13 @@ import pytest
 
 from adversarial import near_scenarios
 from problems import check_contains, interval_model
-from planner.certify import execution_class, tracker_settings
-from planner.plan import derived_a_max, plan_crossing
-from planner.task import PlanningBounds
-from robots import DEXTAR, get_entry
-from robots.errors import InputError
-from verifier.tracker import Verdict, initial_box_from_mode, track
-from verifier.window import HypothesisStatus, Refutation, track_window
+from crosscert.planner.certify import execution_class, tracker_settings
+from crosscert.planner.plan import derived_a_max, plan_crossing
+from crosscert.planner.task import PlanningBounds
+from crosscert.robots import DEXTAR, get_entry
+from crosscert.robots.errors import InputError
+from crosscert.verifier.tracker import Verdict, initial_box_from_mode, track
+from crosscert.verifier.window import HypothesisStatus, Refutation, track_window
 
 N_RUNS = 16  # per family, half crossings and half bounces
 
@@ -111,7 +111,7 @@ def test_recordings_ending_at_the_locus(settings, before):
 def test_final_boxes_keep_poses_of_undecided_mode(settings):
     """On the locus the true pose is the limit of both modes: the final box of either hypothesis holds it."""
     from problems import simulate
-    from verifier.window import _final_box
+    from crosscert.verifier.window import _final_box
 
     run = simulate(1.0, True, 0)
     k = run.k_sing
@@ -146,8 +146,8 @@ def test_planning_run_at_one_metre_per_second(speed, certified):
     """The benchmark plan at 1.0 m/s: the forward tracker says unknown, the window certifies the change
     (below the refutation floor, 0.84 m/s, it must not)."""
     entry = get_entry("dextar")
-    from planner.task import benchmark_task
-    from robots import KinematicModel
+    from crosscert.planner.task import benchmark_task
+    from crosscert.robots import KinematicModel
 
     kin = KinematicModel(DEXTAR)
     b = PlanningBounds().resolved(DEXTAR)
@@ -187,7 +187,7 @@ def test_bad_arguments_are_refused(runs, settings):
 def test_fixed_lag_modes_are_true(runs, settings):
     """Online window reasoning with a lag of 20 samples on slow adversarial crossings and bounces: every
     mode it certifies (now or 20 samples back) is the true one, and it certifies some the tracker did not."""
-    from verifier.window import FixedLagWindow
+    from crosscert.verifier.window import FixedLagWindow
 
     gained = 0
     for sc in runs[N_RUNS:N_RUNS + 6]:

@@ -9,15 +9,15 @@ import tempfile
 import numpy as np
 import pytest
 
-from planner import CrossingTask, PlanningBounds, certify_crossing, execution_class, plan_crossing
-from planner.execution import in_class
-from planner.pipeline import Refuter, refute_speed
-from planner.simulate import random_geometry
-from planner.worker import SubprocessExecutor, WorkerStopped
+from crosscert.planner import CrossingTask, PlanningBounds, certify_crossing, execution_class, plan_crossing
+from crosscert.planner.execution import in_class
+from crosscert.planner.pipeline import Refuter, refute_speed
+from crosscert.planner.simulate import random_geometry
+from crosscert.planner.worker import SubprocessExecutor, WorkerStopped
 from problems import interval_model, kinematics
-from robots import DEXTAR, KinematicModel, benchmark_crossing
-from robots.dextar import dextar_loop_closure
-from verifier.tracker import Verdict
+from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing
+from crosscert.robots.dextar import dextar_loop_closure
+from crosscert.verifier.tracker import Verdict
 
 
 def test_calls_run_in_order_and_errors_come_back():

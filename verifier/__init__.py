@@ -7,7 +7,7 @@ The error classes are :mod:`robots.errors`'s, re-exported for convenience.
 
 import logging
 
-from robots.errors import (
+from crosscert.robots.errors import (
     CrosscertError,
     InputError,
     ModelError,

@@ -27,7 +27,7 @@ import threading
 from pathlib import Path
 from typing import Callable, IO
 
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 
 __all__ = ["check_output_path", "atomic_write"]
 

@@ -20,7 +20,7 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from robots.errors import ModelError
+from crosscert.robots.errors import ModelError
 from .tape import Tape
 
 __all__ = ["IntervalModel"]

@@ -11,7 +11,7 @@ from enum import Enum
 
 import numpy as np
 
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 
 
 __all__ = ["Verdict", "VelocityModel", "TrackerSettings"]

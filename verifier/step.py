@@ -35,7 +35,7 @@ import numpy as np
 from . import interval as I
 from .contractors import hc4_pose, mode_of, newton, split_prune, velocity, velocity_displacement
 from .contractors import pose_solutions as _np_pose_solutions
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",

@@ -31,7 +31,7 @@ import casadi as ca
 import numpy as np
 
 from . import interval as I
-from robots.errors import ModelError
+from crosscert.robots.errors import ModelError
 
 __all__ = ["Tape", "TapeArrays", "OPCODES"]
 

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import interval as I
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 from .settings import TrackerSettings, Verdict, VelocityModel
 from .step import Backend, advance, configure, init_state, pose_solutions
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 
 __all__ = ["Trajectory"]
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robots.errors import TrajectoryFileError
+from crosscert.robots.errors import TrajectoryFileError
 
 from .files import atomic_write
 from .trajectory import Trajectory

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robots.validation import CheckOutcome, CheckResult, register_interval_check
+from crosscert.robots.validation import CheckOutcome, CheckResult, register_interval_check
 
 from .contractors import hc4_pose, newton
 from .model import IntervalModel

@@ -40,7 +40,7 @@ from enum import Enum
 
 import numpy as np
 
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 
 from . import interval as I
 from .settings import TrackerSettings, Verdict

@@ -39,13 +39,13 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-if importlib.util.find_spec("planner") is None:  # not installed: run from a checkout
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+if importlib.util.find_spec("crosscert") is None:
+    sys.exit("sweep_bounds.py: install crosscert first (pip install . in the checkout)")
 
 
-from planner import PlanningBounds, benchmark_task, certify_crossing
-from planner.study import scaled_box
-from robots import get_entry
+from crosscert.planner import PlanningBounds, benchmark_task, certify_crossing
+from crosscert.planner.study import scaled_box
+from crosscert.robots import get_entry
 
 ENTRY = get_entry("dextar")
 DEXTAR = ENTRY.robot

@@ -16,8 +16,8 @@ import signal
 import sys
 import threading
 
-from robots.errors import CrosscertError
-from robots.registry import get_entry
+from crosscert.robots.errors import CrosscertError
+from crosscert.robots.registry import get_entry
 
 from .checks import check_command
 from .parser import UsageError, build_parser, robot_of

@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from robots.errors import InputError
-from robots.registry import get_entry
-from verifier.files import check_output_path
+from crosscert.robots.errors import InputError
+from crosscert.robots.registry import get_entry
+from crosscert.verifier.files import check_output_path
 
 from ..simulate import ramp_length
 from ..study import COLUMNS, GRID_KEYS, read_results, study_cases

@@ -7,11 +7,11 @@ import importlib.metadata as md
 
 import numpy as np
 
-from robots.registry import DEFAULT_ROBOT, ROBOTS, available_robots
-from verifier.step import Backend
-from verifier.tracker import VelocityModel
-from verifier.trajfile import parse_number
-from verifier.window import Reasoning
+from crosscert.robots.registry import DEFAULT_ROBOT, ROBOTS, available_robots
+from crosscert.verifier.step import Backend
+from crosscert.verifier.tracker import VelocityModel
+from crosscert.verifier.trajfile import parse_number
+from crosscert.verifier.window import Reasoning
 
 from ..execution import ExecutionKind
 from ..task import Method

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from verifier.files import atomic_write
-from verifier.plots import plot_run
-from verifier.trajfile import write_trajectory
+from crosscert.verifier.files import atomic_write
+from crosscert.verifier.plots import plot_run
+from crosscert.verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
 from ..pipeline import certify_crossing

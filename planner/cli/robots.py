@@ -6,9 +6,9 @@ import sys
 
 import numpy as np
 
-from robots.registry import ROBOTS, get_entry
-from robots.validation import validate
-from verifier.validation import INTERVAL_CHECKS
+from crosscert.robots.registry import ROBOTS, get_entry
+from crosscert.robots.validation import validate
+from crosscert.verifier.validation import INTERVAL_CHECKS
 
 from .parser import ACC_UNIT, VEL_UNIT
 

@@ -6,12 +6,12 @@ import sys
 
 import numpy as np
 
-from robots import KinematicModel
-from robots.errors import InputError
-from robots.registry import get_entry
-from verifier.model import IntervalModel
-from verifier.tracker import TrackerSettings
-from verifier.trajfile import parse_number
+from crosscert.robots import KinematicModel
+from crosscert.robots.errors import InputError
+from crosscert.robots.registry import get_entry
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import TrackerSettings
+from crosscert.verifier.trajfile import parse_number
 
 from ..simulate import random_geometry
 from ..task import CrossingTask, benchmark_task

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from robots import KinematicModel
-from robots.registry import get_entry
-from verifier.plots import plot_run
-from verifier.tracker import VelocityModel, Verdict
-from verifier.trajfile import write_trajectory
+from crosscert.robots import KinematicModel
+from crosscert.robots.registry import get_entry
+from crosscert.verifier.plots import plot_run
+from crosscert.verifier.tracker import VelocityModel, Verdict
+from crosscert.verifier.trajfile import write_trajectory
 
 from ..simulate import simulate_bounce, simulate_crossing, simulate_motion
 from ..sweep import sweep as run_sweep

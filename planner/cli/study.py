@@ -25,8 +25,8 @@ import time
 import tomllib
 from pathlib import Path
 
-from robots.errors import InputError
-from verifier.files import atomic_write
+from crosscert.robots.errors import InputError
+from crosscert.verifier.files import atomic_write
 
 from ..study import GRID_KEYS, design_sweep, read_results, repair_results, study_cases
 from .setup import progress_bar

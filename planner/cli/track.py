@@ -10,12 +10,12 @@ from pathlib import Path
 
 import numpy as np
 
-from robots.errors import CrosscertError, TrajectoryFileError
-from verifier.plots import plot_run
-from verifier.step import Backend, Event, Tracker
-from verifier.tracker import Verdict, initial_box_from_mode, verdict_of
-from verifier.trajfile import TrajectoryReader, open_trajectory
-from verifier.window import FixedLagWindow, Reasoning, track_window
+from crosscert.robots.errors import CrosscertError, TrajectoryFileError
+from crosscert.verifier.plots import plot_run
+from crosscert.verifier.step import Backend, Event, Tracker
+from crosscert.verifier.tracker import Verdict, initial_box_from_mode, verdict_of
+from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
+from crosscert.verifier.window import FixedLagWindow, Reasoning, track_window
 
 from .setup import progress_bar, tracker_setup
 

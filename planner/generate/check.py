@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from robots.errors import SimulationError
+from crosscert.robots.errors import SimulationError
 
 from .types import CheckFailed, LimitExceeded, Samples
 

@@ -7,9 +7,9 @@ import time
 
 import numpy as np
 
-from robots.dynamics import LumpedDynamics, LumpedMassModel, uncontrolled_direction
-from robots.errors import InputError, ModelError, SimulationError
-from robots.kinematics import KinematicModel
+from crosscert.robots.dynamics import LumpedDynamics, LumpedMassModel, uncontrolled_direction
+from crosscert.robots.errors import InputError, ModelError, SimulationError
+from crosscert.robots.kinematics import KinematicModel
 
 from ..task import CrossingTask, crossing_on_segment, parse_option
 from .check import CRITERION_TOL, verify

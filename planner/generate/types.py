@@ -7,8 +7,8 @@ from enum import StrEnum
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
 
 from ..task import PlannedTrajectory
 

@@ -26,9 +26,9 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
-from robots.kinematics import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.robots.kinematics import KinematicModel
 
 from ..ipopt import ParametricSolver
 from .problem import (

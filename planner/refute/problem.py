@@ -36,9 +36,9 @@ from types import MappingProxyType
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError
-from robots.kinematics import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError
+from crosscert.robots.kinematics import KinematicModel
 
 __all__ = [
     "ACCEL_MARGIN",

@@ -13,9 +13,9 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
-from robots import validators as V
-from robots.errors import InputError
-from robots.kinematics import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError
+from crosscert.robots.kinematics import KinematicModel
 
 from .nlp import MAX_CPU_TIME, MAX_ITER, search_counterexample
 from .problem import CounterexampleKind, RecordingBounds

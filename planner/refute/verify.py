@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 
-from robots.errors import InputError
-from robots.kinematics import KinematicModel
+from crosscert.robots.errors import InputError
+from crosscert.robots.kinematics import KinematicModel
 
 from .problem import Counterexample, CounterexampleKind, RecordingBounds, integrate_states
 from .results import Verification

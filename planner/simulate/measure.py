@@ -6,9 +6,9 @@ from enum import StrEnum
 
 import numpy as np
 
-from robots import validators as V
-from robots.base import Robot
-from robots.errors import InputError
+from crosscert.robots import validators as V
+from crosscert.robots.base import Robot
+from crosscert.robots.errors import InputError
 
 __all__ = ["Quantisation", "quantise", "random_geometry"]
 

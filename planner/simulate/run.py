@@ -10,11 +10,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robots import validators as V
-from robots.base import Robot
-from robots.errors import InputError, SimulationError
-from robots.kinematics import KinematicModel
-from verifier.trajectory import Trajectory
+from crosscert.robots import validators as V
+from crosscert.robots.base import Robot
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.robots.kinematics import KinematicModel
+from crosscert.verifier.trajectory import Trajectory
 
 from ..locus import joints_along, nearest_crossing, scan_line, sign_changes, valid_extent, valid_poses
 from ..sampling import align_to_samples

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from robots.errors import InputError
+from crosscert.robots.errors import InputError
 
 from .path import PathSamples
 

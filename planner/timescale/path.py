@@ -12,9 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
-from robots.kinematics import KinematicModel
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.robots.kinematics import KinematicModel
 
 __all__ = ["PathSamples", "sample_path"]
 

@@ -21,7 +21,7 @@ from toppra.constraint import (
     canlinear_colloc_to_interpolate,
 )
 
-from robots.errors import InputError, SimulationError
+from crosscert.robots.errors import InputError, SimulationError
 
 from .limits import ScalingLimits, check_nodes, per_joint
 from .path import PathSamples, criterion_coeffs, crossing_direction, node_index

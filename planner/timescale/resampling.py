@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
-from verifier.trajectory import Trajectory
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
+from crosscert.verifier.trajectory import Trajectory
 
 from ..sampling import ALIGN_TOL
 from .path import BRANCH_JUMP, PathSamples

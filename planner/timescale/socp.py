@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from robots import validators as V
-from robots.errors import InputError, SimulationError
+from crosscert.robots import validators as V
+from crosscert.robots.errors import InputError, SimulationError
 
 from .limits import PathRows, ScalingLimits, interval_matrix, path_rows
 from .path import PathSamples, criterion_coeffs, crossing_direction, node_index
