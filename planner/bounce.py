@@ -121,7 +121,7 @@ class _Bounces:
 
     def __init__(self, robot, task: CrossingTask, bounds: PlanningBounds, speed: float, kin=None, readings=None):
         self.kin = KinematicModel(robot) if kin is None else kin
-        self.b = bounds.resolved(robot)
+        self.b = bounds.for_robot(robot)
         self.speed = float(speed)
         xi = robot.xi_center
         self.point, self.q_point, self.m0 = crossing_point_and_joints(self.kin, task, xi)

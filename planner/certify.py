@@ -115,7 +115,7 @@ def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
     planned poses and joints (seeded, deterministic).
     """
     robot = kin.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     if b.execution is ExecutionKind.JOINT:
         return ex_.joint_class(robot, b.eps_q, b.tracking_error)
     plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)
@@ -136,7 +136,7 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
     ``progress(k)`` (optional) after each tracked sample.
     """
     robot = imodel.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
     s = tracker_settings(robot, b, derived_a_max(plan, b, robot), execution)
@@ -153,7 +153,7 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
     sub-boxes over numba's threads (the same boxes either way).
     """
     robot = imodel.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
     s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
@@ -206,7 +206,7 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
     ``parallel``: window passes over numba's threads (the same boxes; off
     where another process holds the other cores).
     """
-    b = bounds.resolved(kin.robot)
+    b = bounds.for_robot(kin.robot)
     plan = plan_crossing(kin, task, v_sing, b)
     cls = execution_class(kin, plan, b)
     m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
@@ -264,7 +264,7 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
     ``parallel`` as for :func:`certify_speed`.
     """
     robot = kin.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     v_low, v_high = V.positive("v_low", v_low), V.positive("v_high", v_high)
     tol = V.positive("tol", tol)
     if not v_low < v_high:

@@ -130,7 +130,7 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     runs = int(V.number("runs", runs, lo=1))
     batch_runs = int(V.number("batch_runs", batch_runs, lo=1))
     robot = kin.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     a_max = derived_a_max(plan, b, robot) if a_max is None else a_max
     cls = execution_class(kin, plan, b) if execution is None else execution
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)

@@ -44,6 +44,8 @@ log = logging.getLogger(__name__)
 
 #: Version of the layout of :meth:`CrossingCertificate.summary` (``certificate.json``).
 CERTIFICATE_SCHEMA = "crosscert-certificate/3"
+#: Slowest crossing speed a certification tries by default, m/s.
+V_LOW = 0.6
 
 
 @dataclass(frozen=True)
@@ -184,7 +186,7 @@ def package_versions() -> dict:
     return out
 
 
-def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=0.6, v_high=None,
+def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=V_LOW, v_high=None,
                      tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
                      executor: Executor | None = None, seed=0, progress=None, kin=None,
                      imodel=None, bounce: bool = True) -> CrossingCertificate:
@@ -227,7 +229,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     t0 = time.perf_counter()
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
-    b = (bounds or PlanningBounds()).resolved(robot)
+    b = (bounds or PlanningBounds()).for_robot(robot)
     m0 = crossing_on_segment(kin, task, robot.xi_center).m0
     v_feasible = speed_ceiling(kin, task, b)
     v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)

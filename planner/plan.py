@@ -67,7 +67,7 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
         and goal: the message gives the largest feasible speed), bad task.
     """
     robot = kin.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     v_sing = V.positive("v_sing", v_sing)
     xi = robot.xi_center
     c = crossing_on_segment(kin, task, xi)
@@ -148,7 +148,7 @@ def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
         No admissible time law reaches the crossing point.
     """
     robot = kin.robot
-    b = bounds.resolved(robot)
+    b = bounds.for_robot(robot)
     xi = robot.xi_center
     c = crossing_on_segment(kin, task, xi)
     s_star, u, L = c.s_star, c.u, c.length

@@ -16,8 +16,12 @@ from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track_batch
 
 from .simulate import ramp_length, simulate_crossing
+from .simulate.run import A_PEAK
 
-__all__ = ["SweepRow", "sweep", "cruise_for"]
+__all__ = ["SweepRow", "sweep", "cruise_for", "T_REST"]
+
+#: Rest before each simulated crossing of the sweep, s.
+T_REST = 0.1
 
 
 @dataclass(frozen=True)
@@ -34,14 +38,14 @@ class SweepRow:
     contained: bool  # true pose and velocity inside every box (simulation only)
 
 
-def cruise_for(v_sing, a_peak=60.0, start_distance=0.035, minimum=0.005):
+def cruise_for(v_sing, a_peak=A_PEAK, start_distance=0.035, minimum=0.005):
     """Half-length (m) of the constant-speed zone so that every run starts at
     least ``start_distance`` (m) before the locus, whatever its speed."""
     return max(minimum, start_distance - ramp_length(v_sing, a_peak)[1])
 
 
 def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityModel.SOUND), *, xi_true=None,
-          seed=0, t_rest=0.1, a_peak=60.0, start_distance=0.035, initial_mode=None, settings_kw=None, progress=None,
+          seed=0, t_rest=T_REST, a_peak=A_PEAK, start_distance=0.035, initial_mode=None, settings_kw=None, progress=None,
           record_speed=None):
     """Track simulated crossings at several speeds under several error models.
 

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from dataclasses import dataclass, field
@@ -21,6 +22,7 @@ from enum import Enum, StrEnum
 import numpy as np
 
 from crosscert.robots import validators as V
+from crosscert.robots.assumptions import check_bound
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.registry import RobotEntry
 from crosscert.verifier.trajectory import Trajectory
@@ -110,7 +112,11 @@ def benchmark_task(entry: RobotEntry, xi=None, *, half_length: float = BENCHMARK
 
 @dataclass(frozen=True)
 class PlanningBounds:
-    """Bounds of the planning-time certification (SI).
+    """Bounds of the planning-time certification (SI), checked once at construction.
+
+    ``eps_q``, ``t_s`` and ``a_max`` obey the rules of
+    :class:`~robots.assumptions.Assumptions`; ``None`` takes the robot's value
+    when :meth:`for_robot` binds the bounds to a robot (cheap, no re-check).
 
     Parameters
     ----------
@@ -170,41 +176,64 @@ class PlanningBounds:
     qdd_max: float | None = None
     execution: ExecutionKind = ExecutionKind.CARTESIAN
     reasoning: Reasoning = Reasoning.WINDOW
+    #: Name of the robot whose defaults :meth:`for_robot` filled in (``None``: not yet bound).
+    robot_name: str | None = field(default=None, init=False, compare=False)
 
-    def resolved(self, robot) -> PlanningBounds:
-        """These bounds with the robot's defaults filled in and every value checked."""
-        eps = V.positive("eps_q", robot.eps_q if self.eps_q is None else self.eps_q)
-        ts = V.positive("t_s", robot.t_s if self.t_s is None else self.t_s)
-        a_peak = V.positive("a_peak", self.a_peak)
-        tracking = V.positive("tracking_error", self.tracking_error, allow_zero=True)
-        margin = V.positive("a_margin", self.a_margin, allow_zero=True)
-        rest = V.positive("t_rest", self.t_rest, allow_zero=True)
-        amax = None if self.a_max is None else _per_axis_a_max(self.a_max, robot)
-        splits = getattr(robot, "xi_splits", None) if self.xi_splits is None else tuple(self.xi_splits)
-        method = parse_option(Method, "planning method", self.method)
-        execution = parse_option(ExecutionKind, "execution class", self.execution)
-        reasoning = parse_option(Reasoning, "reasoning", self.reasoning)
-        if method is Method.DYNAMIC and self.dynamics is None:
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__  # frozen: normalise once; the bounds by the assumptions' rules
+        if self.eps_q is not None:
+            set_(self, "eps_q", float(check_bound("eps_q", self.eps_q, 1)[0]))
+        if self.t_s is not None:
+            set_(self, "t_s", check_bound("t_s", self.t_s, 1))
+        if self.a_max is not None:
+            set_(self, "a_max", tuple(float(v) for v in check_bound("a_max", self.a_max, max(np.size(self.a_max), 1))))
+        set_(self, "a_peak", V.positive("a_peak", self.a_peak))
+        set_(self, "tracking_error", V.positive("tracking_error", self.tracking_error, allow_zero=True))
+        set_(self, "a_margin", V.positive("a_margin", self.a_margin, allow_zero=True))
+        set_(self, "t_rest", V.positive("t_rest", self.t_rest, allow_zero=True))
+        if self.xi_splits is not None:
+            set_(self, "xi_splits", tuple(self.xi_splits))
+        set_(self, "method", parse_option(Method, "planning method", self.method))
+        set_(self, "execution", parse_option(ExecutionKind, "execution class", self.execution))
+        set_(self, "reasoning", parse_option(Reasoning, "reasoning", self.reasoning))
+        if self.method is Method.DYNAMIC and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
-        return PlanningBounds(eps, tracking, amax, margin, a_peak, ts, rest, splits, method, self.dynamics,
-                              self.qd_max, self.qdd_max, execution, reasoning)
+
+    def for_robot(self, robot) -> PlanningBounds:
+        """These bounds with the robot's defaults where none was given (``eps_q``, ``t_s``, ``xi_splits``) and
+        ``a_max`` as one bound per pose axis.  Checked at construction: nothing is checked again here but
+        what needs the robot (one ``a_max`` per axis in its unit)."""
+        if self.robot_name == robot.name:
+            return self
+        out = copy.copy(self)
+        set_ = object.__setattr__
+        set_(out, "robot_name", robot.name)
+        if self.eps_q is None:
+            set_(out, "eps_q", robot.eps_q)
+        if self.t_s is None:
+            set_(out, "t_s", robot.t_s)
+        if self.xi_splits is None:
+            set_(out, "xi_splits", getattr(robot, "xi_splits", None))
+        if self.a_max is not None:
+            set_(out, "a_max", _per_axis_a_max(self.a_max, robot))
+        return out
 
 
-def _per_axis_a_max(value, robot) -> tuple[float, ...]:
-    """A given ``a_max``: one positive bound per pose axis (one number only when every axis has the same unit)."""
+def _per_axis_a_max(value: tuple, robot) -> tuple[float, ...]:
+    """A given ``a_max`` (checked positive): one bound per pose axis (one number only when every axis has the
+    same unit)."""
     units = robot.acceleration_units
-    if np.ndim(value) == 0 or np.size(value) == 1:
+    if len(value) == 1:
         if robot.mixed_units:
             raise InputError(
-                f"a_max = {np.ravel(value).tolist()} is one number, but robot {robot.name}'s pose axes are in "
+                f"a_max = {list(value)} is one number, but robot {robot.name}'s pose axes are in "
                 f"({', '.join(units)}): give one bound per axis, e.g. a_max = "
                 f"({', '.join(f'{v:g}' for v in robot.a_max)}) (its physical a_max)")
-        return V.floats("a_max", np.broadcast_to(np.asarray(value, float).reshape(-1), (robot.n,)), robot.n,
-                        positive=True)
-    try:
-        return V.floats("a_max", value, robot.n, positive=True)
-    except InputError as exc:
-        raise InputError(f"{exc} (one bound per pose axis of robot {robot.name}, in {', '.join(units)})") from None
+        return value * robot.n
+    if len(value) != robot.n:
+        raise InputError(f"a_max needs {robot.n} entries, got {len(value)} (one bound per pose axis of robot "
+                         f"{robot.name}, in {', '.join(units)})")
+    return value
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -11,13 +11,13 @@ Units are SI throughout: lengths in m, angles in rad, times in s.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
-from .errors import ModelError
+from .assumptions import Assumptions
+from .errors import InputError, ModelError
 from .units import PoseUnit
 from .validators import floats, vector
 
@@ -70,7 +70,7 @@ class Robot:
         The robot's physical bound on ``|x''|`` per axis, in its unit per s^2
         (m/s^2 or rad/s^2, see ``pose_units``): what the drives can produce.
     eps_q : float
-        Default encoder error bound, rad (m for prismatic joints):
+        Default encoder error bound, in each joint's unit (``joint_units``):
         ``|q_meas - q_true| <= eps_q``.
     t_s : float
         Default sampling period, s.
@@ -108,6 +108,10 @@ class Robot:
         ``None`` (default): not declared, and such an axis is bounded by the
         robot's ``a_max``, the bound that holds whatever the controller does.
         Each entry is positive and at most ``a_max``.
+    joint_units : tuple of PoseUnit (or ``"m"`` / ``"rad"``), length n, optional
+        Unit of each joint coordinate: ``"rad"`` for a revolute joint, ``"m"``
+        for a prismatic one (``eps_q`` and ``q_lo``/``q_hi`` are in these
+        units).  ``None``: every joint is revolute.
     description : str, optional
         One-paragraph human description (source of the data, conventions).
     """
@@ -132,6 +136,7 @@ class Robot:
     joint_offsets: tuple[int | None, ...] | None = None
     mode_reference: Callable[..., int] | None = field(default=None, repr=False, compare=False)
     tracking_a_margin: tuple[float, ...] | None = None
+    joint_units: tuple[PoseUnit, ...] | None = None
     description: str = ""
 
     def __post_init__(self) -> None:
@@ -181,10 +186,9 @@ class Robot:
         set_(self, "x_bounds", (xb_lo, xb_hi))
         if not callable(self.loop_closure):
             raise ModelError(f"Robot {self.name}: loop_closure must be callable")
-        set_(self, "pose_units", self._checked_units(n))
+        set_(self, "pose_units", self._checked_units(n, "pose_units", self.pose_units))
+        set_(self, "joint_units", self._checked_units(n, "joint_units", self.joint_units))
         amax = floats("a_max", self.a_max, n, error=ModelError)
-        if any(a <= 0 for a in amax):
-            raise ModelError(f"Robot {self.name}: a_max must be positive, got {amax}")
         set_(self, "a_max", amax)
         if self.tracking_a_margin is not None:
             margin = floats("tracking_a_margin", self.tracking_a_margin, n, error=ModelError)
@@ -197,10 +201,7 @@ class Robot:
                     "(or declare no margin: tracking_a_margin=None)"
                 )
             set_(self, "tracking_a_margin", margin)
-        xd0 = floats("xd0", self.xd0, n, error=ModelError)
-        if any(v <= 0 for v in xd0):
-            raise ModelError(f"Robot {self.name}: xd0 must be positive, got {xd0}")
-        set_(self, "xd0", xd0)
+        set_(self, "xd0", floats("xd0", self.xd0, n, error=ModelError))
         if self.xi_splits is not None:
             splits = tuple(int(v) for v in self.xi_splits)
             if len(splits) != len(self.xi_nominal) or any(v < 1 for v in splits):
@@ -216,14 +217,14 @@ class Robot:
                 )
             set_(self, "joint_offsets", offs)
         for attr in ("eps_q", "t_s"):
-            v = getattr(self, attr)
             try:
-                v = float(v)
+                set_(self, attr, float(getattr(self, attr)))
             except (TypeError, ValueError) as exc:
                 raise ModelError(f"Robot {self.name}: {attr} must be a number") from exc
-            if not (math.isfinite(v) and v > 0):
-                raise ModelError(f"Robot {self.name}: {attr} must be positive and finite, got {v}")
-            set_(self, attr, v)
+        try:  # the default bounds obey the one rule of each (robots.assumptions), not a copy of it
+            Assumptions.for_robot(self)
+        except InputError as exc:
+            raise ModelError(f"Robot {self.name}: {exc}") from None
         if self.mode_sign not in (1, -1):
             raise ModelError(f"Robot {self.name}: mode_sign must be +1 or -1, got {self.mode_sign!r}")
         set_(self, "mode_sign", float(self.mode_sign))
@@ -232,26 +233,34 @@ class Robot:
         if not isinstance(self.description, str):
             raise ModelError(f"Robot {self.name}: description must be a string")
 
-    def _checked_units(self, n: int) -> tuple[PoseUnit, ...]:
-        """``pose_units`` as ``n`` :class:`PoseUnit` values, or ModelError naming the allowed ones."""
+    def _checked_units(self, n: int, name: str, value) -> tuple[PoseUnit, ...]:
+        """``value`` (field ``name``) as ``n`` :class:`PoseUnit` values, or ModelError naming the allowed ones."""
+        if value is None:
+            value = (PoseUnit.RADIAN,) * n
         try:
-            if isinstance(self.pose_units, str):
+            if isinstance(value, str):
                 raise TypeError
-            units = tuple(self.pose_units)
+            units = tuple(value)
         except TypeError:
-            raise ModelError(f"Robot {self.name}: pose_units must be a tuple of units, one per pose axis") from None
+            raise ModelError(f"Robot {self.name}: {name} must be a tuple of units, one per coordinate") from None
+        what = "pose axis" if name == "pose_units" else "joint"
         if len(units) != n:
-            raise ModelError(f"Robot {self.name}: pose_units needs one unit per pose axis ({n}), got {len(units)}")
+            raise ModelError(f"Robot {self.name}: {name} needs one unit per {what} ({n}), got {len(units)}")
         out = []
         for i, u in enumerate(units):
             try:
                 out.append(PoseUnit(u))
             except ValueError:
-                raise ModelError(f"Robot {self.name}: pose_units[{i}] = {u!r} is not a pose unit; use one of "
+                raise ModelError(f"Robot {self.name}: {name}[{i}] = {u!r} is not a {what.split()[0]} unit; use one of "
                                  f"{', '.join(repr(p.value) for p in PoseUnit)}") from None
         return tuple(out)
 
     # ----------------------------------------------------------------- units
+    @property
+    def assumptions(self) -> Assumptions:
+        """The robot's default bounds and calibration box as one :class:`~robots.assumptions.Assumptions`."""
+        return Assumptions.for_robot(self)
+
     @property
     def acceleration_units(self) -> tuple[str, ...]:
         """Unit of each axis' acceleration (``"m/s^2"`` or ``"rad/s^2"``), from ``pose_units``."""

@@ -177,6 +177,7 @@ GOUGH_STEWART = Robot(
     loop_closure=gough_stewart_loop_closure,
     # 40 m/s^2 (a fast hexapod); 120 rad/s^2 gives ~40 m/s^2 at the platform's 0.3 m radius
     pose_units=("m", "m", "m", "rad", "rad", "rad"),  # (p_x, p_y, p_z, yaw, pitch, roll)
+    joint_units=("m",) * 6,  # prismatic legs
     a_max=(40.0, 40.0, 40.0, 120.0, 120.0, 120.0),
     eps_q=5e-6,  # m: a 5 um linear encoder count on each leg
     t_s=1e-3,

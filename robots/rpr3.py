@@ -125,6 +125,7 @@ RPR3 = Robot(
     # 80 m/s^2 as the DexTAR; 200 rad/s^2 gives ~24 m/s^2 at the platform's 0.12 m radius
     # (800 rad/s^2, ~the translational bound there, certifies no crossing: docs/robots.md)
     pose_units=("m", "m", "rad"),  # (p_x, p_y, phi)
+    joint_units=("m", "m", "m"),  # prismatic strokes
     a_max=(80.0, 80.0, 200.0),
     eps_q=5e-6,  # m: a 5 um linear encoder count
     t_s=1e-3,

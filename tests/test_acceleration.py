@@ -26,7 +26,7 @@ def _plan(*peaks):
 
 
 def _resolved(robot, **kw):
-    return PlanningBounds(**kw).resolved(robot)
+    return PlanningBounds(**kw).for_robot(robot)
 
 
 def test_robots_declare_the_unit_of_each_pose_axis():

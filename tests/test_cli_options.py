@@ -174,9 +174,11 @@ def test_help_shows_defaults_and_robots_and_version(capsys):
 
 @pytest.mark.parametrize("argv, shown", [
     (["check", "--help"], ["default of dextar: 9.23998e-05 rad", "default of dextar: 80 m/s^2", "0.001 s"]),
-    (["monitor", "--robot", "3rpr", "--help"], ["default of 3rpr: 5e-06 rad", "(80, 80, 200) m/s^2",
-                                                "(0.1, 0.1, 1) m/s"]),
-    (["certify", "--robot=gough-stewart", "--help"], ["default of gough-stewart: 5e-06 rad"]),
+    # units from the robot's assumptions: its legs are prismatic (m), its pose mixes m and rad
+    (["monitor", "--robot", "3rpr", "--help"], ["encoder error bound, m (default of 3rpr: 5e-06 m",
+                                                "(80, 80, 200) (m/s^2, m/s^2, rad/s^2)",
+                                                "(0.1, 0.1, 1) (m/s, m/s, rad/s)"]),
+    (["certify", "--robot=gough-stewart", "--help"], ["default of gough-stewart: 5e-06 m"]),
 ])
 def test_help_gives_the_robot_defaults_with_values(argv, shown, capsys):
     """Robot defaults in --help are values, of --robot's robot (the default robot without one)."""

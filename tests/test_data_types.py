@@ -64,9 +64,9 @@ def test_task_copies_what_it_is_given():
 
 
 def test_options_are_enums_and_bad_ones_list_the_choices():
-    b = PlanningBounds(method="time-optimal", execution="joint").resolved(robots.DEXTAR)
+    b = PlanningBounds(method="time-optimal", execution="joint").for_robot(robots.DEXTAR)
     assert b.method is Method.TIME_OPTIMAL and b.execution is ExecutionKind.JOINT
     with pytest.raises(InputError, match="'smoothstep', 'time-optimal', 'dynamic'"):
-        PlanningBounds(method="fast").resolved(robots.DEXTAR)
+        PlanningBounds(method="fast").for_robot(robots.DEXTAR)
     with pytest.raises(InputError, match="'cartesian', 'joint'"):
-        PlanningBounds(execution="loose").resolved(robots.DEXTAR)
+        PlanningBounds(execution="loose").for_robot(robots.DEXTAR)

@@ -88,7 +88,7 @@ def test_joint_class_is_the_literal_tube(plan, kin):
     q = kin.ik_path(plan.x, xi, plan.q[0])
     assert not in_class(jc, DEXTAR, q, plan.q, xi, plan.xi_plan, DEXTAR.eps_q, 1e-4)
     with pytest.raises(InputError, match="execution class"):
-        PlanningBounds(execution="cartesain").resolved(DEXTAR)
+        PlanningBounds(execution="cartesain").for_robot(DEXTAR)
     with pytest.raises(InputError, match="safety"):
         cartesian_class(kin, plan.x, plan.q, plan.xi_plan, DEXTAR.eps_q, safety=0.5)
 

@@ -150,7 +150,7 @@ def test_planning_run_at_one_metre_per_second(speed, certified):
     from crosscert.robots import KinematicModel
 
     kin = KinematicModel(DEXTAR)
-    b = PlanningBounds().resolved(DEXTAR)
+    b = PlanningBounds().for_robot(DEXTAR)
     plan = plan_crossing(kin, benchmark_task(entry), speed, b)
     cls = execution_class(kin, plan, b)
     s = tracker_settings(DEXTAR, b, derived_a_max(plan, b, DEXTAR), cls)

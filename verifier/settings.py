@@ -6,11 +6,12 @@ the loops over it (:mod:`verifier.tracker`) share them without an import cycle.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import InitVar, dataclass
 from enum import Enum
 
 import numpy as np
 
+from crosscert.robots.assumptions import UNSET, Assumptions, held, reader
 from crosscert.robots.errors import InputError
 
 
@@ -50,41 +51,36 @@ class VelocityModel(str, Enum):
         return self.value
 
 
-@dataclass(frozen=True, eq=False)
+#: The tracker's view of its :class:`~robots.assumptions.Assumptions`: these
+#: attribute names of :class:`TrackerSettings` read the held value.
+ASSUMED = ("t_s", "eps_q", "a_max", "v_max", "xd0", "eps_q_fast", "drift_rate")
+
+@dataclass(frozen=True, eq=False, kw_only=True)
 class TrackerSettings:
-    """Bounds and options of the tracker.
+    """The tracker's assumptions (one :class:`~robots.assumptions.Assumptions`) and its options.
+
+    Built from the assumptions' fields by keyword (``t_s``, ``eps_q``,
+    ``a_max``, ``v_max``, ``xd0``, ``eps_q_fast``, ``drift_rate``: see
+    :class:`~robots.assumptions.Assumptions` for their units and rules), or
+    from a built value (``assumptions=``); those names read the held value
+    back as ``(n,)`` arrays (``t_s`` a float; ``v_max``/``xd0`` ``inf`` where
+    there is no bound; ``eps_q_fast``/``drift_rate`` ``None`` without a drift
+    model).  Everything is checked once, here.
 
     Parameters
     ----------
-    t_s : float
-        Sampling period, s.
-    eps_q : float or array (n,)
-        Encoder error bound, rad: ``|q_meas - q_true| <= eps_q``.
-    a_max : array (n,)
-        End-effector acceleration bound, m/s^2 (componentwise ``|xdd_i| <= a_max_i``).
-    v_max : array (n,)
-        End-effector velocity bound, m/s (``inf`` = none).
-    xd0 : array (n,)
-        Initial velocity bound, m/s: ``|xd(0)| <= xd0`` (the paper's 0.1 m/s).
+    assumptions : Assumptions, optional
+        The bounds of the run (else built from the keyword fields).
     velocity_model : VelocityModel
         ``SOUND`` (default), ``JOINT_FD`` or ``PAPER`` (quantisation only, unsound).
     baselines : tuple of int
         Sample spans ``j`` used by the ``SOUND`` model (each gives a sound
-        enclosure; they are intersected).
+        enclosure; they are intersected); stored sorted, without repeats.
     qdd_bound : float or array (n,) or None
-        ``JOINT_FD`` only: assumed bound on ``|qdd|``, rad/s^2.  ``None``
-        (default) derives a bound at every step from the boxes and ``a_max``;
-        a number is an assumption the user vouches for (intersected with the
-        derived one).
-    eps_q_fast, drift_rate : float or array (n,), optional
-        A reading error that drifts slowly (``SOUND`` model only): the error
-        ``e_k = q_meas,k - q_true,k`` is, besides ``|e_k| <= eps_q``, the sum
-        of a part bounded by ``eps_q_fast`` (rad) and a part that changes by at
-        most ``drift_rate`` rad/s, so that a difference over ``j`` samples errs
-        by at most ``min(2 eps_q, 2 eps_q_fast + drift_rate j t_s)``.  Both
-        ``None`` (default): readings err independently, ``2 eps_q``.  Planning
-        uses it for executions whose joints follow the plan up to a slowly
-        varying geometry term (``planner.execution``).
+        ``JOINT_FD`` only: assumed bound on ``|qdd|``, joint units per s^2.
+        ``None`` (default) derives a bound at every step from the boxes and
+        ``a_max``; a number is an assumption the user vouches for (intersected
+        with the derived one).
     keep_xi : bool
         Keep the calibration box contracted across steps.
     split_boxes : int
@@ -109,16 +105,10 @@ class TrackerSettings:
         The fixpoint stops when no box width shrinks by more than this fraction.
     """
 
-    t_s: float
-    eps_q: float | np.ndarray
-    a_max: np.ndarray
-    v_max: np.ndarray | None = None
-    xd0: np.ndarray | None = None
+    assumptions: Assumptions | None = None
     velocity_model: VelocityModel = VelocityModel.SOUND
     baselines: tuple = (1, 2, 4, 8, 16)
     qdd_bound: float | np.ndarray | None = None
-    eps_q_fast: float | np.ndarray | None = None
-    drift_rate: float | np.ndarray | None = None
     keep_xi: bool = False
     split_boxes: int = 64
     split_tol: float = 2e-4
@@ -126,54 +116,58 @@ class TrackerSettings:
     xi_splits: tuple | None = None
     max_iter: int = 6
     rel_tol: float = 0.02
+    t_s: InitVar[float] = UNSET
+    eps_q: InitVar[float | np.ndarray] = UNSET
+    a_max: InitVar[np.ndarray] = UNSET
+    v_max: InitVar[np.ndarray | None] = UNSET
+    xd0: InitVar[np.ndarray | None] = UNSET
+    eps_q_fast: InitVar[float | np.ndarray | None] = UNSET
+    drift_rate: InitVar[float | np.ndarray | None] = UNSET
 
-    @classmethod
-    def for_robot(cls, robot, **overrides) -> "TrackerSettings":
-        """The robot's default bounds (``t_s``, ``eps_q``, ``a_max``, ``xd0``,
-        ``xi_splits``), with keyword overrides (``None`` values are ignored)."""
-        args = dict(t_s=robot.t_s, eps_q=robot.eps_q, a_max=robot.a_max, xd0=robot.xd0,
-                    xi_splits=getattr(robot, "xi_splits", None))
-        args.update({k: v for k, v in overrides.items() if v is not None})
-        return cls(**args)
-
-    def validated(self, n: int) -> "TrackerSettings":
-        """Check values and broadcast vectors to shape ``(n,)``."""
-
-        def vec(v, name, default=None, allow_inf=False):
-            if v is None:
-                v = default
-            a = np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)).copy()
-            if np.any(np.isnan(a)) or np.any(a < 0) or (not allow_inf and not np.all(np.isfinite(a))):
-                raise InputError(f"{name} must be {'non-negative' if allow_inf else 'finite and non-negative'}, got {v}")
-            return a
-
-        if not (np.isfinite(self.t_s) and self.t_s > 0):
-            raise InputError(f"sampling period t_s must be positive and finite, got {self.t_s}")
+    def __post_init__(self, *assumed) -> None:
+        set_ = object.__setattr__  # frozen: normalise once
+        set_(self, "assumptions", held(self.assumptions, dict(zip(ASSUMED, assumed))))
+        n = self.assumptions.n
         if int(self.max_iter) < 1:
             raise InputError("max_iter must be at least 1")
-        qdd = None if self.qdd_bound is None else vec(self.qdd_bound, "qdd_bound", allow_inf=True)
-        splits = None
+        set_(self, "max_iter", int(self.max_iter))
+        set_(self, "velocity_model", VelocityModel(self.velocity_model))
+        if self.qdd_bound is not None:
+            q = np.broadcast_to(np.asarray(self.qdd_bound, dtype=np.float64), (n,)).copy()
+            if np.any(np.isnan(q)) or np.any(q < 0):
+                raise InputError(f"qdd_bound must be non-negative, got {self.qdd_bound}")
+            q.setflags(write=False)
+            set_(self, "qdd_bound", q)
         if self.xi_splits is not None:
             splits = tuple(int(v) for v in self.xi_splits)
             if any(v < 1 for v in splits):
                 raise InputError(f"xi_splits must be positive integers, got {self.xi_splits}")
-        if (self.eps_q_fast is None) != (self.drift_rate is None):
-            raise InputError("eps_q_fast and drift_rate go together: give both or neither")
-        fast = None if self.eps_q_fast is None else vec(self.eps_q_fast, "eps_q_fast")
-        rate = None if self.drift_rate is None else vec(self.drift_rate, "drift_rate")
+            set_(self, "xi_splits", splits)
         base = tuple(sorted({int(j) for j in self.baselines}))
         if not base or base[0] < 1:
             raise InputError(f"baselines must be positive sample counts, got {self.baselines}")
-        return replace(
-            self,
-            eps_q=vec(self.eps_q, "eps_q"),
-            a_max=vec(self.a_max, "a_max"),
-            v_max=vec(self.v_max, "v_max", np.inf, allow_inf=True),
-            xd0=vec(self.xd0, "xd0", np.inf, allow_inf=True),
-            velocity_model=VelocityModel(self.velocity_model),
-            qdd_bound=qdd,
-            eps_q_fast=fast,
-            drift_rate=rate,
-            baselines=base,
-            xi_splits=splits,
-        )
+        set_(self, "baselines", base)
+
+    @classmethod
+    def for_robot(cls, robot, **overrides) -> "TrackerSettings":
+        """The robot's default bounds (``t_s``, ``eps_q``, ``a_max``, ``xd0``) and
+        ``xi_splits``, with keyword overrides of assumptions or options (``None`` values are ignored)."""
+        given = {k: v for k, v in overrides.items() if v is not None}
+        assumed = {k: given.pop(k) for k in ASSUMED if k in given}
+        if "assumptions" not in given:
+            fast, rate = assumed.pop("eps_q_fast", None), assumed.pop("drift_rate", None)
+            drift = None if fast is None and rate is None else (fast, rate)
+            given["assumptions"] = Assumptions.for_robot(robot, drift=drift, **assumed)
+        given.setdefault("xi_splits", getattr(robot, "xi_splits", None))
+        return cls(**given)
+
+    def validated(self, n: int) -> "TrackerSettings":
+        """These settings, for a model of ``n`` coordinates (checked at construction: only the dimension here)."""
+        if n != self.assumptions.n:
+            raise InputError(f"the settings bound {self.assumptions.n} coordinates, the model has {n}")
+        return self
+
+
+for _name in ASSUMED:  # after @dataclass: the InitVar defaults live in __init__, the names read the value
+    setattr(TrackerSettings, _name, reader(_name))
+del _name

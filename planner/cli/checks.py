@@ -28,8 +28,13 @@ from crosscert.robots.errors import InputError
 from crosscert.robots.registry import get_entry
 from crosscert.verifier.files import check_output_path
 
+from crosscert.robots.assumptions import check_bound
+
+from ..pipeline import V_LOW
 from ..simulate import ramp_length
+from ..simulate.run import A_PEAK as SIM_A_PEAK, CRUISE, REST_END
 from ..study import COLUMNS, GRID_KEYS, read_results, study_cases
+from ..sweep import T_REST as SWEEP_T_REST
 from ..task import Method, PlanningBounds, benchmark_task
 from .parser import TABLE2_SPEEDS
 from .setup import floats_option
@@ -48,9 +53,15 @@ _BYTES_PER_SAMPLE_JOINT = 24 * 8
 #: Tracker cost per sample and scenario, s (benchmarks/README.md: ~0.1 ms,
 #: with a margin for slower machines).
 _TRACK_S_PER_SAMPLE = 5e-4
-#: Largest encoder error or tracking error accepted, rad: 0.05 rad is an
-#: encoder of ~126 counts per turn, coarser than any robot joint we know of.
+#: Largest encoder error or tracking error accepted, in the joint's unit (rad or m): 0.05 rad is an
+#: encoder of ~126 counts per turn, coarser than any robot joint we know of; 0.05 m of a leg's stroke likewise.
 MAX_JOINT_ERROR = 0.05
+#: Largest acceleration bound accepted, in the axis' unit per s^2 (beyond is a typo).
+MAX_ACCELERATION = 1e6
+#: Largest initial speed bound accepted, in the axis' unit per s.
+MAX_INITIAL_SPEED = 1e3
+#: Longest sampling period accepted, s.
+MAX_T_S = 10.0
 #: Speeds at the singularity accepted, m/s (a plan or simulation beyond is a typo).
 MAX_SPEED = 20.0
 #: Finest resolution of v_min and of the refutation bound, m/s: each halving
@@ -60,24 +71,28 @@ MIN_TOL = 1e-4
 MAX_MONTE_CARLO = 100_000
 #: Largest ``monitor --lag``, samples: each sample near the locus costs about 0.2-0.4 ms per sample of lag.
 MAX_LAG = 1000
-#: Half-length of the cruise of ``simulate`` runs (planner.simulate default), m.
-_CRUISE = 5e-3
-#: Rest after the motion of ``simulate`` runs (planner.simulate default), s.
-_REST_END = 0.1
-#: Rest before and after a plan (PlanningBounds default), s.
-_PLAN_REST = PlanningBounds().t_rest
-#: Peak acceleration of the sweep's ramps (planner.sweep default), m/s^2.
-SWEEP_A_PEAK = 60.0
 #: Largest design study, cases (each is a certification of seconds to minutes).
 MAX_CASES = 10_000
 #: Largest local cluster of ``study --workers``, worker processes.
 MAX_WORKERS = 256
-#: Slowest speed a certification tries (certify_crossing default), m/s.
-_V_LOW = 0.6
 #: Largest ``width_scale`` of a study: a calibration box 100 times the robot's is far beyond any calibration.
 MAX_WIDTH_SCALE = 100.0
 #: Schemes of the Dask scheduler addresses ``study --scheduler`` takes with a HOST:PORT.
 _SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def _bound(option: str, field: str, v, robot, cap: float, *, axis: int | None = None) -> None:
+    """A bound given on the command line (for every axis, or for ``axis``): admissible by the rule of its
+    assumption (robots.assumptions, the one owner), and at most ``cap``, a typo guard of the CLI in its unit."""
+    if v is None:
+        return
+    units = robot.assumptions.unit(field) if axis is None else robot.acceleration_units[axis]
+    try:
+        check_bound(field, v, robot.n, joint_units=robot.joint_units, pose_units=robot.pose_units)
+        if v > cap:
+            raise InputError(f"at most {cap:g} {units}")
+    except InputError as exc:
+        raise InputError(f"{option} = {v:g} {units} is out of range: {exc}") from None
 
 
 def _in(name: str, v, lo: float, hi: float, *, lo_open: bool = True, unit: str = "") -> None:
@@ -101,8 +116,8 @@ def _a_max_per_axis(a, robot) -> None:
                          f"number cannot bound them all; give one per axis, e.g. --a-max "
                          f"{','.join(f'{v:g}' for v in robot.a_max)} (its physical a_max)")
     for i, v in enumerate(a.a_max):
-        unit = units[0] if len(a.a_max) == 1 else units[i]
-        _in("--a-max" if len(a.a_max) == 1 else f"--a-max (axis {i + 1})", v, 0.0, 1e6, unit=f" {unit}")
+        option = "--a-max" if len(a.a_max) == 1 else f"--a-max (axis {i + 1})"
+        _bound(option, "a_max", v, robot, MAX_ACCELERATION, axis=None if len(a.a_max) == 1 else i)
     if len(a.a_max) == 1 and a.a_max[0] < a.a_peak:
         raise InputError(f"--a-max {a.a_max[0]:g} {units[0]} is below --a-peak {a.a_peak:g} {units[0]}: the plans "
                          "accelerate up to a_peak, so no plan would satisfy the bound")
@@ -161,10 +176,10 @@ def _tracker(a, robot) -> None:
             raise InputError(f"{name} {value:g} bounds every pose axis with one number, but robot {robot.name}'s "
                              f"axes are in {', '.join(robot.pose_units)}: omit {name} to use the robot's per-axis "
                              f"{field} ({', '.join(f'{v:g}' for v in getattr(robot, field))})")
-    _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
-    _in("--a-max", a.a_max, 0.0, 1e6, unit=" m/s^2")
-    _in("--xd0", a.xd0, 0.0, 1e3, lo_open=False, unit=" m/s")
-    _in("--t-s", getattr(a, "t_s", None), 0.0, 10.0, unit=" s")
+    _bound("--eps-q", "eps_q", a.eps_q, robot, MAX_JOINT_ERROR)
+    _bound("--a-max", "a_max", a.a_max, robot, MAX_ACCELERATION)
+    _bound("--xd0", "xd0", a.xd0, robot, MAX_INITIAL_SPEED)
+    _bound("--t-s", "t_s", getattr(a, "t_s", None), robot, MAX_T_S)
     if a.x0 is not None:
         v = floats_option(a.x0, 2 * robot.n, "--x0")
         for i, (lo, hi) in enumerate(zip(v[0::2], v[1::2])):
@@ -211,7 +226,7 @@ def check_command(a, entry) -> None:
             direction = entry.benchmark_crossing().direction
         _a_peak_within_robot(a.a_peak, direction, robot)
         T = ramp_length(a.v_sing, a.a_peak)[0]
-        duration = a.t_rest + 2 * T + 2 * _CRUISE / a.v_sing + _REST_END
+        duration = a.t_rest + 2 * T + 2 * CRUISE / a.v_sing + REST_END
         _budget(f"simulate at --v-sing {a.v_sing:g} m/s, --a-peak {a.a_peak:g} m/s^2, --t-rest {a.t_rest:g} s",
                 duration / robot.t_s, robot.n)
         _output_file(a.output, "--output", (".csv",))
@@ -221,12 +236,12 @@ def check_command(a, entry) -> None:
         _a_peak_within_robot(a.a_peak, direction, robot)
     if cmd == "plan":
         T = ramp_length(a.v_sing, a.a_peak)[0]
-        duration = 2 * _PLAN_REST + 2 * T + length / a.v_sing  # rests, ramps, the whole segment at v_sing at most
+        duration = 2 * PlanningBounds.t_rest + 2 * T + length / a.v_sing  # rests, ramps, the whole segment at v_sing at most
         _budget(f"plan at --v-sing {a.v_sing:g} m/s", duration / robot.t_s, robot.n)
         _output_file(a.output, "--output", (".csv",))
         return
     if cmd == "certify":
-        _in("--eps-q", a.eps_q, 0.0, MAX_JOINT_ERROR, unit=" rad")
+        _bound("--eps-q", "eps_q", a.eps_q, robot, MAX_JOINT_ERROR)
         _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
         _a_max_per_axis(a, robot)
         _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
@@ -235,7 +250,7 @@ def check_command(a, entry) -> None:
         _in("--monte-carlo", a.monte_carlo, 0, MAX_MONTE_CARLO, lo_open=False)
         # the slowest plan bounds every batch: samples of a crossing at v_low
         T = ramp_length(a.v_low, a.a_peak)[0]
-        samples = (2 * _PLAN_REST + 2 * T + length / a.v_low) / robot.t_s
+        samples = (2 * PlanningBounds.t_rest + 2 * T + length / a.v_low) / robot.t_s
         _budget(f"certify down to --v-low {a.v_low:g} m/s with --monte-carlo {a.monte_carlo}", samples, robot.n,
                 scenarios=max(a.monte_carlo, 1), tracked=True, hint="raise --v-low or lower --monte-carlo")
         _output_folder(a.out, "--out", ("certificate.json",))
@@ -247,8 +262,8 @@ def check_command(a, entry) -> None:
         if len(a.speeds_list) > 100:
             raise InputError(f"--speeds: {len(a.speeds_list)} speeds; at most 100")
         slowest = min(a.speeds_list)
-        T = ramp_length(slowest, SWEEP_A_PEAK)[0]
-        _budget(f"sweep at {slowest:g} m/s", (0.1 + 2 * T + 0.07 / slowest + _REST_END) / robot.t_s, robot.n,
+        T = ramp_length(slowest, SIM_A_PEAK)[0]
+        _budget(f"sweep at {slowest:g} m/s", (SWEEP_T_REST + 2 * T + 0.07 / slowest + REST_END) / robot.t_s, robot.n,
                 scenarios=2 * len(a.speeds_list), tracked=True, hint="drop the slowest speeds")
         _output_folder(a.out, "--out", ())
 
@@ -323,17 +338,19 @@ def _study(a) -> None:
         raise InputError(f"{a.grid}: the grid has {len(cases)} cases, more than {MAX_CASES}; drop some values")
     _same_study(a.output, cases, a.grid)
     values = {k: [c.values[k] for c in cases] for k in grid}
+    study_robot = get_entry(a.robot).robot
     for v in values.get("eps_q", ()):
-        _in("[grid] eps_q", v, 0.0, MAX_JOINT_ERROR, unit=" rad")
+        _bound("[grid] eps_q", "eps_q", v, study_robot, MAX_JOINT_ERROR)
     for v in values.get("a_max", ()):
-        _in("[grid] a_max", v, 0.0, 1e6, unit=" m/s^2")
-    for k, unit in (("eps_q", " rad"), ("tracking_error", " rad")):
-        if k in bounds and not isinstance(bounds[k], bool) and isinstance(bounds[k], (int, float)):
-            _in(f"[bounds] {k}", bounds[k], 0.0, MAX_JOINT_ERROR, lo_open=k == "eps_q", unit=unit)
+        _bound("[grid] a_max", "a_max", v, study_robot, MAX_ACCELERATION)
+    if isinstance(bounds.get("eps_q"), (int, float)) and not isinstance(bounds["eps_q"], bool):
+        _bound("[bounds] eps_q", "eps_q", bounds["eps_q"], study_robot, MAX_JOINT_ERROR)
+    if isinstance(bounds.get("tracking_error"), (int, float)) and not isinstance(bounds["tracking_error"], bool):
+        _in("[bounds] tracking_error", bounds["tracking_error"], 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
     if isinstance(bounds.get("a_peak"), (int, float)) and not isinstance(bounds.get("a_peak"), bool):
         _in("[bounds] a_peak", bounds["a_peak"], 0.0, 1e6, unit=" m/s^2")
     _in("[certify] tol", cert.get("tol"), MIN_TOL, 1.0, lo_open=False, unit=" m/s")
-    v_low = cert.get("v_low", _V_LOW)
+    v_low = cert.get("v_low", V_LOW)
     _in("[certify] v_low", v_low, 0.0, MAX_SPEED, unit=" m/s")
     _in("[certify] v_high", cert.get("v_high"), v_low, MAX_SPEED, unit=" m/s")
     _in("[certify] monte_carlo_runs", cert.get("monte_carlo_runs"), 0, MAX_MONTE_CARLO, lo_open=False)
@@ -345,7 +362,7 @@ def _study(a) -> None:
         dynamic = bounds.get("method") == Method.DYNAMIC or Method.DYNAMIC in values.get("method", ())
         kw = dict(bounds, dynamics=entry.require_dynamics() if dynamic else None)
         try:
-            b = PlanningBounds(**kw).resolved(entry.robot)
+            b = PlanningBounds(**kw).for_robot(entry.robot)
         except TypeError as exc:  # a value of the wrong kind deep inside numpy
             raise InputError(f"{a.grid}: [bounds]: {exc}") from None
         # the slowest plan of a case bounds its batches: a crossing at v_low with the lowest ramps

@@ -14,7 +14,12 @@ from crosscert.verifier.trajfile import parse_number
 from crosscert.verifier.window import Reasoning
 
 from ..execution import ExecutionKind
-from ..task import Method
+from ..simulate.run import A_PEAK as SIM_A_PEAK
+from ..task import Method, PlanningBounds
+from ..pipeline import V_LOW
+
+#: Peak acceleration of planned ramps: the PlanningBounds default, m/s^2.
+PLAN_A_PEAK = PlanningBounds.a_peak
 
 __all__ = ["build_parser", "robot_of", "ACC_UNIT", "VEL_UNIT", "UsageError", "TABLE2_SPEEDS", "number", "numbers",
            "count"]
@@ -96,9 +101,18 @@ def _values(v) -> str:
     return f"{vals[0]:g}" if len(set(vals)) == 1 else "(" + ", ".join(f"{x:g}" for x in vals) + ")"
 
 
-def _robot_default(robot: str, attr: str, unit: str) -> str:
-    """``help`` text of a default the robot supplies, with its value for ``robot``."""
-    return f"default of {robot}: {_values(getattr(ROBOTS[robot].robot, attr))} {unit}; see crosscert robots"
+def _robot_default(robot: str, attr: str) -> str:
+    """``help`` text of a default the robot supplies: its value and unit for ``robot`` (from its assumptions)."""
+    a = ROBOTS[robot].robot.assumptions
+    value = a.t_s if attr == "t_s" else getattr(a, attr)
+    if np.ndim(value) and np.all(value == value[0]):
+        value = value[0]
+    return f"default of {robot}: {_values(value)} {a.unit(attr)}; see crosscert robots"
+
+
+def _unit(robot: str, attr: str) -> str:
+    """Unit of assumption ``attr`` for ``robot``, for ``help`` (one per coordinate when they differ)."""
+    return ROBOTS[robot].robot.assumptions.unit(attr)
 
 
 def _robot_option(p):
@@ -113,13 +127,13 @@ def _tracker_options(p, robot):
     g.add_argument("--x0", help="initial pose box XLO,XHI,YLO,YHI,... (m); write --x0=-0.01,... when it starts with a minus")
     p.add_argument("--a-max", type=number,
                    help="end-effector acceleration bound, m/s^2, every pose axis (robots whose axes are all lengths; "
-                        + _robot_default(robot, "a_max", ACC_UNIT) + ")")
-    p.add_argument("--eps-q", type=number, help="encoder error bound, rad (" + _robot_default(robot, "eps_q", "rad") + ")")
+                        + _robot_default(robot, "a_max") + ")")
+    p.add_argument("--eps-q", type=number, help=f"encoder error bound, {_unit(robot, 'eps_q')} (" + _robot_default(robot, "eps_q") + ")")
     p.add_argument("--xd0", type=number, help="initial velocity bound, m/s, every pose axis (robots whose axes are all "
-                                              "lengths; " + _robot_default(robot, "xd0", VEL_UNIT) + ")")
+                                              "lengths; " + _robot_default(robot, "xd0") + ")")
     p.add_argument("--t-s", type=number, help="sampling period, s: every step of the time column (in s) must equal "
                                               "it (default: inferred from the time column, the first step fixing it; "
-                                              + _robot_default(robot, "t_s", "s") + ")")
+                                              + _robot_default(robot, "t_s") + ")")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
                    help="joint-data error model (paper = quantisation only, NOT sound)")
     p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
@@ -175,7 +189,7 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
     s.add_argument("--seed", type=count, default=0,
                    help="seed of the true geometry drawn in the calibration box (0: its centre)")
     s.add_argument("--t-rest", type=number, default=0.3, help="rest before the motion, s")
-    s.add_argument("--a-peak", type=number, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    s.add_argument("--a-peak", type=number, default=SIM_A_PEAK, help="peak acceleration of the ramps, m/s^2")
     s.add_argument("-o", "--output", required=True, help="CSV file to write")
 
     ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound")
@@ -185,14 +199,14 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
                          "comma-separated; one number for every axis when they share a unit (default: per axis, the "
                          "planned peak + 10%% where the plan accelerates, else the robot's tracking margin or a_max; "
                          "docs/planning.md)")
-    ce.add_argument("--eps-q", type=number, help="encoder error bound, rad (" + _robot_default(robot, "eps_q", "rad") + ")")
+    ce.add_argument("--eps-q", type=number, help=f"encoder error bound, {_unit(robot, 'eps_q')} (" + _robot_default(robot, "eps_q") + ")")
     ce.add_argument("--tracking-error", type=number, default=0.0, help="extra joint tracking error allowed, rad")
     ce.add_argument("--execution", choices=[k.value for k in ExecutionKind], default=ExecutionKind.CARTESIAN.value,
                     help="executions the certificate covers: 'cartesian' follow the planned path with any geometry "
                          "in the calibration box; 'joint' keep the joints within eps_q + tracking error of the plan")
-    ce.add_argument("--a-peak", type=number, default=60.0, help="peak acceleration of the planned ramps, m/s^2")
+    ce.add_argument("--a-peak", type=number, default=PLAN_A_PEAK, help="peak acceleration of the planned ramps, m/s^2")
     ce.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
-    ce.add_argument("--v-low", type=number, default=0.6, help="slowest speed tried, m/s")
+    ce.add_argument("--v-low", type=number, default=V_LOW, help="slowest speed tried, m/s")
     ce.add_argument("--v-high", type=number, help="fastest speed tried, m/s (default: the fastest the segment allows)")
     ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
     ce.add_argument("--monte-carlo", type=count, default=50, help="simulated executions at v_min (0 skips)")
@@ -205,7 +219,7 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
     pl = command("plan", "plan a crossing at a given speed and write it as a trajectory file")
     _task_options(pl)
     pl.add_argument("--v-sing", type=number, required=True, help="speed at the singularity, m/s")
-    pl.add_argument("--a-peak", type=number, default=60.0, help="peak acceleration of the ramps, m/s^2")
+    pl.add_argument("--a-peak", type=number, default=PLAN_A_PEAK, help="peak acceleration of the ramps, m/s^2")
     pl.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
     pl.add_argument("-o", "--output", required=True, help="CSV file to write (t, q1..qn, x1..xn)")
 

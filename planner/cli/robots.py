@@ -10,8 +10,6 @@ from crosscert.robots.registry import ROBOTS, get_entry
 from crosscert.robots.validation import validate
 from crosscert.verifier.validation import INTERVAL_CHECKS
 
-from .parser import ACC_UNIT, VEL_UNIT
-
 __all__ = ["robots"]
 
 
@@ -21,8 +19,9 @@ def _row(entry) -> str:
     extras = [name for name, has in (("dynamics", entry.dynamics is not None),
                                       ("benchmark crossing", entry.benchmark is not None),
                                       ("reference motion", entry.motion is not None)) if has]
-    return (f"{entry.name}: n = {r.n}, m = {r.m}, t_s = {r.t_s:g} s, eps_q = {r.eps_q:g} rad, "
-            f"a_max = {fmt(r.a_max)} {ACC_UNIT}, xd0 = {fmt(r.xd0)} {VEL_UNIT}; "
+    a = r.assumptions  # the units of each bound come from it
+    return (f"{entry.name}: n = {r.n}, m = {r.m}, t_s = {r.t_s:g} s, eps_q = {r.eps_q:g} {a.unit('eps_q')}, "
+            f"a_max = {fmt(r.a_max)} {a.unit('a_max')}, xd0 = {fmt(r.xd0)} {a.unit('xd0')}; "
             f"ships {', '.join(extras) if extras else 'no task'}")
 
 

@@ -30,13 +30,14 @@ search ended (:class:`SearchOutcome`); the result records are in
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import InitVar, dataclass
 from enum import StrEnum
 from types import MappingProxyType
 
 import numpy as np
 
 from crosscert.robots import validators as V
+from crosscert.robots.assumptions import UNSET, Assumptions, held, reader
 from crosscert.robots.errors import InputError
 from crosscert.robots.kinematics import KinematicModel
 
@@ -158,51 +159,64 @@ def ipopt_outcome(status: str) -> SearchOutcome:
 
 
 # ------------------------------------------------------------------ inputs
-@dataclass(frozen=True, eq=False)
+#: RecordingBounds' names of the fields of its Assumptions.
+_ASSUMED = {"t_s": "t_s", "eps_q": "eps_q", "a_max": "a_max", "xi_lo": "xi_lo", "xi_hi": "xi_hi",
+            "v0_max": "xd0", "v_max": "v_max"}
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
 class RecordingBounds:
     """Measurement intervals of one recording and the assumptions a tracker makes about it.
+
+    The bounds are one :class:`~robots.assumptions.Assumptions` (checked
+    there, once): give it as ``assumptions=`` or give its fields by the names
+    below, which also read it back.
 
     Parameters
     ----------
     q_meas : ndarray, shape (K, n)
-        Encoder samples, rad; the true joints at ``t_k = k t_s`` lie in
+        Encoder samples, joint units; the true joints at ``t_k = k t_s`` lie in
         ``q_meas[k] +- eps_q``.
+    m0 : int
+        Initial assembly mode, +1 or -1 (``KinematicModel.mode`` convention).
+    assumptions : Assumptions, optional
+        The bounds (with a calibration box); else built from the fields:
     t_s : float
         Sampling period, s.
     eps_q : ndarray, shape (n,)
-        Encoder error bounds, rad (a number stands for ``n`` equal bounds).
+        Encoder error bounds, joint units (a number stands for ``n`` equal bounds).
     a_max : ndarray, shape (n,)
-        Componentwise bound on ``|x''|``, m/s^2 (a number: ``n`` equal bounds).
+        Componentwise bound on ``|x''|``, pose units per s^2 (a number: ``n`` equal bounds).
     xi_lo, xi_hi : ndarray, shape (m,)
         Calibration box of the geometry, SI.
-    m0 : int
-        Initial assembly mode, +1 or -1 (``KinematicModel.mode`` convention).
     v0_max : ndarray, shape (n,), optional
-        Bound on ``|x'(0)|``, m/s (the tracker's initial velocity box); none if ``None``.
+        Bound on ``|x'(0)|``, pose units per s (the tracker's initial velocity box; the assumptions' ``xd0``);
+        none if ``None``.
     v_max : ndarray, shape (n,), optional
-        Bound on ``|x'(t)|``, m/s; none if ``None``.
+        Bound on ``|x'(t)|``, pose units per s; none if ``None``.
     x_lo, x_hi : ndarray, shape (n,), optional
-        Box the pose stays in, m; none if ``None``.
+        Box the pose stays in, SI; none if ``None``.
 
     Raises
     ------
     InputError
-        On wrong shapes, non-finite or non-positive bounds, an empty box or ``m0`` not +-1.
+        On wrong shapes, a bound its rule refuses, no calibration box, an empty box or ``m0`` not +-1.
     """
 
     q_meas: np.ndarray
-    t_s: float
-    eps_q: np.ndarray
-    a_max: np.ndarray
-    xi_lo: np.ndarray
-    xi_hi: np.ndarray
     m0: int
-    v0_max: np.ndarray | None = None
-    v_max: np.ndarray | None = None
+    assumptions: Assumptions | None = None
     x_lo: np.ndarray | None = None
     x_hi: np.ndarray | None = None
+    t_s: InitVar[float] = UNSET
+    eps_q: InitVar[np.ndarray] = UNSET
+    a_max: InitVar[np.ndarray] = UNSET
+    xi_lo: InitVar[np.ndarray] = UNSET
+    xi_hi: InitVar[np.ndarray] = UNSET
+    v0_max: InitVar[np.ndarray | None] = UNSET
+    v_max: InitVar[np.ndarray | None] = UNSET
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, *assumed) -> None:
         set_ = object.__setattr__  # frozen: normalise once
         try:
             q = np.array(self.q_meas, dtype=float)
@@ -213,23 +227,15 @@ class RecordingBounds:
         n = q.shape[1]
         q.setflags(write=False)
         set_(self, "q_meas", q)
-        set_(self, "t_s", V.positive("t_s", self.t_s))
-        # V.vector returns new read-only arrays: nobody can change a bound afterwards.
-        set_(self, "eps_q", V.vector("eps_q", self.eps_q, n, broadcast=True, positive=True))
-        set_(self, "a_max", V.vector("a_max", self.a_max, n, broadcast=True, positive=True))
-        lo, hi = V.vector("xi_lo", self.xi_lo), V.vector("xi_hi", self.xi_hi)
-        if lo.shape != hi.shape or lo.size == 0:
-            raise InputError("xi_lo and xi_hi must be finite vectors of the same length")
-        if np.any(lo > hi):
-            raise InputError(f"calibration box is empty: xi_lo = {lo.tolist()}, xi_hi = {hi.tolist()}")
-        set_(self, "xi_lo", lo)
-        set_(self, "xi_hi", hi)
+        given = {_ASSUMED[k]: v for k, v in zip(_ASSUMED, assumed)}
+        a = held(self.assumptions, given, n=n)
+        if a.n != n or a.xi_box is None:
+            raise InputError(f"a recording of {n} joints needs assumptions of {n} coordinates with a calibration "
+                             f"box, got {a.n} coordinates{'' if a.xi_box is not None else ' and no box'}")
+        set_(self, "assumptions", a)
         if self.m0 not in (1, -1):
             raise InputError(f"m0 must be +1 or -1, got {self.m0!r}")
         set_(self, "m0", int(self.m0))
-        for nm in ("v0_max", "v_max"):
-            if getattr(self, nm) is not None:
-                set_(self, nm, V.vector(nm, getattr(self, nm), n, broadcast=True, positive=True))
         if (self.x_lo is None) != (self.x_hi is None):
             raise InputError("give both x_lo and x_hi, or neither")
         if self.x_lo is not None:
@@ -271,11 +277,14 @@ class RecordingBounds:
         if not isinstance(kin, KinematicModel):
             raise InputError(f"kin must be a KinematicModel, got {type(kin).__name__}")
         r = kin.robot
-        args = {"t_s": r.t_s if t_s is None else t_s, "eps_q": r.eps_q, "a_max": r.a_max_array,
-                "xi_lo": r.xi_lo_array, "xi_hi": r.xi_hi_array, "m0": m0, "v0_max": np.array(r.xd0),
-                "x_lo": r.x_lo_array, "x_hi": r.x_hi_array}
-        args.update({k: v for k, v in overrides.items() if v is not None})
-        out = cls(q_meas=q_meas, **args)
+        given = {k: v for k, v in overrides.items() if v is not None}
+        own = {k: given.pop(k) for k in ("x_lo", "x_hi") if k in given}
+        if "assumptions" not in given:
+            box = (given.pop("xi_lo", r.xi_lo_array), given.pop("xi_hi", r.xi_hi_array))
+            given = {_ASSUMED[k]: v for k, v in given.items()}
+            given["assumptions"] = Assumptions.for_robot(r, t_s=t_s, xi_box=box, **given)
+        out = cls(q_meas=q_meas, m0=m0, x_lo=own.get("x_lo", r.x_lo_array), x_hi=own.get("x_hi", r.x_hi_array),
+                  **given)
         if out.q_meas.shape[1] != kin.n or out.xi_lo.shape != (kin.m,):
             raise InputError(f"q_meas must have {kin.n} columns and the box {kin.m} parameters")
         return out
@@ -284,6 +293,11 @@ class RecordingBounds:
     def n_samples(self) -> int:
         """Number of samples K."""
         return int(self.q_meas.shape[0])
+
+
+for _name, _field in _ASSUMED.items():  # after @dataclass: the names read the held assumptions
+    setattr(RecordingBounds, _name, reader(_field, none_if_inf=_name in ("v0_max", "v_max")))
+del _name, _field
 
 
 # ------------------------------------------------------------------ motion

@@ -21,7 +21,15 @@ from ..sampling import align_to_samples
 from .measure import Quantisation, quantise
 from .timelaw import RAMP_PEAK, TimeLaw, bounce_time_law, crossing_time_law, ramp_length
 
-__all__ = ["SimulatedRun", "simulate_crossing", "simulate_bounce", "simulate_motion", "max_v_sing"]
+__all__ = ["SimulatedRun", "simulate_crossing", "simulate_bounce", "simulate_motion", "max_v_sing", "A_PEAK",
+           "CRUISE", "REST_END"]
+
+#: Peak acceleration of the simulated speed ramps, m/s^2 (the paper's runs).
+A_PEAK = 60.0
+#: Half-length of the constant-speed cruise around the crossing, m.
+CRUISE = 5e-3
+#: Rest after the motion, s.
+REST_END = 0.1
 
 #: Largest joint change (rad) between the IK guess interpolated from the scan
 #: and the IK at a sample: more means the IK jumped to another branch.
@@ -263,8 +271,8 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
 
 def simulate_crossing(model: KinematicModel, crossing_point, direction, v_sing: float, *,
                       xi_true=None, t_s: float | None = None, eps_q: float | None = None,
-                      t_rest: float = 0.5, t_rest_end: float = 0.1, a_peak: float = 60.0,
-                      cruise: float = 5e-3, working_guess=None, seed=None,
+                      t_rest: float = 0.5, t_rest_end: float = REST_END, a_peak: float = A_PEAK,
+                      cruise: float = CRUISE, working_guess=None, seed=None,
                       quantisation: str = "floor", strict_xi: bool = True) -> SimulatedRun:
     """Simulate a straight crossing of the Type 2 locus: the assembly mode changes once.
 
@@ -323,8 +331,8 @@ def simulate_crossing(model: KinematicModel, crossing_point, direction, v_sing: 
 
 def simulate_bounce(model: KinematicModel, crossing_point, direction, v_sing: float, *,
                     xi_true=None, t_s: float | None = None, eps_q: float | None = None,
-                    t_rest: float = 0.5, t_rest_end: float = 0.1, a_peak: float = 60.0,
-                    cruise: float = 5e-3, working_guess=None, seed=None,
+                    t_rest: float = 0.5, t_rest_end: float = REST_END, a_peak: float = A_PEAK,
+                    cruise: float = CRUISE, working_guess=None, seed=None,
                     quantisation: str = "floor", strict_xi: bool = True, short: float = 0.0) -> SimulatedRun:
     """Simulate a failed crossing: the end-effector stops on (or ``short`` before) the true locus and comes back.
 
@@ -350,7 +358,7 @@ def simulate_bounce(model: KinematicModel, crossing_point, direction, v_sing: fl
 
 
 def max_v_sing(model: KinematicModel, crossing_point, direction, *, xi_true=None,
-               a_peak: float = 60.0, cruise: float = 5e-3, working_guess=None,
+               a_peak: float = A_PEAK, cruise: float = CRUISE, working_guess=None,
                bounce: bool = False, strict_xi: bool = True, short: float = 0.0) -> float:
     """Largest ``v_sing`` (m/s) whose crossing (or bounce) path stays valid.
 
