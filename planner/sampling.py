@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from crosscert.robots.assumptions import check_bound
 from crosscert.robots import validators as V
 
 __all__ = ["SampleAlignment", "align_to_samples"]
@@ -51,7 +52,7 @@ def align_to_samples(t_event: float, duration: float, t_s: float) -> SampleAlign
     t_s : float
         Sampling period, s.
     """
-    t_s = V.positive("t_s", t_s)
+    t_s = check_bound("t_s", t_s)
     t_event = V.number("t_event", t_event)
     duration = V.number("duration", duration)
     k = math.ceil(t_event / t_s - ALIGN_TOL)

@@ -33,17 +33,19 @@ class _Context:
     """What a rule needs besides the value: the dimension and the units, for shapes and messages."""
 
     n: int
-    joint_units: tuple[PoseUnit, ...]
-    pose_units: tuple[PoseUnit, ...]
+    joint_units: tuple[PoseUnit, ...] | None
+    pose_units: tuple[PoseUnit, ...] | None
 
     def per_joint(self) -> str:
-        return _unit_text(self.joint_units, "")
+        return _unit_text(self.joint_units, "", "each joint's unit (rad or m)")
 
     def per_axis(self, rate: str) -> str:
-        return _unit_text(self.pose_units, rate)
+        return _unit_text(self.pose_units, rate, f"each axis' unit{rate} (m{rate} or rad{rate})")
 
 
-def _unit_text(units, rate: str) -> str:
+def _unit_text(units, rate: str, unknown: str) -> str:
+    if units is None:
+        return unknown
     names = [f"{u.value}{rate}" for u in units]
     return names[0] if len(set(names)) == 1 else "(" + ", ".join(names) + ")"
 
@@ -140,18 +142,27 @@ RULES: dict[str, Callable] = {
 }
 
 
-def _units(value, n: int, name: str) -> tuple[PoseUnit, ...]:
-    units = (PoseUnit.RADIAN,) * n if value is None else tuple(PoseUnit(u) for u in value)
+def _units(value, n: int, name: str) -> tuple[PoseUnit, ...] | None:
+    if value is None:
+        return None
+    units = tuple(PoseUnit(u) for u in value)
     if len(units) != n:
         raise InputError(f"{name} needs one unit per coordinate ({n}), got {len(units)}")
     return units
 
 
-def check_bound(name: str, value, n: int, *, joint_units=None, pose_units=None):
-    """One field checked by its rule, outside an :class:`Assumptions` (an override given before the robot is
-    known, e.g. a planning option); returns the normalised value."""
+def check_bound(name: str, value, n: int | None = None, *, joint_units=None, pose_units=None):
+    """One field checked by its rule, outside an :class:`Assumptions` (a value given before the robot is
+    known, or a function's own argument); returns the normalised value.
+
+    Without ``n`` a single number is checked as such and returned as a float.
+    """
+    scalar = n is None and np.ndim(value) == 0
+    if n is None:
+        n = max(int(np.size(value)), 1)
     ctx = _Context(n, _units(joint_units, n, "joint_units"), _units(pose_units, n, "pose_units"))
-    return RULES[name](value, ctx)
+    out = RULES[name](value, ctx)
+    return float(out[0]) if scalar and isinstance(out, np.ndarray) else out
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -183,7 +194,7 @@ class Assumptions:
         over ``j`` samples errs by at most ``min(2 eps_q, 2 eps_q_fast +
         drift_rate j t_s)``.  ``None``: readings err independently.
     joint_units, pose_units : tuple of PoseUnit, optional
-        Units of the joints and pose axes, for messages (all rad when absent).
+        Units of the joints and pose axes, for messages (``None``: not known).
     n : int, optional
         Number of joints = pose axes; inferred from the longest vector given.
 

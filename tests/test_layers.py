@@ -137,3 +137,59 @@ def test_the_contract_sees_a_violation(tmp_path):
     found = _imports("verifier.mod", bad)
     assert ("planner.simulate", ("_vec",), 2) in found
     assert ("planner.cli", ("main",), 3) in found
+
+
+# ------------------------------------------------------------------ one owner of the assumptions
+#: The bounds robots.assumptions owns; only it decides whether a value of one is admissible.
+BOUNDS = {"eps_q", "t_s", "a_max", "xd0", "v_max", "v0_max", "eps_q_fast", "drift_rate"}
+ASSUMPTIONS_OWNER = "robots.assumptions"
+#: Argument checkers a bound may not be run through outside the owner (robots.validators).
+_CHECKERS = {"positive", "number", "vector", "floats"}
+
+
+def _bound_name(node) -> str | None:
+    while isinstance(node, ast.Subscript):
+        node = node.value
+    name = node.id if isinstance(node, ast.Name) else node.attr if isinstance(node, ast.Attribute) else None
+    return name if name in BOUNDS else None
+
+
+def _revalidations(tree) -> list[tuple[int, str]]:
+    """``(line, bound)`` of each sign check of a bound: ``bound < 0``-like comparisons with 0, and
+    ``positive("bound", ...)``-like calls of the argument checkers (a rule of its own)."""
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare) and all(isinstance(op, (ast.Lt, ast.LtE, ast.Gt, ast.GtE)) for op in node.ops):
+            sides = [node.left, *node.comparators]
+            zero = any(isinstance(s, ast.Constant) and type(s.value) in (int, float) and s.value == 0 for s in sides)
+            names = [n for n in map(_bound_name, sides) if n]
+            if zero and names:
+                out.append((node.lineno, names[0]))
+        elif isinstance(node, ast.Call) and node.args:
+            f = node.func
+            fname = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+            first = node.args[0]
+            signed = fname in ("positive", "number") or any(
+                k.arg in ("positive", "nonneg") and not (isinstance(k.value, ast.Constant) and not k.value.value)
+                for k in node.keywords)
+            if (fname in _CHECKERS and signed and isinstance(first, ast.Constant) and first.value in BOUNDS):
+                out.append((node.lineno, first.value))
+    return sorted(out)
+
+
+@pytest.mark.parametrize("name", sorted(MODULES))
+def test_only_the_owner_checks_a_bound(name):
+    """eps_q, t_s, a_max ... are checked by the rule of robots.assumptions, once: no module re-validates one."""
+    if name == ASSUMPTIONS_OWNER:
+        return
+    found = _revalidations(ast.parse(MODULES[name].read_text()))
+    assert not found, (f"{MODULES[name].relative_to(ROOT)} checks {', '.join(f'{b} (line {k})' for k, b in found)}"
+                       f" itself: use robots.assumptions (Assumptions, check_bound)")
+
+
+def test_the_owner_check_sees_a_revalidation():
+    """The finder sees each form (so the test above can fail), and not a bound compared with another value."""
+    code = ("if eps_q <= 0: pass\nif not self.t_s > 0.0: pass\nif 0 < s.a_max[0]: pass\n"
+            "V.positive('t_s', x)\nvector('a_max', v, n, positive=True)\nif t_s > t_min: pass\n"
+            "vector('a_max', v, n)\n")
+    assert [b for _, b in _revalidations(ast.parse(code))] == ["eps_q", "t_s", "a_max", "t_s", "a_max"]

@@ -12,6 +12,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from crosscert.robots.assumptions import check_bound
 from crosscert.robots.errors import InputError
 
 __all__ = ["Trajectory"]
@@ -77,10 +78,8 @@ class Trajectory:
             if t.shape[0] < 2:
                 raise InputError("a trajectory of one sample needs t_s")
             object.__setattr__(self, "t_s", float(t[1] - t[0]))
-        elif not (np.isfinite(self.t_s) and self.t_s > 0):
-            raise InputError(f"t_s must be positive and finite, got {self.t_s!r}")
         else:
-            object.__setattr__(self, "t_s", float(self.t_s))
+            object.__setattr__(self, "t_s", check_bound("t_s", self.t_s))
 
     @property
     def n(self) -> int:

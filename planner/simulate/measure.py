@@ -6,7 +6,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots.assumptions import check_bound
 from crosscert.robots.base import Robot
 from crosscert.robots.errors import InputError
 
@@ -44,7 +44,7 @@ def quantise(q_true, eps_q: float, kind: Quantisation | str, rng=None) -> np.nda
     ndarray, shape (K, n)
     """
     q_true = np.asarray(q_true, dtype=float)
-    eps_q = V.positive("eps_q", eps_q)
+    eps_q = check_bound("eps_q", eps_q)
     try:
         kind = Quantisation(kind)
     except ValueError:

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from crosscert.robots.assumptions import check_bound
 from crosscert.robots import validators as V
 from crosscert.robots.base import Robot
 from crosscert.robots.errors import InputError, SimulationError
@@ -147,8 +148,8 @@ def _prepare(model, crossing_point, direction, v_sing, xi_true, t_s, eps_q, t_re
     cruise = V.positive("cruise", cruise)
     t_rest = V.positive("t_rest", t_rest, allow_zero=True)
     t_rest_end = V.positive("t_rest_end", t_rest_end, allow_zero=True)
-    t_s = V.positive("t_s", r.t_s if t_s is None else t_s)
-    eps_q = V.positive("eps_q", r.eps_q if eps_q is None else eps_q)
+    t_s = check_bound("t_s", r.t_s if t_s is None else t_s)
+    eps_q = check_bound("eps_q", r.eps_q if eps_q is None else eps_q)
     peak = a_peak * np.abs(u)
     if np.any(peak >= r.a_max_array):
         raise InputError(

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from crosscert.robots.assumptions import check_bound
 from crosscert.robots import validators as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.verifier.trajectory import Trajectory
@@ -112,7 +113,7 @@ def resample(scaling: TimeScaling, samples: PathSamples, t_s: float, *, t_rest: 
         raise InputError("resample needs a TimeScaling and the PathSamples it was computed on")
     if scaling.s.shape != samples.s.shape or np.any(scaling.s != samples.s):
         raise InputError("the scaling was computed on another grid than these samples")
-    t_s = V.positive("t_s", t_s)
+    t_s = check_bound("t_s", t_s)
     t_rest = V.positive("t_rest", t_rest, allow_zero=True)
     t_rest_end = V.positive("t_rest_end", t_rest_end, allow_zero=True)
     if (t_rest > 0 and scaling.b[0] != 0.0) or (t_rest_end > 0 and scaling.b[-1] != 0.0):

@@ -1,0 +1,99 @@
+"""The one owner of the assumptions: one rule per field, checked once, immutable, read by every holder."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from crosscert.planner.refute.problem import RecordingBounds
+from crosscert.planner.task import PlanningBounds
+from crosscert.robots import DEXTAR, RPR3, InputError, ModelError
+from crosscert.robots.assumptions import RULES, Assumptions, check_bound
+from crosscert.verifier.settings import TrackerSettings
+
+GOOD = dict(t_s=1e-3, eps_q=1e-4, a_max=(80.0, 80.0), n=2)
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("eps_q", 0.0, "reading error eps_q must be positive and finite, in each joint.s unit"),
+    ("eps_q", (1e-4, -1e-4), "eps_q must be positive"),
+    ("eps_q", np.inf, "eps_q must be positive and finite"),
+    ("t_s", 0.0, "t_s must be positive and finite"),
+    ("t_s", float("nan"), "t_s must be positive and finite"),
+    ("t_s", True, "t_s must be positive"),
+    ("a_max", (80.0, 0.0), "a_max must be positive and finite, in each axis. unit/s\\^2"),
+    ("a_max", (80.0, 80.0, 80.0), "a_max needs 1 or 2 entries"),
+    ("xd0", -0.1, "xd0 must be non-negative"),
+    ("v_max", 0.0, "v_max must be positive"),
+    ("xi_box", ((0.0, 1.0), (1.0, 0.0)), "calibration box is empty"),
+    ("xi_box", ((0.0,), (1.0, 2.0)), "one length"),
+    ("drift", (1e-5, None), "give both or neither"),
+    ("drift", (-1e-5, 1.0), "eps_q_fast must be non-negative"),
+])
+def test_each_rule_refuses_what_its_field_cannot_be(field, value, message):
+    with pytest.raises(InputError, match=message):
+        Assumptions(**{**GOOD, field: value})
+
+
+def test_every_field_has_one_rule():
+    """The rules are the fields' (no field unchecked, no stray rule)."""
+    stored = {f.name for f in dataclasses.fields(Assumptions)} - {"joint_units", "pose_units", "n"}
+    assert set(RULES) == stored
+
+
+def test_units_in_messages_are_the_robots_own():
+    """eps_q of a prismatic joint is in m; a_max of a mixed pose names each axis' unit."""
+    with pytest.raises(InputError, match=r"eps_q must be positive and finite, in m;"):
+        Assumptions.for_robot(RPR3, eps_q=0.0)
+    with pytest.raises(InputError, match=r"in \(m/s\^2, m/s\^2, rad/s\^2\)"):
+        Assumptions.for_robot(RPR3, a_max=-1.0)
+    a = RPR3.assumptions
+    assert a.unit("eps_q") == "m" and a.unit("xd0") == "(m/s, m/s, rad/s)" and DEXTAR.assumptions.unit("eps_q") == "rad"
+
+
+def test_values_are_normalised_and_immutable():
+    a = Assumptions(**GOOD)
+    assert a.n == 2 and a.eps_q.tolist() == [1e-4, 1e-4]
+    assert np.all(np.isinf(a.xd0)) and np.all(np.isinf(a.v_max)) and a.drift is None
+    for arr in (a.eps_q, a.a_max, a.xd0, a.v_max):
+        with pytest.raises(ValueError):
+            arr[0] = 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        a.t_s = 1.0
+    assert a.with_(xd0=0.0).xd0.tolist() == [0.0, 0.0]  # at rest is a state, not a degenerate bound
+
+
+def test_robot_defaults_obey_the_same_rules():
+    with pytest.raises(ModelError, match="Robot dextar: reading error eps_q must be positive"):
+        dataclasses.replace(DEXTAR, eps_q=0.0)
+    assert check_bound("t_s", 1e-3) == 1e-3 and check_bound("eps_q", 2e-5) == 2e-5
+
+
+def test_tracker_settings_hold_one_value_checked_once():
+    """eps_q = 0 is refused by TrackerSettings like everywhere else; its old names read the value; a copy with
+    another option keeps the very same value (not checked again); a copy with xd0=None has no initial bound."""
+    with pytest.raises(InputError, match="eps_q must be positive"):
+        TrackerSettings(t_s=1e-3, eps_q=0.0, a_max=(80.0, 80.0))
+    s = TrackerSettings.for_robot(DEXTAR, eps_q=2e-4, eps_q_fast=1e-4, drift_rate=0.5)
+    assert s.eps_q.tolist() == [2e-4, 2e-4] and s.t_s == DEXTAR.t_s and s.drift_rate.tolist() == [0.5, 0.5]
+    assert s.validated(2) is s
+    assert dataclasses.replace(s, xi_splits=None).assumptions is s.assumptions
+    free = dataclasses.replace(s, xd0=None)
+    assert np.all(np.isinf(free.xd0)) and free.eps_q_fast.tolist() == [1e-4, 1e-4]
+    with pytest.raises(InputError, match="2 coordinates, the model has 3"):
+        s.validated(3)
+
+
+def test_recording_and_planning_bounds_use_the_same_rules():
+    q = np.zeros((3, 2))
+    rb = RecordingBounds(q_meas=q, m0=1, t_s=1e-3, eps_q=1e-4, a_max=80.0, xi_lo=(0.0,), xi_hi=(1.0,))
+    assert rb.v0_max is None and rb.a_max.tolist() == [80.0, 80.0]
+    assert dataclasses.replace(rb, eps_q=2e-4).eps_q.tolist() == [2e-4, 2e-4]
+    with pytest.raises(InputError, match="eps_q must be positive"):
+        dataclasses.replace(rb, eps_q=0.0)
+    with pytest.raises(InputError, match="eps_q must be positive"):
+        PlanningBounds(eps_q=0.0)
+    with pytest.raises(InputError, match="t_s must be positive"):
+        PlanningBounds(t_s=-1e-3)
+    b = PlanningBounds(a_max=90.0).for_robot(DEXTAR)
+    assert b.a_max == (90.0, 90.0) and b.eps_q == DEXTAR.eps_q and b.for_robot(DEXTAR) is b
