@@ -34,6 +34,7 @@ _API = {
     "Trajectory": "verifier.trajectory",
     "read_trajectory": "verifier.trajfile",
     # robots and errors
+    "validate": "verifier.validation",
     "get_robot": "robots.registry",
     "get_entry": "robots.registry",
     "available_robots": "robots.registry",

@@ -8,9 +8,10 @@ list of checks on seeded random configurations and returns a
 :class:`ValidationReport` with one :class:`CheckResult` per check.
 
 The interval checks need :mod:`verifier`, which this bottom layer may not
-import: the verifier registers them here when it is imported
-(:func:`register_interval_check`), or a caller passes them explicitly.  A
-check that could not run is reported ``NOT_RUN``, never passed.
+import: :func:`verifier.validation.validate` (also ``crosscert.validate``)
+passes them in, as may any caller (``interval_checks``).  Without them they
+are reported ``NOT_RUN``, never passed, whatever else was imported: the
+report depends on the arguments only.
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ from .base import Robot
 from .errors import CrosscertError, ModelError
 from .kinematics import KinematicModel
 
-__all__ = ["CheckOutcome", "CheckResult", "ValidationReport", "Sample", "validate", "register_interval_check",
-           "INTERVAL_CHECK_NAMES"]
+__all__ = ["CheckOutcome", "CheckResult", "ValidationReport", "Sample", "validate", "INTERVAL_CHECK_NAMES"]
 
 #: Relative agreement required between CasADi's Jacobians and central differences of f.
 JACOBIAN_RTOL = 1e-5
@@ -74,12 +74,6 @@ class Sample:
 
 #: ``check(robot, kinematic_model, sample, rng) -> CheckResult``.
 IntervalCheck = Callable[[Robot, KinematicModel, Sample, np.random.Generator], CheckResult]
-_REGISTERED: dict[str, IntervalCheck] = {}
-
-
-def register_interval_check(name: str, check: IntervalCheck) -> None:
-    """Make ``check`` part of every :func:`validate` run (the verifier calls this on import)."""
-    _REGISTERED[name] = check
 
 
 @dataclass(frozen=True)
@@ -246,8 +240,9 @@ def validate(robot: Robot, *, seed: int = 0, samples: int = 16,
     samples : int
         Configurations checked.
     interval_checks : dict, optional
-        ``name -> check``; default the checks registered by :mod:`verifier`
-        (imported by then), each missing one reported ``NOT_RUN``.
+        ``name -> check``; each of :data:`INTERVAL_CHECK_NAMES` missing is
+        reported ``NOT_RUN``.  :func:`verifier.validation.validate` passes
+        the verifier's.
 
     Returns
     -------
@@ -277,11 +272,12 @@ def validate(robot: Robot, *, seed: int = 0, samples: int = 16,
     checks.append(_check_jacobians(km, s))
     checks.append(_check_round_trip(robot, km, s, rng))
     checks.append(_check_mode(robot, km, s))
-    chosen = dict(_REGISTERED) if interval_checks is None else dict(interval_checks)
+    chosen = dict(interval_checks or {})
     for name in INTERVAL_CHECK_NAMES:
         fn = chosen.pop(name, None)
         if fn is None:
-            checks.append(CheckResult(name, CheckOutcome.NOT_RUN, "interval evaluation not loaded (import verifier)"))
+            checks.append(CheckResult(name, CheckOutcome.NOT_RUN, "needs the interval checks: call "
+                                      "crosscert.verifier.validate(robot) (or crosscert.validate) for every check"))
         else:
             checks.append(_run(name, fn, robot, km, s, rng))
     for name, fn in chosen.items():

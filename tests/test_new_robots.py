@@ -10,21 +10,24 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import subprocess
+import sys
 
 import casadi as ca
 import numpy as np
 import pytest
 
-from crosscert import verifier  # noqa: F401  (registers the interval checks of robots.validate)
 from crosscert.planner.cli import main
 from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing, simulate_motion
-from crosscert.robots import KinematicModel, get_entry, get_robot, validate
+from crosscert.robots import KinematicModel, get_entry, get_robot
 from crosscert.robots.gough_stewart import HOME, gs_ik, mode_by_plucker
 from crosscert.robots.rpr3 import RPR3, mode_by_leg_lines, rpr3_ik
 from crosscert.robots.errors import ModelError
 from crosscert.robots.validation import CheckOutcome
+from crosscert.robots.validation import validate as validate_geometry
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
+from crosscert.verifier.validation import validate
 
 N_RPR3 = 20  # seeded geometries, each tracked through a crossing and a bounce
 N_GS = 8  # seeded simulated motions of the Gough-Stewart platform
@@ -161,10 +164,23 @@ def test_validate_finds_a_loop_closure_the_interval_evaluator_cannot_read():
 
 
 def test_validate_reports_interval_checks_not_run_without_them():
-    report = validate(RPR3, interval_checks={})
-    outcomes = {c.name: c.outcome for c in report.checks}
-    assert outcomes["interval-evaluation"] is CheckOutcome.NOT_RUN
+    """The robots layer's validate never runs (or passes) the interval checks, whatever was imported before
+    (the verifier is imported here); the message says which call runs them."""
+    report = validate_geometry(RPR3)
+    by_name = {c.name: c for c in report.checks}
+    assert by_name["interval-evaluation"].outcome is CheckOutcome.NOT_RUN
+    assert "crosscert.verifier.validate" in by_name["interval-containment"].message
     assert not report.ok
+
+
+def test_validate_does_not_depend_on_what_was_imported():
+    """A fresh interpreter that imports only crosscert.robots gets the same report as this process, which has
+    imported the verifier (it registered its checks on import before: NOT_RUN in one, passed in the other)."""
+    code = ("from crosscert.robots import RPR3, validate\n"
+            "print([(c.name, c.outcome.value) for c in validate(RPR3, samples=4).checks])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    here = [(c.name, c.outcome.value) for c in validate_geometry(RPR3, samples=4).checks]
+    assert out.stdout.strip() == str(here)
 
 
 # ------------------------------------------------------------------ commands

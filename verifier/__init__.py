@@ -30,7 +30,7 @@ from .tracker import (
 )
 from .trajectory import Trajectory
 from .trajfile import read_trajectory, write_trajectory
-from . import validation as validation  # noqa: F401  (registers the interval checks of robots.validate)
+from .validation import validate
 
 __all__ = [
     "CrosscertError",
@@ -63,6 +63,7 @@ __all__ = [
     "atomic_write",
     "read_trajectory",
     "write_trajectory",
+    "validate",
 ]
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

@@ -1,4 +1,4 @@
-"""The interval checks of :func:`robots.validate`, registered when :mod:`verifier` is imported.
+"""Every check of a robot definition: :func:`validate`, the robots layer's checks with the interval ones.
 
 * ``interval-evaluation`` — the interval tapes of ``f``, ``J_x`` and ``J_q``
   on point boxes enclose CasADi's float values (up to a few ulps of CasADi's
@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from crosscert.robots.validation import CheckOutcome, CheckResult, register_interval_check
+from crosscert.robots.validation import CheckOutcome, CheckResult, ValidationReport
+from crosscert.robots.validation import validate as validate_geometry
 
 from .contractors import hc4_pose, newton
 from .model import IntervalModel
 
-__all__ = ["check_interval_evaluation", "check_interval_containment", "INTERVAL_CHECKS"]
+__all__ = ["validate", "check_interval_evaluation", "check_interval_containment", "INTERVAL_CHECKS"]
 
 #: Relative slack for CasADi's float rounding when comparing with an outward-rounded enclosure.
 _FLOAT_RTOL = 1e-12
@@ -97,5 +98,21 @@ def check_interval_containment(robot, km, sample, rng) -> CheckResult:
 INTERVAL_CHECKS = {"interval-evaluation": check_interval_evaluation,
                    "interval-containment": check_interval_containment}
 
-for _name, _check in INTERVAL_CHECKS.items():
-    register_interval_check(_name, _check)
+
+def validate(robot, *, seed: int = 0, samples: int = 16) -> ValidationReport:
+    """Every check of ``robot``: :func:`robots.validation.validate` with :data:`INTERVAL_CHECKS`.
+
+    Parameters
+    ----------
+    robot : Robot
+    seed : int
+        Seed of every random draw.
+    samples : int
+        Configurations checked.
+
+    Returns
+    -------
+    ValidationReport
+        ``.ok`` when every check ran and passed.
+    """
+    return validate_geometry(robot, seed=seed, samples=samples, interval_checks=INTERVAL_CHECKS)
