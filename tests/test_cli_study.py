@@ -103,17 +103,35 @@ def _rows(path):
         return list(csv.DictReader(fh))
 
 
-def test_tiny_study_runs_then_restarts_without_work(tmp_path, capsys):
+def _spy_on_figures(monkeypatch) -> list:
+    """The figures saved during the test (to read what was drawn, not only that a file was written)."""
+    from matplotlib.figure import Figure
+
+    saved, original = [], Figure.savefig
+
+    def savefig(fig, *args, **kwargs):
+        saved.append(fig)
+        return original(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", savefig)
+    return saved
+
+
+def test_tiny_study_runs_then_restarts_without_work(tmp_path, capsys, monkeypatch):
     grid = tmp_path / "tiny.toml"
     grid.write_text(TINY)
     res, png = tmp_path / "res.csv", tmp_path / "p.png"
     argv = ["study", str(grid), "--workers", "1", "--no-progress", "-o", str(res), "--plot", str(png)]
+    figures = _spy_on_figures(monkeypatch)
     assert main(argv) == 0
     out = capsys.readouterr().out
     rows = _rows(res)
     assert len(rows) == 1 and rows[0]["error"] == "", rows
     assert math.isfinite(float(rows[0]["v_min_mps"])) and float(rows[0]["a_max"]) == 80.0
-    assert png.stat().st_size > 0
+    # the PNG shows the case: its v_min is a plotted point (a figure without the data would pass size > 0)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and len(figures) == 1
+    drawn = [y for ax in figures[0].axes for line in ax.get_lines() for y in line.get_ydata()]
+    assert float(rows[0]["v_min_mps"]) in drawn, drawn
     assert "1 case (0 already" in out and "0 errors" in out and f"wrote {res}" in out and f"wrote {png}" in out
     assert main(argv) == 0  # every case is in the CSV: nothing runs, no cluster starts
     out = capsys.readouterr().out
