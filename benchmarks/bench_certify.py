@@ -44,14 +44,14 @@ PHASES = ("setup", "search", "certificate", "monte_carlo", "refutation", "bounce
 #: Parts of the work in the ``--profile`` table: (label, module path suffix, function name).  Times are
 #: inclusive (a part may contain another: window passes contain forward passes of the kernel).
 PARTS = (
-    ("speed search (search_v_min)", "planner/certify.py", "search_v_min"),
+    ("speed search (search_v_min)", "planner/certify/plan.py", "search_v_min"),
     ("  plans (plan_crossing)", "planner/plan.py", "plan_crossing"),
     ("  execution classes (cartesian_class)", "planner/execution.py", "cartesian_class"),
     ("  forward tracker runs (track)", "verifier/tracker.py", "track"),
     ("  window passes (track_window)", "verifier/window.py", "track_window"),
     ("Monte Carlo (monte_carlo_runs)", "planner/montecarlo.py", "monte_carlo_runs"),
     ("  batched forward tracking (track_batch)", "verifier/tracker.py", "track_batch"),
-    ("refutation bound (refute_speed)", "planner/pipeline.py", "refute_speed"),
+    ("refutation bound (refute_speed)", "planner/certify/crossing.py", "refute_speed"),
     ("bounce gap (bounce_gap)", "planner/bounce.py", "bounce_gap"),
     ("  bounce simulations (simulate_bounce)", "planner/simulate/run.py", "simulate_bounce"),
     ("counterexample NLPs (search_counterexample)", "planner/refute/nlp.py", "search_counterexample"),
@@ -101,7 +101,7 @@ def profile(method: str) -> None:
     import pstats
 
     from crosscert.planner import PlanningBounds, benchmark_task, certify_crossing
-    from crosscert.planner.certify import certify_speed
+    from crosscert.planner.certify.plan import certify_speed
     from crosscert.robots import DEFAULT_ROBOT, KinematicModel, get_entry
     from crosscert.verifier.model import IntervalModel
 

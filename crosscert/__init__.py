@@ -18,8 +18,8 @@ import importlib
 #: name -> defining module (relative to this package), read on first access.
 _API = {
     # planning: the main job
-    "certify_crossing": "planner.pipeline",
-    "CrossingCertificate": "planner.pipeline",
+    "certify_crossing": "planner.certify.crossing",
+    "CrossingCertificate": "planner.certify.crossing",
     "benchmark_task": "planner.task",
     "CrossingTask": "planner.task",
     "PlanningBounds": "planner.task",

@@ -8,10 +8,10 @@ Layout, along the method:
   (time-optimal) and :mod:`planner.generate` (dynamic);
 * :mod:`planner.acceleration` — the per-axis acceleration bounds a certificate
   assumes, with units and sources;
-* :mod:`planner.certify` — certification of plans and the speed search;
+* :mod:`planner.certify.plan` — certification of plans and the speed search;
 * :mod:`planner.montecarlo` — simulated executions tracked at run time;
 * :mod:`planner.refute` — verified counterexamples (the refutation bound, the crossing floor);
-* :mod:`planner.pipeline` — all of it, on an executor; :mod:`planner.assumption_cost`
+* :mod:`planner.certify.crossing` — all of it, on an executor; :mod:`planner.assumption_cost`
   — the same under the robot's physical ``a_max``;
 * :mod:`planner.simulate`, :mod:`planner.sweep` — simulated runs and the
   paper's speed sweep; :mod:`planner.cli` — the ``crosscert`` command.
@@ -23,11 +23,11 @@ import logging
 
 from .acceleration import AccelerationAssumption, AccelerationSource, AxisAcceleration, acceleration_assumption
 from .assumption_cost import AtRobotAMax, ComparisonOutcome, certify_at_robot_a_max
-from .certify import CertifiedRun, SpeedSearch, SpeedTrial, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
+from .certify.plan import CertifiedRun, SpeedSearch, SpeedTrial, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
 from .execution import ExecutionClass, cartesian_class, in_class, joint_class
 from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
-from .pipeline import CrossingCertificate, certify_crossing
+from .certify.crossing import CrossingCertificate, certify_crossing
 from .plan import plan_crossing, speed_ceiling
 from .refute import (
     CrossingFloor,

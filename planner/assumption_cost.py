@@ -4,7 +4,7 @@ A certificate's default acceleration bounds (:mod:`planner.acceleration`)
 may be tighter than the robot's physical ``a_max`` on some axes (an axis the
 plan accelerates gets its planned peak + 10 %).  A tighter assumption covers
 fewer executions and can certify a slower crossing.
-:func:`certify_at_robot_a_max` re-runs :func:`planner.pipeline.certify_crossing`
+:func:`certify_at_robot_a_max` re-runs :func:`planner.certify.crossing.certify_crossing`
 with ``a_max`` = the robot's, so a certificate can state both speeds.
 
 Its cost is kept low: no Monte Carlo confirmation and no bounce search; when
@@ -24,7 +24,7 @@ import numpy as np
 from crosscert.verifier.tracker import Verdict
 
 from .acceleration import AccelerationAssumption, robot_a_max_assumption
-from .pipeline import CrossingCertificate, certify_crossing
+from .certify.crossing import CrossingCertificate, certify_crossing
 
 __all__ = ["ComparisonOutcome", "AtRobotAMax", "certify_at_robot_a_max"]
 
@@ -49,7 +49,7 @@ class AtRobotAMax:
     verdict : Verdict or None
         ``MODE_CHANGED`` when some speed certifies; None when not computed.
     v_min, refutation_bound : float or None
-        m/s, as in :class:`planner.pipeline.CrossingCertificate`.
+        m/s, as in :class:`planner.certify.crossing.CrossingCertificate`.
     v_low : float or None
         Slowest speed tried, m/s (the default's ``v_min`` when the robot's
         bound covers the default's on every axis).
@@ -79,7 +79,7 @@ class AtRobotAMax:
 def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6, v_high=None, tol=0.01,
                            refute=True, seed=0, executor=None, progress=None, kin=None,
                            imodel=None) -> CrossingCertificate:
-    """``cert`` with :attr:`~planner.pipeline.CrossingCertificate.at_robot_a_max` filled in.
+    """``cert`` with :attr:`~planner.certify.crossing.CrossingCertificate.at_robot_a_max` filled in.
 
     Parameters
     ----------
@@ -88,7 +88,7 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
     cert : CrossingCertificate
         The certificate of ``task`` under its own bounds (``cert.bounds``).
     v_low, v_high, tol, refute, seed, executor, progress, kin, imodel
-        As for :func:`planner.pipeline.certify_crossing` (the call that made ``cert``).
+        As for :func:`planner.certify.crossing.certify_crossing` (the call that made ``cert``).
 
     Returns
     -------

@@ -23,7 +23,7 @@ from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_fro
 from crosscert.verifier.window import Reasoning, track_window
 
 from . import execution as ex_
-from .certify import execution_class
+from .certify.plan import execution_class
 from .plan import derived_a_max
 from .simulate import Quantisation, quantise, random_geometry
 from .task import PlannedTrajectory, PlanningBounds

@@ -1,7 +1,7 @@
 """Design studies: how v_min and the refutation floor move with the bounds, on Dask or any executor.
 
 A study is a grid of inputs (:data:`GRID_KEYS`); each point is one
-certification (:func:`planner.pipeline.certify_crossing`) of a robot's
+certification (:func:`planner.certify.crossing.certify_crossing`) of a robot's
 benchmark task, run where the caller says:
 
 * a ``dask.distributed`` client (``client=``, or ``scheduler="tcp://host:8786"``),
@@ -40,7 +40,7 @@ from crosscert.robots import validators as V
 from crosscert.robots.errors import InputError, ModelError
 from crosscert.robots.registry import DEFAULT_ROBOT, get_entry
 
-from .pipeline import certify_crossing, package_versions
+from .certify.crossing import certify_crossing, package_versions
 from .task import Method, PlanningBounds, benchmark_task, parse_option
 
 __all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "design_sweep", "read_results", "repair_results",

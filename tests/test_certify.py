@@ -14,7 +14,7 @@ from crosscert.planner import (
     speed_ceiling,
 )
 from crosscert.planner.cli import main
-from crosscert.planner.certify import certify_plan_window
+from crosscert.planner.certify.plan import certify_plan_window
 from crosscert.planner.task import CrossingTask, PlanningBounds
 from problems import PLANNING, check_certified_speed, check_contains, check_plan_limits
 from crosscert.robots import DEXTAR, DEXTAR_DYNAMICS

@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from crosscert.planner.certify import certify_plan
+from crosscert.planner.certify.plan import certify_plan
 from crosscert.planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
 from crosscert.planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
 from problems import interval_model, kinematics

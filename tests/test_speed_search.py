@@ -1,4 +1,4 @@
-"""The two speed searches of a certification and the bracket they share (planner.certify, planner.pipeline).
+"""The two speed searches of a certification and the bracket they share (planner.certify.plan, planner.certify.crossing).
 
 The searches' logic is checked on stand-in answers (a speed certifies above
 a threshold, a counterexample exists below one), so every case runs in
@@ -14,10 +14,10 @@ from types import SimpleNamespace
 
 import pytest
 
-import crosscert.planner.certify as certify_mod
-import crosscert.planner.pipeline as pipeline_mod
-from crosscert.planner.certify import search_v_min
-from crosscert.planner.pipeline import Refuter, refutation_search
+import crosscert.planner.certify.plan as certify_mod
+import crosscert.planner.certify.crossing as crossing_mod
+from crosscert.planner.certify.plan import search_v_min
+from crosscert.planner.certify.crossing import Refuter, refutation_search
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR
 from crosscert.robots.errors import InputError
@@ -112,7 +112,7 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
             gate.wait(10)  # hold the first search until the ceiling is set
         return _Row(v, v <= 0.84)
 
-    monkeypatch.setattr(pipeline_mod, "refute_speed", fake)
+    monkeypatch.setattr(crossing_mod, "refute_speed", fake)
     scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
     with ThreadPoolExecutor(max_workers=1) as pool:
         ref = Refuter(DEXTAR, None, None, 1, [], None, pool)

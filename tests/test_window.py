@@ -21,7 +21,7 @@ import pytest
 
 from adversarial import near_scenarios
 from problems import check_contains, interval_model
-from crosscert.planner.certify import execution_class, tracker_settings
+from crosscert.planner.certify.plan import execution_class, tracker_settings
 from crosscert.planner.plan import derived_a_max, plan_crossing
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR, get_entry

@@ -30,7 +30,7 @@ from crosscert.verifier.files import check_output_path
 
 from crosscert.robots.assumptions import check_bound
 
-from ..pipeline import V_LOW
+from ..certify.crossing import V_LOW
 from ..simulate import ramp_length
 from ..simulate.run import A_PEAK as SIM_A_PEAK, CRUISE, REST_END
 from ..study import COLUMNS, GRID_KEYS, read_results, study_cases

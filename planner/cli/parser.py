@@ -16,7 +16,7 @@ from crosscert.verifier.window import Reasoning
 from ..execution import ExecutionKind
 from ..simulate.run import A_PEAK as SIM_A_PEAK
 from ..task import Method, PlanningBounds
-from ..pipeline import V_LOW
+from ..certify.crossing import V_LOW
 
 #: Peak acceleration of planned ramps: the PlanningBounds default, m/s^2.
 PLAN_A_PEAK = PlanningBounds.a_peak

@@ -12,7 +12,7 @@ from crosscert.verifier.plots import plot_run
 from crosscert.verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
-from ..pipeline import certify_crossing
+from ..certify.crossing import certify_crossing
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
 from ..task import Method, PlanningBounds

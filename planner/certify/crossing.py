@@ -26,16 +26,16 @@ from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackResult, Verdict
 from crosscert.verifier.window import WindowResult
 
-from . import execution as ex_
-from . import refute
-from .bounce import BounceGap, bounce_floor, bounce_verdicts, gap_of
-from .certify import search_v_min
-from .montecarlo import MonteCarloResult, monte_carlo_confirmation
-from .acceleration import AccelerationAssumption, derived_a_max
-from .plan import plan_crossing, speed_ceiling
-from .simulate import random_geometry
-from .task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
-from .worker import SubprocessExecutor
+from .. import execution as ex_
+from .. import refute
+from ..bounce import BounceGap, bounce_floor, bounce_verdicts, gap_of
+from ..montecarlo import MonteCarloResult, monte_carlo_confirmation
+from ..acceleration import AccelerationAssumption, derived_a_max
+from ..plan import plan_crossing, speed_ceiling
+from ..simulate import random_geometry
+from ..task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
+from ..worker import SubprocessExecutor
+from .plan import search_v_min
 
 __all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refute_speed", "Refuter", "refutation_search",
            "REFUTE_CPU_TIME"]

@@ -8,7 +8,7 @@ assembly-mode change to be certified from its encoders, and prove it.
 * :func:`minimal_v_sing` — bisection search of the smallest certified speed;
 
 Plans come from :mod:`planner.plan`, the Monte Carlo confirmation from
-:mod:`planner.montecarlo`, the whole pipeline from :mod:`planner.pipeline`.
+:mod:`planner.montecarlo`, the whole pipeline from :mod:`planner.certify.crossing`.
 
 What a certificate guarantees
 -----------------------------
@@ -59,10 +59,10 @@ from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, TrackResult, Verdict, track
 from crosscert.verifier.window import Reasoning, WindowResult, track_window
 
-from . import execution as ex_
-from .acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
-from .plan import plan_crossing
-from .task import ExecutionKind, PlannedTrajectory, PlanningBounds
+from .. import execution as ex_
+from ..acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
+from ..plan import plan_crossing
+from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
 
 __all__ = [
     "SpeedTrial",
