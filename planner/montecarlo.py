@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crosscert.robots import KinematicModel
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch

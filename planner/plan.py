@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 
 from .acceleration import derived_a_max

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from crosscert.robots.assumptions import check_bound
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 
 __all__ = ["SampleAlignment", "align_to_samples"]
 

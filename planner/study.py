@@ -36,14 +36,14 @@ from pathlib import Path
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, ModelError
 from crosscert.robots.registry import DEFAULT_ROBOT, get_entry
 
 from .certify.crossing import certify_crossing, package_versions
 from .task import Method, PlanningBounds, benchmark_task, parse_option
 
-__all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "design_sweep", "read_results", "repair_results",
+__all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "run_study", "read_results", "repair_results",
            "scaled_box"]
 
 log = logging.getLogger(__name__)
@@ -267,7 +267,7 @@ def _append(path: Path, rows: Iterable[dict]) -> None:
         os.fsync(fh.fileno())
 
 
-def design_sweep(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | None = None,
+def run_study(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | None = None,
                  certify: dict | None = None, client=None, scheduler: str | None = None,
                  executor: Executor | None = None, workers: int | None = None, cases_per_task: int = 1,
                  progress: Callable[[dict], None] | None = None):

@@ -21,7 +21,7 @@ from enum import Enum, StrEnum
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.assumptions import check_bound
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.registry import RobotEntry

@@ -2,7 +2,7 @@
 
 The bottom layer of crosscert: it imports neither :mod:`verifier` nor
 :mod:`planner`.  The project's error hierarchy (:mod:`robots.errors`) and its
-argument checks (:mod:`robots.validators`) live here so every layer above can
+argument checks (:mod:`robots.arguments`) live here so every layer above can
 use them.
 """
 

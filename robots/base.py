@@ -19,7 +19,7 @@ import numpy as np
 from .assumptions import Assumptions
 from .errors import InputError, ModelError
 from .units import PoseUnit
-from .validators import floats, vector
+from .arguments import floats, vector
 
 __all__ = ["Robot", "LoopClosure", "BenchmarkCrossing", "ReferenceMotion"]
 

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ModelError
-from .validators import floats
+from .arguments import floats
 
 __all__ = ["LumpedMassModel"]
 

@@ -186,8 +186,8 @@ def fake_study(monkeypatch):
 
     calls = []
     monkeypatch.setattr(study_mod, "run_cases", _fake_rows(calls))
-    monkeypatch.setattr(cli_study, "design_sweep",
-                        functools.partial(study_mod.design_sweep, executor=ThreadPoolExecutor(max_workers=1)))
+    monkeypatch.setattr(cli_study, "run_study",
+                        functools.partial(study_mod.run_study, executor=ThreadPoolExecutor(max_workers=1)))
     return calls
 
 

@@ -143,7 +143,7 @@ def test_the_contract_sees_a_violation(tmp_path):
 #: The bounds robots.assumptions owns; only it decides whether a value of one is admissible.
 BOUNDS = {"eps_q", "t_s", "a_max", "xd0", "v_max", "v0_max", "eps_q_fast", "drift_rate"}
 ASSUMPTIONS_OWNER = "robots.assumptions"
-#: Argument checkers a bound may not be run through outside the owner (robots.validators).
+#: Argument checkers a bound may not be run through outside the owner (robots.arguments).
 _CHECKERS = {"positive", "number", "vector", "floats"}
 
 

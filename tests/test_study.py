@@ -12,7 +12,7 @@ distributed = pytest.importorskip("distributed")
 from crosscert.planner import PlanningBounds, plan_crossing  # noqa: E402
 from crosscert.planner.certify.plan import execution_class  # noqa: E402
 from crosscert.planner.montecarlo import monte_carlo_confirmation  # noqa: E402
-from crosscert.planner.study import design_sweep, read_results, run_case, study_cases  # noqa: E402
+from crosscert.planner.study import run_study, read_results, run_case, study_cases  # noqa: E402
 from crosscert.robots.errors import InputError  # noqa: E402
 
 #: Cheap certifications: no refutation, no Monte Carlo, a coarse speed resolution (~3 s a case).
@@ -33,7 +33,7 @@ def _by_case(table):
 
 
 def test_a_study_on_dask_equals_the_same_cases_run_serially(client, tmp_path):
-    table = design_sweep(GRID, out=tmp_path / "s.csv", certify=FAST, client=client)
+    table = run_study(GRID, out=tmp_path / "s.csv", certify=FAST, client=client)
     assert len(table) == 4 and table["error"].isna().all()
     settings = {"robot": "dextar", "bounds": {}, "certify": FAST}
     cases = study_cases(GRID)
@@ -49,18 +49,18 @@ def test_a_study_on_dask_equals_the_same_cases_run_serially(client, tmp_path):
 def test_a_rerun_skips_what_is_done(tmp_path):
     out = tmp_path / "s.csv"
     grid = {"a_max": [80.0]}
-    first = design_sweep(grid, out=out, certify=FAST, executor=ThreadPoolExecutor(1))
+    first = run_study(grid, out=out, certify=FAST, executor=ThreadPoolExecutor(1))
 
     class Refusing(ThreadPoolExecutor):
         def submit(self, *args, **kwargs):
             raise AssertionError("a finished case was run again")
 
-    again = design_sweep(grid, out=out, certify=FAST, executor=Refusing(1))
+    again = run_study(grid, out=out, certify=FAST, executor=Refusing(1))
     assert len(read_results(out)) == 1 and again["v_min_mps"].tolist() == first["v_min_mps"].tolist()
 
 
 def test_a_failing_case_is_a_row_not_a_lost_study(tmp_path):
-    table = design_sweep({"a_max": [1.0, 80.0]}, out=tmp_path / "s.csv", certify=FAST, executor=ThreadPoolExecutor(2))
+    table = run_study({"a_max": [1.0, 80.0]}, out=tmp_path / "s.csv", certify=FAST, executor=ThreadPoolExecutor(2))
     errors = table.set_index("a_max")["error"]
     assert "no feasible crossing speed" in errors[1.0] and not isinstance(errors[80.0], str)
 
@@ -77,7 +77,7 @@ def test_a_dead_worker_loses_only_its_case(client, tmp_path):
             killed.append(pid)
 
     grid = {"a_max": [65.0, 75.0, 85.0, 95.0], "width_scale": [1.0]}
-    table = design_sweep(grid, out=tmp_path / "s.csv", certify=FAST, client=client, progress=kill_one)
+    table = run_study(grid, out=tmp_path / "s.csv", certify=FAST, client=client, progress=kill_one)
     assert killed and len(table) == 4 and table["error"].isna().all()
     assert np.isfinite(table["v_min_mps"]).all()
 
@@ -87,7 +87,7 @@ def test_bad_grids_are_refused_before_any_work(tmp_path):
                           ({"a_max": [-1.0]}, "a_max"), ({"method": ["fast"]}, "unknown method"),
                           ({"robot": ["delta"]}, "unknown robot")):
         with pytest.raises(InputError, match=message):
-            design_sweep(grid, out=tmp_path / "s.csv", executor=ThreadPoolExecutor(1))
+            run_study(grid, out=tmp_path / "s.csv", executor=ThreadPoolExecutor(1))
     assert not (tmp_path / "s.csv").exists()
 
 
@@ -104,7 +104,7 @@ def test_monte_carlo_in_batches_on_dask_equals_one_batch(client, kin, imodel, ta
 
 def test_the_crossing_point_moves_along_the_locus(tmp_path):
     """``crossing_offset`` moves the task across its direction: it still crosses, at another point of the locus."""
-    table = design_sweep({"crossing_offset": [0.0, 0.02]}, out=tmp_path / "s.csv", certify=FAST,
+    table = run_study({"crossing_offset": [0.0, 0.02]}, out=tmp_path / "s.csv", certify=FAST,
                          executor=ThreadPoolExecutor(2))
     v = table.set_index("crossing_offset")["v_min_mps"]
     assert table["error"].isna().all() and np.isfinite(v).all() and v[0.0] != v[0.02]

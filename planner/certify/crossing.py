@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from crosscert.robots import KinematicModel
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackResult, Verdict

@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from crosscert.robots import KinematicModel
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, TrackResult, Verdict, track

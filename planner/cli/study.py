@@ -1,4 +1,4 @@
-"""``crosscert study``: a design study (:func:`planner.study.design_sweep`) from a TOML grid, on Dask.
+"""``crosscert study``: a design study (:func:`planner.study.run_study`) from a TOML grid, on Dask.
 
 The grid file (read with :mod:`tomllib`)::
 
@@ -28,7 +28,7 @@ from pathlib import Path
 from crosscert.robots.errors import InputError
 from crosscert.verifier.files import atomic_write
 
-from ..study import GRID_KEYS, design_sweep, read_results, repair_results, study_cases
+from ..study import GRID_KEYS, run_study, read_results, repair_results, study_cases
 from .setup import progress_bar
 
 __all__ = ["study", "read_grid", "plot_study", "CERTIFY_KEYS", "BOUNDS_KEYS", "MAX_GRID_BYTES"]
@@ -161,7 +161,7 @@ def study(a) -> int:
         bar.unit = "case"
         bar.refresh()
     try:
-        table = design_sweep(grid, out=a.output, robot=robot, bounds=spec["bounds"], certify=spec["certify"],
+        table = run_study(grid, out=a.output, robot=robot, bounds=spec["bounds"], certify=spec["certify"],
                              scheduler=a.scheduler, workers=a.workers, progress=cb)
     finally:
         if bar is not None:
@@ -205,7 +205,7 @@ def plot_study(path, table, swept, *, robot: str) -> Path:
     path : str or Path
         Output PNG, written by :func:`verifier.files.atomic_write`.
     table : pandas.DataFrame
-        Rows of :func:`planner.study.design_sweep`.
+        Rows of :func:`planner.study.run_study`.
     swept : list of str
         The grid's inputs.  Each numeric one gets a panel; one series per
         combination of the other inputs (names, like ``method``, only label

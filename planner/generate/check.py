@@ -20,7 +20,7 @@ from crosscert.robots.errors import SimulationError
 
 from .types import CheckFailed, LimitExceeded, Samples
 
-__all__ = ["CRITERION_TOL", "LIMIT_RTOL", "verify"]
+__all__ = ["CRITERION_TOL", "LIMIT_RTOL", "check_plan"]
 
 #: Relative tolerance of the a-posteriori limit check on the samples.
 LIMIT_RTOL = 1e-6
@@ -43,7 +43,7 @@ def _check(cond: bool, what: str) -> None:
         raise CheckFailed(what)
 
 
-def verify(kin, dyn, task, point, m0, v_sing, lim, torque, xi, samples: Samples, node_q, criterion_tol):
+def check_plan(kin, dyn, task, point, m0, v_sing, lim, torque, xi, samples: Samples, node_q, criterion_tol):
     """Recompute joints, rates, torques and the criterion on the samples; raise on any failure.
 
     Parameters

@@ -12,7 +12,7 @@ from crosscert.robots.errors import InputError, ModelError, SimulationError
 from crosscert.robots.kinematics import KinematicModel
 
 from ..task import CrossingTask, crossing_on_segment, parse_option
-from .check import CRITERION_TOL, verify
+from .check import CRITERION_TOL, check_plan
 from .nlp import initial_guess, sample, solve_nlp
 from .types import GeneratedTrajectory, GenerationLimits, LimitExceeded, Objective
 
@@ -218,7 +218,7 @@ def generate_crossing(kin: KinematicModel, dynamics, task: CrossingTask, v_sing:
         solve_time += sol.solve_time
         sampled = sample(sol, NA, t_s, t_rest, t_after)
         try:
-            Q, QD, QDD, tau, crit, modes, peak = verify(kin, dyn, task, point, m0, v_sing, lim, bool(limits.torque),
+            Q, QD, QDD, tau, crit, modes, peak = check_plan(kin, dyn, task, point, m0, v_sing, lim, bool(limits.torque),
                                                         xi, sampled, sol.Q, criterion_tol)
             break
         except LimitExceeded as exc:

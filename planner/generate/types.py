@@ -7,7 +7,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 
 from ..task import PlannedTrajectory

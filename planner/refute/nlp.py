@@ -26,7 +26,7 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.kinematics import KinematicModel
 

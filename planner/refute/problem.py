@@ -36,7 +36,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.assumptions import UNSET, Assumptions, held, reader
 from crosscert.robots.errors import InputError
 from crosscert.robots.kinematics import KinematicModel

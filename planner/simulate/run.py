@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from crosscert.robots.assumptions import check_bound
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.base import Robot
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.kinematics import KinematicModel

@@ -82,7 +82,7 @@ class ScalingLimits:
     Notes
     -----
     An infinite entry leaves that component unbounded, so these are not
-    checked by :func:`robots.validators.vector` (which requires finite entries).
+    checked by :func:`robots.arguments.vector` (which requires finite entries).
     """
 
     qd_max: object = None

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.kinematics import KinematicModel
 

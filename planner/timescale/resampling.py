@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from crosscert.robots.assumptions import check_bound
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.verifier.trajectory import Trajectory
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
-from crosscert.robots import validators as V
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 
 from .limits import PathRows, ScalingLimits, interval_matrix, path_rows

@@ -1,4 +1,4 @@
-"""The one place where arguments are checked and coerced.
+"""Argument checks: the one place where a function's numbers are checked and coerced (names, shapes, ranges).
 
 Every public function and dataclass of crosscert that takes numbers from a user
 checks them here, so a bad value gets the same kind of message everywhere:
