@@ -70,7 +70,8 @@ import numpy as np  # noqa: E402
 
 from crosscert.planner.sweep import cruise_for as sweep_cruise_for  # noqa: E402
 from crosscert.planner.simulate import random_geometry, simulate_crossing  # noqa: E402
-from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
+from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
+from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 import crosscert.verifier.tracker as tracker_module  # noqa: E402
 from crosscert.verifier.model import IntervalModel  # noqa: E402
 from crosscert.verifier.step import Tracker  # noqa: E402

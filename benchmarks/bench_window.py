@@ -26,7 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from problems import default_settings, interval_model, kinematics, simulate  # noqa: E402
 from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
 from crosscert.planner.sweep import cruise_for  # noqa: E402
-from crosscert.robots import DEXTAR, benchmark_crossing  # noqa: E402
+from crosscert.robots import DEXTAR  # noqa: E402
+from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 from crosscert.verifier.tracker import initial_box_from_mode, track  # noqa: E402
 from crosscert.verifier.window import FixedLagWindow, track_window  # noqa: E402
 

@@ -16,88 +16,65 @@ Layout, along the method:
 * :mod:`planner.simulate`, :mod:`planner.sweep` — simulated runs and the
   paper's speed sweep; :mod:`planner.cli` — the ``crosscert`` command.
 
-Explicit re-exports (no star imports).
+Explicit re-exports, grouped by what a user does (no star imports); the
+lower-level pieces (execution classes, acceleration bounds, the NLP
+generator, counterexample searches) are imported from their modules.
 """
 
 import logging
 
-from .acceleration import AccelerationAssumption, AccelerationSource, AxisAcceleration, acceleration_assumption
 from .assumption_cost import AtRobotAMax, ComparisonOutcome, certify_at_robot_a_max
-from .certify.plan import CertifiedRun, SpeedSearch, SpeedTrial, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
-from .execution import ExecutionClass, cartesian_class, in_class, joint_class
-from .generate import GeneratedTrajectory, GenerationLimits, generate_crossing
-from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .certify.crossing import CrossingCertificate, certify_crossing
+from .certify.plan import CertifiedRun, SpeedSearch, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
+from .execution import ExecutionClass
+from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .plan import plan_crossing, speed_ceiling
-from .refute import (
-    CrossingFloor,
-    RecordingBounds,
-    RefutationBound,
-    crossing_floor,
-    refutation_bound,
-    search_bounce,
-    search_crossing,
-    verify_bounce,
-    verify_crossing,
-)
-from .simulate import Quantisation, SimulatedRun, max_v_sing, quantise, random_geometry, simulate_bounce, simulate_crossing
-from .sweep import SweepRow, cruise_for, sweep
+from .refute import CrossingFloor, RecordingBounds, RefutationBound, crossing_floor, refutation_bound
+from .simulate import SimulatedRun, max_v_sing, random_geometry, simulate_bounce, simulate_crossing
+from .sweep import SweepRow, sweep
 from .task import CrossingTask, ExecutionKind, Method, PlannedTrajectory, PlanningBounds, benchmark_task
 
 __all__ = [
+    # the task and its bounds
     "CrossingTask",
+    "benchmark_task",
     "PlanningBounds",
-    "PlannedTrajectory",
     "Method",
     "ExecutionKind",
-    "benchmark_task",
-    "plan_crossing",
-    "speed_ceiling",
-    "SpeedTrial",
-    "certify_plan",
-    "execution_class",
-    "minimal_v_sing",
-    "search_v_min",
-    "certify_speed",
-    "SpeedSearch",
-    "CertifiedRun",
-    "MonteCarloResult",
-    "monte_carlo_confirmation",
-    "CrossingCertificate",
+    # plan and certify a crossing (the main job)
     "certify_crossing",
-    "AccelerationAssumption",
-    "AccelerationSource",
-    "AxisAcceleration",
-    "acceleration_assumption",
+    "CrossingCertificate",
+    "certify_at_robot_a_max",
     "AtRobotAMax",
     "ComparisonOutcome",
-    "certify_at_robot_a_max",
+    # its parts: a plan, one speed, the speed search, the executions covered
+    "plan_crossing",
+    "PlannedTrajectory",
+    "speed_ceiling",
+    "certify_plan",
+    "certify_speed",
+    "CertifiedRun",
+    "search_v_min",
+    "minimal_v_sing",
+    "SpeedSearch",
+    "execution_class",
     "ExecutionClass",
-    "cartesian_class",
-    "in_class",
-    "joint_class",
-    "GeneratedTrajectory",
-    "GenerationLimits",
-    "generate_crossing",
-    "RecordingBounds",
-    "RefutationBound",
+    "monte_carlo_confirmation",
+    "MonteCarloResult",
+    # what no sound tracker can do: the refutation bound and the crossing floor
     "refutation_bound",
-    "search_bounce",
-    "verify_bounce",
-    "CrossingFloor",
+    "RefutationBound",
     "crossing_floor",
-    "search_crossing",
-    "verify_crossing",
-    "Quantisation",
-    "quantise",
+    "CrossingFloor",
+    "RecordingBounds",
+    # simulated recordings and the paper's sweep (design studies: planner.study.run_study)
+    "simulate_crossing",
+    "simulate_bounce",
     "SimulatedRun",
     "max_v_sing",
     "random_geometry",
-    "simulate_bounce",
-    "simulate_crossing",
-    "SweepRow",
-    "cruise_for",
     "sweep",
+    "SweepRow",
 ]
 
 logging.getLogger(__name__).addHandler(logging.NullHandler())

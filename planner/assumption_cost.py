@@ -21,7 +21,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from crosscert.verifier.tracker import Verdict
+from crosscert.verifier.settings import Verdict
 
 from .acceleration import AccelerationAssumption, robot_a_max_assumption
 from .certify.crossing import CrossingCertificate, certify_crossing

@@ -25,7 +25,8 @@ import numpy as np
 
 from crosscert.robots import KinematicModel
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode
+from crosscert.verifier.settings import TrackerSettings, Verdict
+from crosscert.verifier.tracker import initial_box_from_mode
 from crosscert.verifier.window import track_window
 
 from . import refute

@@ -19,7 +19,8 @@ from crosscert.robots import KinematicModel
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
+from crosscert.verifier.settings import TrackerSettings, Verdict
+from crosscert.verifier.tracker import initial_box_from_mode, track_batch
 from crosscert.verifier.window import Reasoning, track_window
 
 from . import execution as ex_

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.tracker import TrackerSettings, VelocityModel, Verdict, initial_box_from_mode, track_batch
+from crosscert.verifier.settings import TrackerSettings, VelocityModel, Verdict
+from crosscert.verifier.tracker import initial_box_from_mode, track_batch
 
 from .simulate import ramp_length, simulate_crossing
 from .simulate.run import A_PEAK

@@ -1,54 +1,59 @@
 """Robot descriptions, their kinematic and dynamic models, and the registry.
 
 The bottom layer of crosscert: it imports neither :mod:`verifier` nor
-:mod:`planner`.  The project's error hierarchy (:mod:`robots.errors`) and its
-argument checks (:mod:`robots.arguments`) live here so every layer above can
-use them.
+:mod:`planner`.  The project's error hierarchy (:mod:`robots.errors`), the
+one owner of the bounds a certificate assumes (:mod:`robots.assumptions`) and
+the argument checks (:mod:`robots.arguments`) live here so every layer above
+can use them.  A robot's own helpers (IK, its benchmark crossing) stay in its
+module (:mod:`robots.dextar`, :mod:`robots.rpr3`, :mod:`robots.gough_stewart`).
 """
 
 from __future__ import annotations
 
 import logging
 
-from .base import BenchmarkCrossing, LoopClosure, Robot
-from .units import PoseUnit
-from .dextar import DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing, elbows_out_ik, singular_y
+from .assumptions import Assumptions
+from .base import BenchmarkCrossing, LoopClosure, ReferenceMotion, Robot
+from .dextar import DEXTAR
 from .dynamics import LumpedDynamics
-from .mass_model import LumpedMassModel
 from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
-from .kinematics import KinematicModel
-from .rpr3 import RPR3
 from .gough_stewart import GOUGH_STEWART
-from .base import ReferenceMotion
-from .validation import CheckOutcome, CheckResult, ValidationReport, validate
+from .kinematics import KinematicModel
+from .mass_model import LumpedMassModel
 from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot
+from .rpr3 import RPR3
+from .units import PoseUnit
+from .validation import CheckOutcome, CheckResult, ValidationReport, validate
 
 __all__ = [
-    "Robot",
-    "PoseUnit",
-    "LoopClosure",
-    "KinematicModel",
-    "LumpedMassModel",
-    "LumpedDynamics",
-    "BenchmarkCrossing",
-    "RobotEntry",
-    "ROBOTS",
-    "DEFAULT_ROBOT",
-    "get_entry",
-    "get_robot",
-    "available_robots",
+    # the shipped robots and the registry
     "DEXTAR",
     "RPR3",
     "GOUGH_STEWART",
+    "ROBOTS",
+    "DEFAULT_ROBOT",
+    "RobotEntry",
+    "get_robot",
+    "get_entry",
+    "available_robots",
+    # describing a robot
+    "Robot",
+    "LoopClosure",
+    "PoseUnit",
+    "BenchmarkCrossing",
     "ReferenceMotion",
+    "LumpedMassModel",
+    # what a certificate assumes about it
+    "Assumptions",
+    # its models
+    "KinematicModel",
+    "LumpedDynamics",
+    # checking a definition (the interval checks: crosscert.validate)
     "validate",
     "ValidationReport",
     "CheckResult",
     "CheckOutcome",
-    "DEXTAR_DYNAMICS",
-    "benchmark_crossing",
-    "elbows_out_ik",
-    "singular_y",
+    # errors
     "CrosscertError",
     "InputError",
     "ModelError",

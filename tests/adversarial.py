@@ -25,7 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from crosscert.planner.simulate import random_geometry
-from crosscert.robots import DEXTAR, benchmark_crossing
+from crosscert.robots import DEXTAR
+from crosscert.robots.dextar import benchmark_crossing
 from crosscert.robots.dextar import elbows_out_ik, mode_by_cross_product
 
 #: Fraction of ``a_max`` used at every instant (the rest absorbs rounding).

@@ -24,7 +24,8 @@ from numba import njit
 from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing
 from crosscert.planner.sweep import cruise_for
 from crosscert.planner.task import CrossingTask, Method, benchmark_task
-from crosscert.robots import DEXTAR, KinematicModel, available_robots, benchmark_crossing, get_entry
+from crosscert.robots import DEXTAR, KinematicModel, available_robots, get_entry
+from crosscert.robots.dextar import benchmark_crossing
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, Verdict
 

@@ -17,7 +17,8 @@ from crosscert.planner.cli import main
 from crosscert.planner.certify.plan import certify_plan_window
 from crosscert.planner.task import CrossingTask, PlanningBounds
 from problems import PLANNING, check_certified_speed, check_contains, check_plan_limits
-from crosscert.robots import DEXTAR, DEXTAR_DYNAMICS
+from crosscert.robots import DEXTAR
+from crosscert.robots.dextar import DEXTAR_DYNAMICS
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.verifier.tracker import Verdict
 

@@ -38,7 +38,8 @@ from crosscert.planner.refute.nlp import SAMPLE_BUCKET
 from crosscert.planner.simulate import max_v_sing, simulate_bounce
 from crosscert.planner.sweep import cruise_for
 from problems import default_settings, interval_model, kinematics
-from crosscert.robots import DEXTAR, benchmark_crossing
+from crosscert.robots import DEXTAR
+from crosscert.robots.dextar import benchmark_crossing
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.verifier.tracker import Verdict, track
 

@@ -21,7 +21,8 @@ from crosscert.planner.certify.plan import certify_plan
 from crosscert.planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
 from crosscert.planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
 from problems import interval_model, kinematics
-from crosscert.robots import DEXTAR, benchmark_crossing
+from crosscert.robots import DEXTAR
+from crosscert.robots.dextar import benchmark_crossing
 from crosscert.robots.dextar import DEXTAR_DYNAMICS, dextar_mass_points
 from crosscert.robots.dynamics import LumpedDynamics, criterion_residual, uncontrolled_direction
 from crosscert.robots.errors import InputError, ModelError, SimulationError

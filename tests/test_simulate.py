@@ -19,7 +19,8 @@ from crosscert.planner.simulate import (
     simulate_bounce,
     simulate_crossing,
 )
-from crosscert.robots import DEXTAR, singular_y
+from crosscert.robots import DEXTAR
+from crosscert.robots.dextar import singular_y
 from crosscert.robots.dextar import mode_by_cross_product
 from crosscert.robots.errors import InputError, SimulationError
 
@@ -133,7 +134,7 @@ def test_derivatives_match_finite_differences(fine_runs):
 
 def test_joint_derivatives_are_exact(crossing, xi_true):
     """qd, qdd against 5-point stencils of the closed-form IK on the time law (no simulator IK)."""
-    from crosscert.robots import elbows_out_ik
+    from crosscert.robots.dextar import elbows_out_ik
 
     law, p, u = crossing.time_law, crossing.crossing_point, crossing.direction
     h = 2e-5

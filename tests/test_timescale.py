@@ -37,7 +37,8 @@ from crosscert.planner.timescale import (  # noqa: E402
     sample_path,
     time_optimal_scaling,
 )
-from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
+from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
+from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 from crosscert.robots.errors import InputError, SimulationError  # noqa: E402
 
 V_SING = 1.458  # fastest crossing of Table II, m/s

@@ -15,7 +15,8 @@ from crosscert.planner.certify.crossing import Refuter, refute_speed
 from crosscert.planner.simulate import random_geometry
 from crosscert.planner.worker import SubprocessExecutor, WorkerStopped
 from problems import interval_model, kinematics
-from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing
+from crosscert.robots import DEXTAR, KinematicModel
+from crosscert.robots.dextar import benchmark_crossing
 from crosscert.robots.dextar import dextar_loop_closure
 from crosscert.verifier.tracker import Verdict
 

@@ -1,68 +1,62 @@
 """Sound interval tracking of a parallel robot's pose and velocity.
 
-Explicit re-exports of the public API (no star imports).  The one-sample
-function is ``verifier.step.step`` (not re-exported: the name is its module's).
-The error classes are :mod:`robots.errors`'s, re-exported for convenience.
+What a user calls, by task (explicit re-exports, no star imports):
+
+* **track a recording** — :class:`TrackerSettings` (its bounds are one
+  :class:`~robots.assumptions.Assumptions`), :func:`track` /
+  :func:`track_batch` / the online :class:`Tracker`, answering a
+  :class:`Verdict`; :class:`Backend` picks the compiled or NumPy kernels;
+* **reason over a window** — :func:`track_window` (whole run) and
+  :class:`FixedLagWindow` (online, with a lag), :class:`Reasoning`;
+* **the interval model** of a robot — :class:`IntervalModel`;
+* **recordings** — :class:`Trajectory`, :func:`read_trajectory`,
+  :func:`write_trajectory`;
+* **check a robot definition** — :func:`validate` (every check, the interval
+  ones included).
+
+The one-sample step, its configuration and state (:mod:`verifier.step`), the
+packing and kernels (:mod:`verifier.compiled`), tapes (:mod:`verifier.tape`)
+and file helpers (:mod:`verifier.files`) stay in their modules; the error
+classes are :mod:`robots.errors`'s.
 """
 
 import logging
 
-from crosscert.robots.errors import (
-    CrosscertError,
-    InputError,
-    ModelError,
-    SimulationError,
-    TrajectoryFileError,
-    UnknownRobotError,
-)
 from .model import IntervalModel
-from .step import Backend, Event, StepConfig, StepResult, Tracker, TrackerState, advance, configure, init_state
-from .tape import Tape
-from .files import atomic_write
 from .settings import TrackerSettings, VelocityModel, Verdict
-from .tracker import (
-    BatchResult,
-    SampleStream,
-    TrackResult,
-    initial_box_from_mode,
-    track,
-    track_batch,
-)
+from .step import Backend, Tracker
+from .tracker import BatchResult, SampleStream, TrackResult, initial_box_from_mode, track, track_batch
 from .trajectory import Trajectory
 from .trajfile import read_trajectory, write_trajectory
 from .validation import validate
+from .window import FixedLagWindow, LagResult, Reasoning, WindowResult, track_window
 
 __all__ = [
-    "CrosscertError",
-    "InputError",
-    "ModelError",
-    "SimulationError",
-    "TrajectoryFileError",
-    "UnknownRobotError",
-    "IntervalModel",
-    "Backend",
-    "Event",
-    "StepConfig",
-    "StepResult",
-    "Tracker",
-    "TrackerState",
-    "advance",
-    "configure",
-    "init_state",
-    "Tape",
-    "BatchResult",
-    "SampleStream",
+    # track a recording
     "TrackerSettings",
-    "TrackResult",
     "VelocityModel",
     "Verdict",
-    "initial_box_from_mode",
     "track",
     "track_batch",
+    "Tracker",
+    "TrackResult",
+    "BatchResult",
+    "SampleStream",
+    "initial_box_from_mode",
+    "Backend",
+    # reason over a window
+    "track_window",
+    "FixedLagWindow",
+    "Reasoning",
+    "WindowResult",
+    "LagResult",
+    # the interval model
+    "IntervalModel",
+    # recordings
     "Trajectory",
-    "atomic_write",
     "read_trajectory",
     "write_trajectory",
+    # check a robot definition
     "validate",
 ]
 

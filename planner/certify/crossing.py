@@ -23,7 +23,8 @@ from crosscert.robots import KinematicModel
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.tracker import TrackResult, Verdict
+from crosscert.verifier.settings import Verdict
+from crosscert.verifier.tracker import TrackResult
 from crosscert.verifier.window import WindowResult
 
 from .. import execution as ex_

@@ -56,7 +56,8 @@ from crosscert.robots import KinematicModel
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.tracker import TrackerSettings, TrackResult, Verdict, track
+from crosscert.verifier.settings import TrackerSettings, Verdict
+from crosscert.verifier.tracker import TrackResult, track
 from crosscert.verifier.window import Reasoning, WindowResult, track_window
 
 from .. import execution as ex_

@@ -9,7 +9,7 @@ import numpy as np
 
 from crosscert.robots.registry import DEFAULT_ROBOT, ROBOTS, available_robots
 from crosscert.verifier.step import Backend
-from crosscert.verifier.tracker import VelocityModel
+from crosscert.verifier.settings import VelocityModel
 from crosscert.verifier.trajfile import parse_number
 from crosscert.verifier.window import Reasoning
 

@@ -10,7 +10,7 @@ from crosscert.robots import KinematicModel
 from crosscert.robots.errors import InputError
 from crosscert.robots.registry import get_entry
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.tracker import TrackerSettings
+from crosscert.verifier.settings import TrackerSettings
 from crosscert.verifier.trajfile import parse_number
 
 from ..simulate import random_geometry

@@ -7,7 +7,7 @@ from pathlib import Path
 from crosscert.robots import KinematicModel
 from crosscert.robots.registry import get_entry
 from crosscert.verifier.plots import plot_run
-from crosscert.verifier.tracker import VelocityModel, Verdict
+from crosscert.verifier.settings import VelocityModel, Verdict
 from crosscert.verifier.trajfile import write_trajectory
 
 from ..simulate import simulate_bounce, simulate_crossing, simulate_motion

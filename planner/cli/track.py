@@ -13,7 +13,8 @@ import numpy as np
 from crosscert.robots.errors import CrosscertError, TrajectoryFileError
 from crosscert.verifier.plots import plot_run
 from crosscert.verifier.step import Backend, Event, Tracker
-from crosscert.verifier.tracker import Verdict, initial_box_from_mode, verdict_of
+from crosscert.verifier.settings import Verdict
+from crosscert.verifier.tracker import initial_box_from_mode, verdict_of
 from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
 from crosscert.verifier.window import FixedLagWindow, Reasoning, track_window
 
