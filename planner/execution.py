@@ -45,6 +45,7 @@ from enum import StrEnum
 
 import numpy as np
 
+from crosscert.robots.assumptions import Assumptions
 from crosscert.robots.errors import InputError, SimulationError
 
 __all__ = ["ExecutionKind", "ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
@@ -96,6 +97,16 @@ class ExecutionClass:
     @property
     def xi_box(self) -> tuple[np.ndarray, np.ndarray]:
         return self.xi_lo.copy(), self.xi_hi.copy()
+
+    def assumptions(self, robot, t_s: float, a_max) -> Assumptions:
+        """What a certifying run of this class assumes: its reading error, drift model and geometry box, the
+        robot's ``xd0``, with sampling period ``t_s`` (s) and ``a_max`` (per pose axis, its unit/s^2)."""
+        drift = None
+        if self.drift_per_sample is not None:
+            # d per sample as a rate, rounded up so that j t_s rate >= j d
+            drift = (self.fast_error, float(np.nextafter(self.drift_per_sample / t_s, np.inf)))
+        return Assumptions.for_robot(robot, t_s=t_s, eps_q=self.reading_error, a_max=a_max, drift=drift,
+                                     xi_box=self.xi_box)
 
     def summary(self) -> dict:
         return {

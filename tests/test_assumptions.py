@@ -23,6 +23,7 @@ GOOD = dict(t_s=1e-3, eps_q=1e-4, a_max=(80.0, 80.0), n=2)
     ("t_s", True, "t_s must be positive"),
     ("a_max", (80.0, 0.0), "a_max must be positive and finite, in each axis. unit/s\\^2"),
     ("a_max", (80.0, 80.0, 80.0), "a_max needs 1 or 2 entries"),
+    ("a_max", (80.0, np.inf), "a_max must be positive and finite"),
     ("xd0", -0.1, "xd0 must be non-negative"),
     ("v_max", 0.0, "v_max must be positive"),
     ("xi_box", ((0.0, 1.0), (1.0, 0.0)), "calibration box is empty"),
@@ -97,3 +98,24 @@ def test_recording_and_planning_bounds_use_the_same_rules():
         PlanningBounds(t_s=-1e-3)
     b = PlanningBounds(a_max=90.0).for_robot(DEXTAR)
     assert b.a_max == (90.0, 90.0) and b.eps_q == DEXTAR.eps_q and b.for_robot(DEXTAR) is b
+
+
+def test_execution_class_gives_the_tracker_its_assumptions_with_the_drift_rate_rounded_up():
+    """The class's drift per sample ``d`` becomes a rate with ``rate * t_s >= d`` exactly (the tracker's
+    difference bound ``2 eps_fast + rate j t_s`` must cover ``j d``); round-to-nearest alone falls short on
+    some of these seeded pairs, so the test fails without the upward rounding."""
+    from fractions import Fraction
+
+    from crosscert.planner.execution import ExecutionClass, ExecutionKind
+
+    rng = np.random.default_rng(7)
+    pairs = [(float(d), float(t)) for d, t in zip(10.0 ** rng.uniform(-9, -5, 400), 10.0 ** rng.uniform(-4, -2, 400))]
+    short = [(d, t) for d, t in pairs if Fraction(d / t) * Fraction(t) < Fraction(d)]
+    assert short, "no pair where round-to-nearest falls short: the test would not see a missing rounding"
+    box = (DEXTAR.xi_lo_array, DEXTAR.xi_hi_array)
+    for d, t in short[:20] + pairs[:20]:
+        cls = ExecutionClass(ExecutionKind.CARTESIAN, 2e-4, 1e-4, *box, fast_error=1e-4, drift_per_sample=d)
+        a = cls.assumptions(DEXTAR, t, DEXTAR.a_max)
+        assert all(Fraction(float(r)) * Fraction(t) >= Fraction(d) for r in a.drift_rate), (d, t)
+        assert a.eps_q.tolist() == [2e-4, 2e-4] and a.eps_q_fast.tolist() == [1e-4, 1e-4]
+        assert a.xi_lo.tolist() == box[0].tolist() and a.t_s == t

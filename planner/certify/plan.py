@@ -50,7 +50,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
 
 from crosscert.robots import KinematicModel
 from crosscert.robots import arguments as V
@@ -100,13 +99,9 @@ CERTIFY_WINDOW_GEOMETRIES = 16
 
 # ------------------------------------------------------------------ planning
 def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -> TrackerSettings:
-    """Tracker settings of a certifying run: the class's reading error and drift, ``a_max`` (per axis, its unit/s^2)."""
-    drift = {}
-    if cls.drift_per_sample is not None:
-        # d per sample as a rate, rounded up so that j t_s rate >= j d
-        drift = dict(eps_q_fast=cls.fast_error, drift_rate=float(np.nextafter(cls.drift_per_sample / b.t_s, np.inf)))
-    return TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=cls.reading_error, a_max=a_max, xi_splits=b.xi_splits,
-                                     **drift)
+    """Tracker settings of a certifying run: the class's assumptions (reading error, drift, geometry box) at
+    the plan's ``t_s`` and ``a_max`` (per axis, its unit/s^2), with the bounds' geometry hypotheses."""
+    return TrackerSettings(assumptions=cls.assumptions(robot, b.t_s, a_max), xi_splits=b.xi_splits)
 
 
 def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
