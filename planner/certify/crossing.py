@@ -187,47 +187,120 @@ def package_versions() -> dict:
     return out
 
 
+@dataclass(frozen=True)
+class SpeedBracket:
+    """The speeds a certification searches: ``v_min`` in ``[v_low, v_high]`` m/s, to ``tol`` m/s."""
+
+    v_low: float
+    v_high: float
+    tol: float
+
+
+@dataclass(frozen=True)
+class RefuteOptions:
+    """How a certification searches counterexamples (see :func:`certify_crossing`'s parameters)."""
+
+    enabled: bool = True
+    speeds: tuple | None = None
+    in_background: bool = True
+    executor: Executor | None = None
+    bounce: bool = True
+
+
+@dataclass(frozen=True, eq=False)
+class _Job:
+    """One certification's fixed inputs: the robot, its models, the task and bounds, the bracket."""
+
+    robot: object
+    task: CrossingTask
+    b: PlanningBounds
+    kin: KinematicModel
+    imodel: IntervalModel
+    m0: int
+    bracket: SpeedBracket
+    threads: bool  # numba's threads for the tracking (not beside a background worker)
+
+
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=V_LOW, v_high=None,
                      tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
                      executor: Executor | None = None, seed=0, progress=None, kin=None,
                      imodel=None, bounce: bool = True) -> CrossingCertificate:
     """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
 
+    The steps: the speed search (:func:`~planner.certify.plan.search_v_min`), whose run at ``v_min``
+    is the certificate; the counterexample searches below it (:func:`refutation_search`, in the
+    background by default) and the bounces at ``v_min``; the Monte Carlo confirmation.
+
     Parameters
     ----------
     robot : robots.Robot
     task : CrossingTask
     bounds : PlanningBounds, optional
-    v_low, v_high : float
-        Speed bracket, m/s; ``v_high`` defaults to (and is capped at)
-        :func:`speed_ceiling`: the fastest crossing the time law allows.
-    tol : float
-        Resolution of ``v_min``, m/s.
+    v_low, v_high, tol : float
+        Speed bracket and resolution of ``v_min``, m/s (:class:`SpeedBracket`); ``v_high`` defaults
+        to (and is capped at) :func:`speed_ceiling`: the fastest crossing the time law allows.
     monte_carlo_runs : int
         Executions simulated at ``v_min`` (0 to skip).
-    refute : bool
-        Search verified counterexamples (planner.refute) below ``v_min``.
-    refute_speeds : sequence of float, optional
-        Speeds of the coarse counterexample scan (default every 0.1 m/s from 0.3).
-    refute_in_background : bool
-        Run the counterexample searches on ``executor`` while the speed search
-        and the Monte Carlo run go on (the same searches, with the same 2 s
-        CPU cap per attempt; ``False`` runs them here, afterwards).
-    executor : concurrent.futures.Executor, optional
-        Where background searches run (a process pool, a Dask client's
-        ``get_executor()``...); default: a :class:`~planner.worker.SubprocessExecutor`
-        made for this call and shut down at its end.  A given executor is not
-        shut down.
+    refute, refute_speeds, refute_in_background, executor, bounce
+        The counterexample searches (:class:`RefuteOptions`): whether to search below ``v_min``; the
+        speeds of the coarse scan (default every 0.1 m/s from 0.3); on ``executor`` while the speed
+        search and the Monte Carlo run go on (default: a
+        :class:`~planner.worker.SubprocessExecutor` made for this call; a given one is not shut down)
+        or here, afterwards; also the bounces of the task at ``v_min`` (:mod:`planner.bounce`).
     seed : int
         Seed of the Monte Carlo executions and of the counterexample starts.
     progress : callable, optional
         ``progress(k)`` after each tracked sample of every batch.
-    bounce : bool
-        With ``refute``: also bracket the bounces of the task at ``v_min``
-        (:func:`planner.bounce.bounce_gap`, on ``executor`` when searching in
-        the background).
+    kin, imodel : optional
+        The robot's kinematic and interval models (built when absent).
     """
     t0 = time.perf_counter()
+    opts = RefuteOptions(refute, refute_speeds, refute_in_background, executor, bounce)
+    job = _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, threads=not (refute and refute_in_background))
+    refuter, starts = _start_refuter(job, opts, seed)
+    clock = _Clock({"setup": time.perf_counter() - t0})
+    try:
+        t1 = time.perf_counter()
+        search = _search(job, refuter, progress)
+        t1 = clock.lap("search", t1)
+        # the search certified each speed alone, on its own plan, class and a_max: its run at v_min is the
+        # certificate (no re-run)
+        run = None if search.v_min is None else search.runs[search.v_min]
+        t1 = clock.lap("certificate", t1)
+        top = search.v_min if search.v_min is not None else max(t.v_sing for t in search.trials)
+        ref_job = _refute_below(refuter, top, job.bracket.tol, opts.in_background)
+        bounces = None
+        if refuter is not None and search.v_min is not None and opts.bounce:
+            bounces = _start_bounces(job, search.v_min, refuter, starts)
+            t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
+        mc = _confirm(job, run, monte_carlo_runs, seed, progress)
+        t1 = clock.lap("monte_carlo", t1)
+        ref_bound, ref = _refutation(refuter, ref_job, top, job.bracket.tol)
+        t1 = clock.lap("refutation", t1)
+        gap, ran = _bounce_gap(job, bounces, starts)
+        clock.lap("bounce", t1)
+        if gap is not None:  # its own run time: the tracker's side here plus the crossing searches
+            clock.times["bounce"] = bounces[1] + ran
+    finally:
+        if refuter is not None:
+            refuter.close()
+    return _certificate(job, search, run, mc, ref_bound, ref, gap, clock.times, t0)
+
+
+class _Clock:
+    """Wall time of each phase of a certification, s (the refutation's is the wait left after the Monte Carlo run)."""
+
+    def __init__(self, times: dict):
+        self.times = times
+
+    def lap(self, name: str, since: float) -> float:
+        self.times[name] = time.perf_counter() - since
+        log.info("certify_crossing: %s done in %.2f s", name, self.times[name])
+        return time.perf_counter()
+
+
+def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: bool) -> _Job:
+    """The models, the bounds bound to the robot, the start's mode and the checked speed bracket."""
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
     b = (bounds or PlanningBounds()).for_robot(robot)
@@ -239,111 +312,118 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     if v_high <= v_low:
         raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the {b.method} time law allows "
                          f"at most {v_feasible:.3f} m/s on this task")
-    refuter = None
-    if refute:
-        # starting geometries of the (non-convex) searches: the box centre and a seeded corner
-        starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
-        scan = refute_speeds if refute_speeds is not None else np.arange(0.3, v_high, 0.1)
-        try:
-            scan = sorted({round(float(v), 6) for v in scan})
-        except (TypeError, ValueError):
-            raise InputError(f"refute_speeds must be numbers (m/s), got {refute_speeds!r}") from None
-        pool = (executor or SubprocessExecutor()) if refute_in_background else None
-        refuter = Refuter(robot, task, b, m0, starts, kin, pool, own_executor=executor is None)
-        refuter.submit(scan)
     # numba's threads for the tracking, unless the counterexample worker runs beside it: it holds the
     # other core, the serial kernels are as fast then (benchmarks/README.md), and the first run after
     # an install does not compile the threaded ones
-    threads = not (refute and refute_in_background)
-    # wall time of each phase (the refutation's is the wait left after the Monte Carlo run)
-    clock = {"setup": time.perf_counter() - t0}
+    return _Job(robot, task, b, kin, imodel, m0, SpeedBracket(v_low, v_high, tol), threads)
 
-    def lap(name, since):
-        clock[name] = time.perf_counter() - since
-        log.info("certify_crossing: %s done in %.2f s", name, clock[name])
-        return time.perf_counter()
 
+def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
+    """The :class:`Refuter` with the coarse scan queued (``None`` without refutation) and its starting geometries."""
+    if not opts.enabled:
+        return None, None
+    robot = job.robot
+    # starting geometries of the (non-convex) searches: the box centre and a seeded corner
+    starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
+    scan = opts.speeds if opts.speeds is not None else np.arange(0.3, job.bracket.v_high, 0.1)
     try:
-        t1 = time.perf_counter()
-        # a certified speed is the refutation's ceiling: no counterexample is searched at or above it
-        observe = None if refuter is None else (
-            lambda t: refuter.drop_from(t.v_sing) if t.verdict is Verdict.MODE_CHANGED else None)
-        search = search_v_min(kin, imodel, task, b, v_low, v_high, tol=tol, progress=progress, observe=observe,
-                              parallel=threads)
-        v_min, trials = search.v_min, list(search.trials)
-        t1 = lap("search", t1)
-        # the search certified each speed alone, on its own plan, class and a_max: its run at
-        # v_min is the certificate (no re-run)
-        plan = enc = win = mc = a_used = cls = None
-        if v_min is not None:
-            run = search.runs[v_min]
-            plan, cls, enc, win, a_used = run.plan, run.execution, run.forward, run.window, run.acceleration
-        t1 = lap("certificate", t1)
-        top = v_min if v_min is not None else max(t.v_sing for t in trials)
-        ref_job = bounce_job = tracked = None
-        bounce_s = 0.0
-        if refuter is not None:
-            refuter.drop_from(top)
-            if refute_in_background:
-                # the bisection mostly waits on the worker: let it wait beside the Monte Carlo run
-                helper = ThreadPoolExecutor(max_workers=1)
-                ref_job = helper.submit(refutation_search, refuter, top, tol)
-                helper.shutdown(wait=False)
-        if refuter is not None and v_min is not None and bounce:
-            # the bounces of the task at v_min: the tracker's side here (this process has the
-            # kernels loaded), then the crossing searches on the worker, beside the Monte Carlo run
-            tracked, bounce_s = timed(bounce_verdicts, robot, task, b, v_min, kin=kin, imodel=imodel,
-                                      parallel=threads)
-            if pool is not None:
-                bounce_job = pool.submit(timed, bounce_floor, robot, task, b, tracked, starts=starts)
-            t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
-        if v_min is not None and monte_carlo_runs:
-            mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
-                                          execution=cls, parallel=threads)
-        t1 = lap("monte_carlo", t1)
-        if ref_job is not None:
-            ref_bound, ref = ref_job.result()
-        elif refuter is not None:
-            ref_bound, ref = refutation_search(refuter, top, tol)
-        else:
-            ref_bound = ref = None
-        t1 = lap("refutation", t1)
-        gap = None
-        if tracked is not None:
-            floor = None
-            try:
-                floor, ran = bounce_job.result() if bounce_job is not None else (None, 0.0)
-            except Exception as exc:  # as for the refutation: a failed worker is no result; run it here
-                log.warning("background bounce search failed (%r); searching in this process", exc)
-            if floor is None:
-                floor, ran = timed(bounce_floor, robot, task, b, tracked, starts=starts, kin=kin)
-            gap = gap_of(tracked, floor)
-        lap("bounce", t1)
-        if gap is not None:
-            # its own run time: the tracker's side here plus the crossing searches (in the background,
-            # beside other phases, or here)
-            clock["bounce"] = bounce_s + ran
-    finally:
-        if refuter is not None:
-            refuter.close()
+        scan = sorted({round(float(v), 6) for v in scan})
+    except (TypeError, ValueError):
+        raise InputError(f"refute_speeds must be numbers (m/s), got {opts.speeds!r}") from None
+    pool = (opts.executor or SubprocessExecutor()) if opts.in_background else None
+    refuter = Refuter(robot, job.task, job.b, job.m0, starts, job.kin, pool, own_executor=opts.executor is None)
+    refuter.submit(scan)
+    return refuter, starts
+
+
+def _search(job: _Job, refuter, progress):
+    """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above)."""
+    observe = None if refuter is None else (
+        lambda t: refuter.drop_from(t.v_sing) if t.verdict is Verdict.MODE_CHANGED else None)
+    br = job.bracket
+    return search_v_min(job.kin, job.imodel, job.task, job.b, br.v_low, br.v_high, tol=br.tol, progress=progress,
+                        observe=observe, parallel=job.threads)
+
+
+def _refute_below(refuter, top, tol, in_background: bool):
+    """Drop the speeds at or above ``top``; in the background, start the refutation search (its future)."""
+    if refuter is None:
+        return None
+    refuter.drop_from(top)
+    if not in_background:
+        return None
+    # the bisection mostly waits on the worker: let it wait beside the Monte Carlo run
+    helper = ThreadPoolExecutor(max_workers=1)
+    future = helper.submit(refutation_search, refuter, top, tol)
+    helper.shutdown(wait=False)
+    return future
+
+
+def _refutation(refuter, ref_job, top, tol):
+    """``(bound, rows)`` of the refutation search (its background result, or run here); ``(None, None)`` without."""
+    if ref_job is not None:
+        return ref_job.result()
+    if refuter is not None:
+        return refutation_search(refuter, top, tol)
+    return None, None
+
+
+def _start_bounces(job: _Job, v_min, refuter, starts) -> tuple:
+    """The bounces of the task at ``v_min``: the tracker's side here (this process has the kernels loaded),
+    then the crossing searches on the worker, beside the Monte Carlo run.  ``(tracked, seconds, job)``."""
+    tracked, seconds = timed(bounce_verdicts, job.robot, job.task, job.b, v_min, kin=job.kin, imodel=job.imodel,
+                             parallel=job.threads)
+    pool = refuter.executor
+    floor_job = None if pool is None else pool.submit(timed, bounce_floor, job.robot, job.task, job.b, tracked,
+                                                      starts=starts)
+    return tracked, seconds, floor_job
+
+
+def _bounce_gap(job: _Job, bounces, starts) -> tuple:
+    """``(gap, seconds of the crossing searches)`` of the started bounces (searched here if the worker failed)."""
+    if bounces is None:
+        return None, 0.0
+    tracked, _seconds, floor_job = bounces
+    floor = None
+    try:
+        floor, ran = floor_job.result() if floor_job is not None else (None, 0.0)
+    except Exception as exc:  # as for the refutation: a failed worker is no result; run it here
+        log.warning("background bounce search failed (%r); searching in this process", exc)
+    if floor is None:
+        floor, ran = timed(bounce_floor, job.robot, job.task, job.b, tracked, starts=starts, kin=job.kin)
+    return gap_of(tracked, floor), ran
+
+
+def _confirm(job: _Job, run, runs: int, seed, progress):
+    """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs)."""
+    if run is None or not runs:
+        return None
+    return monte_carlo_confirmation(job.kin, job.imodel, run.plan, job.b, runs=runs, seed=seed, progress=progress,
+                                    execution=run.execution, parallel=job.threads)
+
+
+def _certificate(job: _Job, search, run, mc, ref_bound, ref, gap, clock, t0) -> CrossingCertificate:
+    robot = job.robot
+    enc = None if run is None else run.forward
+    win = None if run is None else run.window
     return CrossingCertificate(
         verdict=(win or enc).verdict if enc is not None else Verdict.UNKNOWN,
-        v_min=v_min,
+        v_min=search.v_min,
         refutation_bound=ref_bound,
-        trials=tuple(trials),
-        trajectory=plan,
+        trials=tuple(search.trials),
+        trajectory=None if run is None else run.plan,
         enclosures=enc,
-        bounds=b,
-        a_max_used=a_used,
+        bounds=job.b,
+        a_max_used=None if run is None else run.acceleration,
         monte_carlo=mc,
         versions=package_versions(),
         elapsed_s=time.perf_counter() - t0,
         refutation=tuple(ref or ()),
-        execution=cls,
+        execution=None if run is None else run.execution,
         timings_s=clock,
         robot_name=robot.name,
         param_names=tuple(robot.param_names),
-        task=task,
+        task=job.task,
         window=win,
         bounce=gap,
         acceleration_units=robot.acceleration_units,
@@ -438,6 +518,11 @@ class Refuter:
             for v, f in self._futures.items():
                 if v >= v_top:
                     f.cancel()
+
+    @property
+    def executor(self) -> Executor | None:
+        """Where searches run in the background (``None``: here, or after the executor failed)."""
+        return self._executor
 
     def speeds(self) -> list:
         """The speeds still wanted, sorted."""
