@@ -119,3 +119,17 @@ def test_execution_class_gives_the_tracker_its_assumptions_with_the_drift_rate_r
         assert all(Fraction(float(r)) * Fraction(t) >= Fraction(d) for r in a.drift_rate), (d, t)
         assert a.eps_q.tolist() == [2e-4, 2e-4] and a.eps_q_fast.tolist() == [1e-4, 1e-4]
         assert a.xi_lo.tolist() == box[0].tolist() and a.t_s == t
+
+
+def test_every_field_reads_back_under_its_own_name():
+    """Distinct values per field: a holder that permuted its keyword fields (they reach __post_init__ in
+    declaration order) would read one back under another's name."""
+    s = TrackerSettings(t_s=1e-3, eps_q=1e-4, a_max=(80.0, 81.0), v_max=(2.0, 3.0), xd0=(0.2, 0.3),
+                        eps_q_fast=(5e-5, 6e-5), drift_rate=(0.5, 0.6))
+    assert (s.t_s, s.eps_q.tolist(), s.a_max.tolist(), s.v_max.tolist(), s.xd0.tolist(), s.eps_q_fast.tolist(),
+            s.drift_rate.tolist()) == (1e-3, [1e-4, 1e-4], [80.0, 81.0], [2.0, 3.0], [0.2, 0.3], [5e-5, 6e-5],
+                                       [0.5, 0.6])
+    rb = RecordingBounds(q_meas=np.zeros((3, 2)), m0=1, t_s=2e-3, eps_q=(1e-4, 2e-4), a_max=(70.0, 71.0),
+                         xi_lo=(0.0,), xi_hi=(1.0,), v0_max=(0.1, 0.2), v_max=(4.0, 5.0))
+    assert (rb.t_s, rb.eps_q.tolist(), rb.a_max.tolist(), rb.xi_lo.tolist(), rb.xi_hi.tolist(), rb.v0_max.tolist(),
+            rb.v_max.tolist()) == (2e-3, [1e-4, 2e-4], [70.0, 71.0], [0.0], [1.0], [0.1, 0.2], [4.0, 5.0])
