@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from problems import CATALOGUE, default_settings, interval_model, run_of, simulate
-from crosscert.verifier.step import Tracker, configure
+from crosscert.verifier.step import configure
+from crosscert.verifier.tracker import Tracker
 from crosscert.verifier.tracker import VelocityModel, initial_box_from_mode, track, track_batch
 
 _probe = np.random.default_rng(5).uniform(-7.0, 7.0, 20000)

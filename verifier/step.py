@@ -44,7 +44,7 @@ from .constants import JOINT_FD, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
-           "advance", "Tracker", "pose_solutions", "StepImpl", "NumpyStep", "CompiledStep"]
+           "advance", "pose_solutions", "StepImpl", "NumpyStep", "CompiledStep"]
 
 
 class Backend(str, Enum):
@@ -507,10 +507,24 @@ class CompiledStep:
 
     def advance(self, config, st, q, record=None, prior=None):
         a = self._args(config, st)
-        rec = a["no_record"] if record is None else a["Record"](*record)
-        pri = a["no_prior"] if prior is None else a["Prior"](*prior)
-        a["run"](config.model.program, config.const, a["rows"], a["scen"], a["scratch"], st.k, q,
-                 record is not None, rec, prior is not None, pri)
+        if record is None and prior is None:
+            # the online path: every argument's type is fixed for this state (q is a
+            # C-contiguous float64 copy), so after the first call the compiled entry
+            # point runs directly; numba's dispatcher would spend longer typing the
+            # nested tuples of arrays than the kernel takes for a sample at rest
+            args = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"], int(st.k), q, False,
+                    a["no_record"], False, a["no_prior"])
+            entry = a.get("entry")
+            if entry is None:
+                a["run"](*args)
+                a["entry"] = _entry_point(a["run"], args)
+            else:
+                entry(*args)
+        else:
+            rec = a["no_record"] if record is None else a["Record"](*record)
+            pri = a["no_prior"] if prior is None else a["Prior"](*prior)
+            a["run"](config.model.program, config.const, a["rows"], a["scen"], a["scratch"], int(st.k), q,
+                     record is not None, rec, prior is not None, pri)
         st.k += q.shape[1]
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
@@ -524,6 +538,18 @@ class CompiledStep:
         if count < 0:
             return None
         return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
+
+
+def _entry_point(dispatcher, args):
+    """The compiled function a numba dispatcher runs for ``args``, called
+    without the dispatcher's typing of every argument (``dispatcher`` itself
+    when it has no such overload)."""
+    import numba
+
+    try:
+        return dispatcher.overloads[tuple(numba.typeof(v) for v in args)].entry_point
+    except (KeyError, AttributeError):
+        return dispatcher
 
 
 _IMPLS = {Backend.NUMPY: NumpyStep(), Backend.COMPILED: CompiledStep()}

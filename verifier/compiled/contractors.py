@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import ops
-from .linalg import enclosure_scratch, gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
+from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 from .ops import jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
 

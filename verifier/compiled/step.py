@@ -48,7 +48,7 @@ from .contractors import (
     velocity_displacement,
     velocity_gs,
 )
-from .linalg import enclosure_scratch, linear_enclosure
+from .linalg import linear_enclosure
 from .ops import jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
