@@ -73,7 +73,7 @@ from crosscert.planner.simulate import random_geometry, simulate_crossing  # noq
 from crosscert.robots import DEXTAR, KinematicModel, benchmark_crossing  # noqa: E402
 import crosscert.verifier.tracker as tracker_module  # noqa: E402
 from crosscert.verifier.model import IntervalModel  # noqa: E402
-from crosscert.verifier.step import Tracker  # noqa: E402
+from crosscert.verifier.tracker import Tracker  # noqa: E402
 from crosscert.verifier.tracker import (  # noqa: E402
     SampleStream,
     TrackerSettings,

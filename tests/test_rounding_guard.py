@@ -78,7 +78,7 @@ def _arb_nodes(prog, t, inputs):
 
 def _inputs(model, rng):
     """A point in the robot's input space: pose in its bounds, joints, calibration and rates."""
-    n, m = model.n, model.m
+    n = model.n
     xlo, xhi = (np.asarray(b, float) for b in model.robot.x_bounds)
     xi_lo, xi_hi = model.xi_box()
     x = rng.uniform(xlo, xhi)

@@ -609,9 +609,11 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None)
 
 
 def __getattr__(name):
-    # the online tracker moved to verifier.tracker; kept importable from here
+    # The online tracker moved to verifier.tracker (which imports this module);
+    # a transitional alias resolved on first use, so that code still importing
+    # it from here keeps working.  Import it from verifier.tracker.
     if name == "Tracker":
-        from .tracker import Tracker
+        import importlib
 
-        return Tracker
+        return importlib.import_module(".tracker", __package__).Tracker
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
