@@ -398,13 +398,20 @@ def scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior
         _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
-def _run(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
-    T = S.w.shape[0]
-    B = q.shape[0]
-    for t in prange(T):
-        sc = thread_scratch(S, t)
-        for b in range(t, B, T):
-            scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior)
+def _make_driver(parallel: bool):
+    def run(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
+        T = S.w.shape[0]
+        B = q.shape[0]
+        for t in prange(T):
+            sc = thread_scratch(S, t)
+            for b in range(t, B, T):
+                scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior)
+
+    # numba names a cached function by its qualified name: without distinct
+    # names the serial driver would load the parallel one from the cache (and
+    # wake the thread pool at every call) or the reverse
+    run.__name__ = run.__qualname__ = "run_parallel" if parallel else "run_serial"
+    return njit(cache=True, nogil=True, parallel=parallel)(run)
 
 
 def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
@@ -426,8 +433,8 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
-#: Every scenario in this thread (uses scratch slot 0 only).
-run_serial = njit(cache=True, nogil=True)(_run)
-#: Scenarios spread over numba's threads, one scratch slot per thread.
-run_parallel = njit(cache=True, nogil=True, parallel=True)(_run)
+#: Every scenario in this thread (thread slots one after the other).
+run_serial = _make_driver(False)
+#: Scenarios spread over numba's threads, thread slot ``t`` running scenarios ``t, t + T, ...``.
+run_parallel = _make_driver(True)
 run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True)(run_hypotheses_parallel)
