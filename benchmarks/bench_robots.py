@@ -48,7 +48,7 @@ from crosscert.planner.simulate import simulate_crossing, simulate_motion  # noq
 from crosscert.planner.sweep import cruise_for  # noqa: E402
 from crosscert.robots import KinematicModel, available_robots, get_entry  # noqa: E402
 from crosscert.verifier.model import IntervalModel  # noqa: E402
-from crosscert.verifier.step import Tracker  # noqa: E402
+from crosscert.verifier.tracker import Tracker  # noqa: E402
 from crosscert.verifier.tracker import TrackerSettings, initial_box_from_mode, track_batch  # noqa: E402
 
 

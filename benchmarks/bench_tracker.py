@@ -74,7 +74,7 @@ from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
 from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 import crosscert.verifier.tracker as tracker_module  # noqa: E402
 from crosscert.verifier.model import IntervalModel  # noqa: E402
-from crosscert.verifier.step import Tracker  # noqa: E402
+from crosscert.verifier.tracker import Tracker  # noqa: E402
 from crosscert.verifier.tracker import (  # noqa: E402
     SampleStream,
     TrackerSettings,

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from problems import CATALOGUE, default_settings, interval_model, run_of, simulate
-from crosscert.verifier.step import Tracker, configure
+from crosscert.verifier.step import configure
+from crosscert.verifier.tracker import Tracker
 from crosscert.verifier.tracker import VelocityModel, initial_box_from_mode, track, track_batch
 
 _probe = np.random.default_rng(5).uniform(-7.0, 7.0, 20000)
@@ -194,3 +195,13 @@ def test_read_only_readings_use_the_same_kernel(imodel, settings):
     assert np.array_equal(frozen.x_lo, ref.x_lo)
     assert all(not any(getattr(t, "readonly", False) for t in sig if hasattr(t, "readonly"))
                for sig in run_serial.signatures)
+
+
+def test_drivers_have_their_own_cache_entries():
+    """numba keys its on-disk cache by a function's qualified name: the serial
+    and parallel drivers must not share one, or one loads the other (a serial
+    tracker waking the thread pool at every sample)."""
+    from crosscert.verifier.compiled import step as kernels
+
+    names = {d.py_func.__qualname__ for d in (kernels.run_serial, kernels.run_parallel, kernels.run_hypotheses_parallel)}
+    assert len(names) == 3

@@ -5,17 +5,20 @@ interval model, validated settings and the constants derived from them, the
 backend) never changes during a run; a :class:`TrackerState` holds everything
 that does (boxes of every geometry hypothesis, the window of past boxes and
 readings the velocity baselines use, mode streaks, inconsistencies); and
-:func:`step` advances the state by one sample.  :class:`Tracker` bundles one
-of each for online use (``update(q)``); :func:`verifier.tracker.track` and
-:func:`verifier.tracker.track_batch` are loops over the same step.
+:func:`step` advances the state by one sample.  :class:`verifier.tracker.Tracker`
+bundles one of each for online use (``update(q)``); :func:`verifier.tracker.track`
+and :func:`verifier.tracker.track_batch` are loops over the same step.
 
-Two backends compute the same step:
+Two implementations of one small step protocol (:class:`StepImpl`) compute
+the same step, chosen by the user-facing :class:`Backend`:
 
-* ``"compiled"`` (default): numba kernels (:mod:`verifier.compiled`), no
-  Python per operation; scenarios in parallel for batches;
-* ``"numpy"``: the reference, vectorised over rows with numpy.
+* ``"compiled"`` (default, :class:`CompiledStep`): numba kernels
+  (:mod:`verifier.compiled`), no Python per operation, no allocation per
+  sample; scenarios in parallel for batches;
+* ``"numpy"`` (:class:`NumpyStep`): the reference, vectorised over rows.
 
-Both follow the same float operations; their boxes agree bit for bit except
+Both read the same :class:`verifier.constants.StepConstants` by name and
+follow the same float operations; their boxes agree bit for bit except
 where numpy's and the C library's ``sin``/``cos`` differ in the last bits
 (both inside the :data:`verifier.interval.TRIG_ULPS` margin).
 
@@ -29,6 +32,7 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import Protocol
 
 import numpy as np
 
@@ -36,10 +40,11 @@ from . import interval as I
 from .contractors import hc4_pose, mode_of, newton, split_prune, velocity, velocity_displacement
 from .contractors import pose_solutions as _np_pose_solutions
 from crosscert.robots.errors import InputError
+from .constants import JOINT_FD, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
-           "advance", "Tracker", "pose_solutions"]
+           "advance", "pose_solutions", "StepImpl", "NumpyStep", "CompiledStep"]
 
 
 class Backend(str, Enum):
@@ -52,9 +57,6 @@ class Backend(str, Enum):
         return self.value
 
 
-_VMODEL_CODE = {"sound": 0, "joint-fd": 1, "paper": 2}
-
-
 @dataclass(frozen=True, eq=False)
 class StepConfig:
     """What stays fixed during a run (build with :func:`configure`).
@@ -65,14 +67,10 @@ class StepConfig:
     settings : TrackerSettings
         Validated (vectors of shape ``(n,)``).
     backend : Backend
-    fpar, ipar, vec, base, diff_err, h : arrays
-        Constants of the step: floats, integers, per-axis vectors (see
-        :mod:`verifier.compiled.step` for the layout), baselines ``j``
-        ``(J,)``, the error interval of a reading difference ``j`` samples
-        apart ``(J, 2, n)`` rad, and ``h = j t_s`` ``(J, 2)`` s, all rounded
-        outward.
-    depth : int
-        Samples kept in the window of past boxes.
+    impl : StepImpl
+        The implementation of the step ``backend`` names.
+    const : verifier.constants.StepConstants
+        The step's constants, rounded outward, read by name by both implementations.
     parallel : bool
         Compiled backend: spread the scenarios of a batch over numba's
         threads (one parallel region per block of samples).  Turn it off
@@ -90,62 +88,30 @@ class StepConfig:
     model: object
     settings: object
     backend: Backend
-    fpar: np.ndarray
-    ipar: np.ndarray
-    vec: np.ndarray
-    base: np.ndarray
-    diff_err: np.ndarray
-    h: np.ndarray
-    depth: int
+    impl: object
+    const: StepConstants
     parallel: bool = True
     spread_hypotheses: bool = False
 
-
-def _difference_error(s, j: int, two_eps):
-    """Error interval of a difference of two readings ``j`` samples apart, rad (outward)."""
-    if s.eps_q_fast is None:
-        return two_eps
-    two_fast = I.scale(2.0, -s.eps_q_fast, s.eps_q_fast)[1]
-    span = I.mul(float(j), float(j), s.t_s, s.t_s)[1]  # j t_s, rounded up
-    bound = I.add(two_fast, two_fast, *I.mul(span, span, s.drift_rate, s.drift_rate))[1]
-    bound = np.minimum(bound, two_eps[1])
-    return -bound, bound
+    @property
+    def depth(self) -> int:
+        """Samples kept in the window of past boxes."""
+        return self.const.depth
 
 
 def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, parallel: bool = True,
               spread_hypotheses: bool = False) -> StepConfig:
     """Validate ``settings`` for ``model`` and derive the step's constants once
     (``parallel``, ``spread_hypotheses``: see :class:`StepConfig`)."""
-    from .settings import VelocityModel
-
     try:
         backend = Backend(backend)
     except ValueError:
         raise InputError(f"unknown backend {backend!r}: choose 'compiled' or 'numpy'") from None
     s = settings.validated(model.n)
-    n, ts = model.n, s.t_s
-    A = (-s.a_max, s.a_max)
-    with I.quiet_fp():
-        half_ts2_A = I.mul(*I.scale(0.5, *I.mul(ts, ts, ts, ts)), *A)  # (t_s^2 / 2) [a], outward
-        ts_A = I.scale(ts, *A)
-        two_eps = I.scale(2.0, -s.eps_q, s.eps_q)
-        quant = I.div(*two_eps, ts, ts)  # 2 eps / t_s
-        diff = np.array([np.stack(_difference_error(s, j, two_eps)) for j in s.baselines]).reshape(-1, 2, n)
-        h = np.array([np.stack(I.mul(float(j), float(j), ts, ts)) for j in s.baselines]).reshape(-1, 2)
-    qdd = np.full(n, np.inf) if s.qdd_bound is None else s.qdd_bound
-    vec = np.stack([s.eps_q, s.a_max, s.v_max, half_ts2_A[0], half_ts2_A[1], ts_A[0], ts_A[1],
-                    quant[0], quant[1], qdd]).astype(np.float64)
-    sound = s.velocity_model is VelocityModel.SOUND
-    P = int(np.prod(s.xi_splits)) if s.xi_splits is not None else 1
     if s.xi_splits is not None and len(s.xi_splits) != model.m:
         raise InputError(f"xi_splits needs {model.m} counts (one per geometric parameter), got {len(s.xi_splits)}")
-    fpar = np.array([ts, s.rel_tol, s.split_tol, s.split_max_width], np.float64)
-    ipar = np.array([_VMODEL_CODE[s.velocity_model.value], int(s.max_iter), int(s.split_boxes), int(bool(s.keep_xi)),
-                     P, int(s.qdd_bound is not None), 0, 0], np.int64)
-    return StepConfig(model=model, settings=s, backend=backend, fpar=fpar, ipar=ipar, vec=vec,
-                      base=np.array(s.baselines, np.int64), diff_err=np.ascontiguousarray(diff), h=h,
-                      depth=max(s.baselines) if sound else 1, parallel=bool(parallel),
-                      spread_hypotheses=bool(spread_hypotheses))
+    return StepConfig(model=model, settings=s, backend=backend, impl=_IMPLS[backend], const=pack_constants(s, model.n),
+                      parallel=bool(parallel), spread_hypotheses=bool(spread_hypotheses))
 
 
 @dataclass(eq=False)
@@ -189,6 +155,8 @@ class TrackerState:
     x_hull: np.ndarray
     xd_hull: np.ndarray
     qdd_hull: np.ndarray
+    #: the compiled implementation's per-thread scratch and argument tuples, built once per state
+    kernel_args: dict = field(default_factory=dict, repr=False)
 
 
 def partition_xi(XI, splits):
@@ -233,7 +201,8 @@ def init_state(config: StepConfig, x0, *, batch: int = 1, xi_box=None) -> Tracke
     R = B * P
     lo = np.repeat(np.broadcast_to(np.asarray(x0[0], dtype=np.float64), (B, n)), P, axis=0)
     hi = np.repeat(np.broadcast_to(np.asarray(x0[1], dtype=np.float64), (B, n)), P, axis=0)
-    xd = np.stack([np.broadcast_to(-s.xd0, (R, n)), np.broadcast_to(s.xd0, (R, n))], axis=1)
+    xd0 = config.const.axis["xd0"]
+    xd = np.stack([np.broadcast_to(-xd0, (R, n)), np.broadcast_to(xd0, (R, n))], axis=1)
     return TrackerState(
         batch=B, hypotheses=P, k=0,
         x=np.ascontiguousarray(np.stack([lo, hi], axis=1)),
@@ -293,38 +262,38 @@ def _rows(a):
 
 
 def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
-    model, s = config.model, config.settings
+    model, c = config.model, config.const
     B, P, n, k = st.batch, st.hypotheses, model.n, st.k
-    R, D = B * P, config.depth
-    ts = s.t_s
-    vec = config.vec
-    vmodel = int(config.ipar[0])
+    R, D = B * P, c.depth
+    ts = c.t_s
+    ax = c.axis
+    vmodel = c.velocity_model
     qk = np.repeat(qk, P, axis=0)
-    eps = vec[0]
+    eps = ax["eps_q"]
     alive = st.row_bad < 0
     X, XD, XI = _rows(st.x), _rows(st.xd), _rows(st.xi)
     Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
     QDD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
     QD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
     prev = (k - 1) % D
-    if k > 0 and vmodel != 0:
-        if vmodel == 1:
-            A = (np.broadcast_to(-s.a_max, (R, n)), np.broadcast_to(s.a_max, (R, n)))
-            QDD = _qdd_over_step(model, s, X, XD, _rows(st.past_q[:, prev]), Q, XI, A)
-            if s.qdd_bound is not None:
-                QDD = I.intersect(*QDD, -s.qdd_bound, s.qdd_bound)
+    if k > 0 and vmodel != SOUND:
+        if vmodel == JOINT_FD:
+            A = (np.broadcast_to(-ax["a_max"], (R, n)), np.broadcast_to(ax["a_max"], (R, n)))
+            QDD = _qdd_over_step(model, ts, X, XD, _rows(st.past_q[:, prev]), Q, XI, A)
+            if c.has_qdd_bound:
+                QDD = I.intersect(*QDD, -ax["qdd_bound"], ax["qdd_bound"])
         qp = st.past_r[:, prev]
         fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
-        QD = I.add(*fd, vec[7], vec[8])
-        if vmodel == 1:
+        QD = I.add(*fd, ax["quant_lo"], ax["quant_hi"])
+        if vmodel == JOINT_FD:
             # q_{k-1} = q_k - t_s qd_k + (t_s^2/2) qdd(zeta), per component, so
             # qd_k = FD + (t_s/2) qdd(zeta)
             QD = I.add(*QD, *I.mul(0.5 * ts, 0.5 * ts, *QDD))
             QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
     if k > 0:
         # prediction (Taylor with Lagrange remainder)
-        Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), vec[3], vec[4])
-        XD = I.intersect(*I.add(*XD, vec[5], vec[6]), -vec[2], vec[2])
+        Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), ax["half_ts2_a_lo"], ax["half_ts2_a_hi"])
+        XD = I.intersect(*I.add(*XD, ax["ts_a_lo"], ax["ts_a_hi"]), -ax["v_max"], ax["v_max"])
         X = Xn
     if prior is not None:
         # boxes known from elsewhere (the other passes of verifier.window) to hold the truth at this sample
@@ -333,26 +302,26 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
         XD = I.intersect(*XD, pxd[:, 0], pxd[:, 1])
     # the displacement baselines depend only on past boxes and readings
     pasts = []
-    if vmodel == 0:
-        for jb, j in enumerate(config.base):
-            if j > min(k, D):
+    if vmodel == SOUND:
+        for jb, base in enumerate(c.baseline):
+            if base["j"] > min(k, D):
                 break
-            p = (k - j) % D
+            p = (k - base["j"]) % D
             qp = st.past_r[:, p]
-            DQ = I.add(*I.sub(qk, qk, qp, qp), *config.diff_err[jb])
-            pasts.append((_rows(st.past_x[:, p]), _rows(st.past_q[:, p]), DQ, tuple(config.h[jb])))
+            DQ = I.add(*I.sub(qk, qk, qp, qp), *c.diff_err[jb])
+            pasts.append((_rows(st.past_x[:, p]), _rows(st.past_q[:, p]), DQ, (base["h_lo"], base["h_hi"])))
     # contraction to a fixpoint, row by row
     active = alive.copy()
     bad = st.row_bad.copy()
     has_qd = np.any(np.isfinite(QD[0]))
-    for _ in range(s.max_iter):
+    for _ in range(c.max_iter):
         wx0 = I.width(*X).sum(-1)
         wv0 = I.width(*XD).sum(-1)
         Xc, Qc, XIc = hc4_pose(model, X, Q, XI)
-        XIc = XIc if s.keep_xi else XI
+        XIc = XIc if c.keep_xi else XI
         Xc = newton(model, Xc, Qc, XIc, "x")
-        if vmodel == 0:
-            XDc = velocity_displacement(model, Xc, Qc, pasts, XIc, XD, s.a_max)
+        if vmodel == SOUND:
+            XDc = velocity_displacement(model, Xc, Qc, pasts, XIc, XD, ax["a_max"])
         elif has_qd:
             XDc = velocity(model, Xc, Qc, XIc, XD, QD)
         else:
@@ -369,18 +338,18 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
         wv1 = I.width(*XD).sum(-1)
         gain = np.maximum((wx0 - wx1) / np.maximum(wx0, 1e-300),
                           np.where(np.isfinite(wv0), (wv0 - wv1) / np.maximum(wv0, 1e-300), 1.0))
-        active &= gain > s.rel_tol
+        active &= gain > c.rel_tol
         if not active.any():
             break
     alive = bad < 0
     mode = mode_of(model, X, Q, XI).astype(np.int64)
-    if s.split_boxes:
-        narrow = np.all(X[1] - X[0] <= s.split_max_width, -1)  # also False for NaN/inf
+    if c.split_boxes:
+        narrow = np.all(X[1] - X[0] <= c.split_max_width, -1)  # also False for NaN/inf
         todo = np.nonzero(alive & (mode == 0) & narrow)[0]
         if todo.size:
             sub = lambda box: (box[0][todo], box[1][todo])  # noqa: E731
-            (lo_t, hi_t), mode_t = split_prune(model, sub(X), sub(Q), sub(XI), max_pieces=s.split_boxes,
-                                               tol=s.split_tol)
+            (lo_t, hi_t), mode_t = split_prune(model, sub(X), sub(Q), sub(XI), max_pieces=c.split_boxes,
+                                               tol=c.split_tol)
             X = (X[0].copy(), X[1].copy())
             X[0][todo], X[1][todo] = lo_t, hi_t
             mode[todo] = mode_t
@@ -423,7 +392,7 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
                                         st.max_width_velocity)
 
 
-def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
+def _qdd_over_step(model, ts, X, XD, Q_prev, Q_now, XI, A):
     """Bound ``|qdd|`` over ``[t_k, t_{k+1}]`` from the boxes at ``t_k``.
 
     Over the interval, ``x`` lies in ``[x]_k + [0, t_s][xd]_k + [0, t_s^2/2][a]``
@@ -433,9 +402,8 @@ def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
     box if the contracted result lies strictly inside it.  Then
     ``qd = -J_q^{-1} J_x xd`` and ``qdd = -J_q^{-1}(J_x xdd + h)`` are enclosed
     by :func:`linear_enclosure`.  Returns ``(lo, hi)`` of ``qdd`` (``-inf, inf``
-    where no bound could be proved).
+    where no bound could be proved); ``ts`` the sampling period, s.
     """
-    ts = s.t_s
     Xs = I.add(*X, *I.mul(0.0, ts, *XD))
     half_ts2 = I.scale(0.5, *I.mul(ts, ts, ts, ts))  # t_s^2 / 2, rounded outward
     Xs = I.add(*Xs, *I.mul(*I.hull(0.0, 0.0, *half_ts2), *A))
@@ -457,46 +425,134 @@ def _qdd_over_step(model, s, X, XD, Q_prev, Q_now, XI, A):
     return np.where(ok, QDD[0], -np.inf), np.where(ok, QDD[1], np.inf)
 
 
-# ---------------------------------------------------------------------------- compiled
+# ---------------------------------------------------------------------------- the two implementations
 
 
-def _empty_record(B, n):
-    return np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64), np.zeros((B, 0, n))
+class StepImpl(Protocol):
+    """What an implementation of the step provides (:class:`NumpyStep`, :class:`CompiledStep`)."""
+
+    backend: Backend
+
+    def advance(self, config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
+        """Advance ``state`` over checked readings ``q`` ``(B, Kc, n)`` (see :func:`advance`)."""
+
+    def pose_solutions(self, model, Q, XI, X_search, tol: float, small: float, max_boxes: int, sweeps: int):
+        """See :func:`pose_solutions`."""
 
 
-def _compiled_steps(config: StepConfig, st: TrackerState, q, record=None, prior=None):
-    """Advance the state over readings ``q`` ``(B, Kc, n)`` in one kernel call,
-    threaded as ``config`` says."""
-    from .compiled import step as kernels
+class NumpyStep:
+    """The reference: the step vectorised over rows with numpy, one sample at a time."""
 
-    prog = config.model.program
-    B, n = st.batch, config.model.n
-    ipar = config.ipar
-    if record is None:
-        rec = _empty_record(B, n)
-    else:
-        ipar = ipar.copy()
-        ipar[6] = 1
-        rec = record
-    if prior is None:
-        prior = (np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)))
-    else:
-        ipar = ipar.copy()
-        ipar[7] = 1
+    backend = Backend.NUMPY
+
+    def advance(self, config, state, q, record=None, prior=None):
+        for kk in range(q.shape[1]):
+            with I.quiet_fp():
+                _numpy_step(config, state, q[:, kk], None if prior is None else (prior[0][:, kk], prior[1][:, kk]))
+            if record is not None:
+                record[0][:, kk] = state.x_hull
+                record[1][:, kk] = state.xd_hull
+                record[2][:, kk] = state.mode
+                record[3][:, kk] = state.qdd_hull
+            state.k += 1
+
+    def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
+        return _np_pose_solutions(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps)
+
+
+class CompiledStep:
+    """The numba kernels of :mod:`verifier.compiled.step`, imported (and
+    compiled or loaded from the cache) on first use only."""
+
+    backend = Backend.COMPILED
+
+    @staticmethod
+    def _threads(config, st):
+        """Which driver runs ``st`` and with how many scratch slots (threads)."""
+        import numba
+
+        from .compiled import step as kernels
+
+        threads = numba.config.NUMBA_NUM_THREADS
+        if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
+            return kernels.run_hypotheses_parallel, min(threads, st.hypotheses)
+        if threads > 1 and config.parallel and st.batch > 1:
+            return kernels.run_parallel, min(threads, st.batch)
+        return kernels.run_serial, 1
+
+    def _args(self, config, st):
+        """The kernel's arguments that stay the same from call to call, built
+        once per state: the state's arrays as tuples, the per-thread scratch
+        and the empty record and prior."""
+        a = st.kernel_args
+        if not a:
+            from .compiled import step as kernels
+            from .compiled.contractors import scratch_arrays
+
+            model, c = config.model, config.const
+            run, threads = self._threads(config, st)
+            B, n = st.batch, model.n
+            a.update(
+                run=run,
+                rows=kernels.Rows(st.x, st.xd, st.xi, st.q, st.past_x, st.past_q, st.past_r, st.row_bad),
+                scen=kernels.Scenarios(st.init_mode, st.mode, st.streak, st.bad_at, st.max_width_pose,
+                                       st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull),
+                scratch=scratch_arrays(threads, model.program.n_nodes, n, model.m, c.baseline.shape[0],
+                                       c.split_boxes, st.hypotheses),
+                no_record=kernels.Record(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64),
+                                         np.zeros((B, 0, n))),
+                no_prior=kernels.Prior(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n))),
+                Record=kernels.Record, Prior=kernels.Prior)
+        return a
+
+    def advance(self, config, st, q, record=None, prior=None):
+        a = self._args(config, st)
+        if record is None and prior is None:
+            # the online path: every argument's type is fixed for this state (q is a
+            # C-contiguous float64 copy), so after the first call the compiled entry
+            # point runs directly; numba's dispatcher would spend longer typing the
+            # nested tuples of arrays than the kernel takes for a sample at rest
+            args = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"], int(st.k), q, False,
+                    a["no_record"], False, a["no_prior"])
+            entry = a.get("entry")
+            if entry is None:
+                a["run"](*args)
+                a["entry"] = _entry_point(a["run"], args)
+            else:
+                entry(*args)
+        else:
+            rec = a["no_record"] if record is None else a["Record"](*record)
+            pri = a["no_prior"] if prior is None else a["Prior"](*prior)
+            a["run"](config.model.program, config.const, a["rows"], a["scen"], a["scratch"], int(st.k), q,
+                     record is not None, rec, prior is not None, pri)
+        st.k += q.shape[1]
+
+    def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
+        from .compiled.contractors import pose_solutions as kernel
+
+        box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)])[None])  # noqa: E731
+        out = np.empty((max_boxes, 2, model.n))
+        modes = np.empty(max_boxes, np.int64)
+        count = kernel(model.program, box(Q), box(XI), box(X_search), float(tol), float(small), int(max_boxes),
+                       int(sweeps), out, modes)
+        if count < 0:
+            return None
+        return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
+
+
+def _entry_point(dispatcher, args):
+    """The compiled function a numba dispatcher runs for ``args``, called
+    without the dispatcher's typing of every argument (``dispatcher`` itself
+    when it has no such overload)."""
     import numba
 
-    threads = numba.config.NUMBA_NUM_THREADS
-    if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
-        run = kernels.run_hypotheses_parallel
-    elif threads > 1 and config.parallel and st.batch > 1:
-        run = kernels.run_parallel
-    else:
-        run = kernels.run_serial
-    run(prog.code, prog.value, prog.outs, prog.meta, prog.n_nodes, st.k, q, st.x, st.xd, st.xi, st.q,
-        st.past_x, st.past_q, st.past_r, st.row_bad, st.init_mode, st.mode, st.streak, st.bad_at,
-        st.max_width_pose, st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull,
-        config.fpar, ipar, config.vec, config.base, config.diff_err, config.h, *rec, *prior)
-    st.k += q.shape[1]
+    try:
+        return dispatcher.overloads[tuple(numba.typeof(v) for v in args)].entry_point
+    except (KeyError, AttributeError):
+        return dispatcher
+
+
+_IMPLS = {Backend.NUMPY: NumpyStep(), Backend.COMPILED: CompiledStep()}
 
 
 def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 5e-3, max_boxes: int = 20000,
@@ -504,33 +560,13 @@ def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 
     """Enclose every forward-kinematics solution in ``X_search``: the branch
     and prune of :func:`verifier.contractors.pose_solutions` (same arguments
     and result) run by ``backend``."""
-    if Backend(backend) is Backend.NUMPY:
-        return _np_pose_solutions(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps)
-    from .compiled.contractors import pose_solutions as kernel
-
-    prog = model.program
-    box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)]))  # noqa: E731
-    out = np.empty((max_boxes, 2, model.n))
-    modes = np.empty(max_boxes, np.int64)
-    count = kernel(prog.code, prog.value, prog.outs, prog.meta, prog.n_nodes, box(Q), box(XI), box(X_search),
-                   float(tol), float(small), int(max_boxes), int(sweeps), out, modes)
-    if count < 0:
-        return None
-    return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
+    return _IMPLS[Backend(backend)].pose_solutions(model, Q, XI, X_search, tol, small, max_boxes, sweeps)
 
 
 def _kernel_array(a):
-    """A writable C-contiguous float64 copy: numba compiles a separate kernel for
-    each array layout and for read-only arrays (a row of a frozen recording
-    would cost a second compilation)."""
+    """A writable C-contiguous float64 copy: one kernel signature whatever the
+    caller's array (a row of a frozen recording is read-only)."""
     return np.array(a, dtype=np.float64, order="C", copy=True)
-
-
-def _check_sample(config, st, q):
-    q = np.asarray(q, dtype=np.float64)
-    if q.shape != (st.batch, config.model.n) or not np.all(np.isfinite(q)):
-        raise InputError(f"sample {st.k}: expected {st.batch}x{config.model.n} finite joint values, got shape {q.shape}")
-    return q
 
 
 def step(config: StepConfig, state: TrackerState, q) -> None:
@@ -540,13 +576,11 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
     ``mode``, ...).  Raises :class:`InputError` for a reading of the wrong
     shape or not finite (the state is then unchanged).
     """
-    q = _check_sample(config, state, q)
-    if config.backend is Backend.NUMPY:
-        with I.quiet_fp():
-            _numpy_step(config, state, q)
-        state.k += 1
-    else:
-        _compiled_steps(config, state, _kernel_array(q[:, None, :]))
+    q = np.asarray(q, dtype=np.float64)
+    if q.shape != (state.batch, config.model.n) or not np.isfinite(q).all():
+        raise InputError(f"sample {state.k}: expected {state.batch}x{config.model.n} finite joint values, "
+                         f"got shape {q.shape}")
+    config.impl.advance(config, state, _kernel_array(q[:, None, :]))
 
 
 def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
@@ -571,69 +605,15 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None)
         prior = tuple(_kernel_array(a) for a in prior)
         if any(a.shape != (B, Kc, 2, config.model.n) for a in prior):
             raise InputError(f"prior boxes must have shape ({B}, {Kc}, 2, {config.model.n})")
-    if config.backend is Backend.COMPILED:
-        _compiled_steps(config, state, _kernel_array(q), record, prior)
-        return
-    for kk in range(Kc):
-        with I.quiet_fp():
-            _numpy_step(config, state, q[:, kk], None if prior is None else (prior[0][:, kk], prior[1][:, kk]))
-        if record is not None:
-            record[0][:, kk] = state.x_hull
-            record[1][:, kk] = state.xd_hull
-            record[2][:, kk] = state.mode
-            record[3][:, kk] = state.qdd_hull
-        state.k += 1
+    config.impl.advance(config, state, _kernel_array(q), record, prior)
 
 
-class Tracker:
-    """Online tracker of one scenario: feed it one reading at a time.
+def __getattr__(name):
+    # The online tracker moved to verifier.tracker (which imports this module);
+    # a transitional alias resolved on first use, so that code still importing
+    # it from here keeps working.  Import it from verifier.tracker.
+    if name == "Tracker":
+        import importlib
 
-    Parameters
-    ----------
-    model : verifier.model.IntervalModel
-    settings : TrackerSettings
-    x0 : (lo, hi)
-        Initial pose box ``(n,)``, m.
-    xi_box : (lo, hi), optional
-        Calibration box, the robot's by default.
-    backend : {"compiled", "numpy"}
-    spread_hypotheses : bool
-        Spread the hypotheses of each sample over numba's threads: lower
-        latency on dedicated cores, erratic on busy ones (see :class:`StepConfig`).
-
-    Examples
-    --------
-    >>> tr = Tracker(model, settings, x0)          # doctest: +SKIP
-    >>> r = tr.update(q)                            # q: (n,) rad
-    >>> r.mode, r.x, r.events                       # doctest: +SKIP
-    """
-
-    def __init__(self, model, settings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
-                 spread_hypotheses: bool = False):
-        self.config = configure(model, settings, backend, spread_hypotheses=spread_hypotheses)
-        self.state = init_state(self.config, x0, batch=1, xi_box=xi_box)
-        self._mode = 0
-        self._consistent = True
-
-    def update(self, q) -> StepResult:
-        """Advance by one reading ``q`` ``(n,)``, rad; returns the new boxes and events."""
-        st = self.state
-        step(self.config, st, np.asarray(q, dtype=np.float64).reshape(1, -1))
-        k = st.k - 1
-        mode = int(st.mode[0])
-        consistent = bool(st.bad_at[0] < 0)
-        events = []
-        if not consistent and self._consistent:
-            events.append(Event.INCONSISTENT)
-        elif consistent:
-            if mode != self._mode:
-                if self._mode == 0:
-                    events.append(Event.MODE_GAINED)
-                elif mode == 0:
-                    events.append(Event.MODE_LOST)
-                else:
-                    events.append(Event.MODE_CHANGED)
-        self._mode, self._consistent = mode, consistent
-        return StepResult(k=k, x=(st.x_hull[0, 0].copy(), st.x_hull[0, 1].copy()),
-                          xd=(st.xd_hull[0, 0].copy(), st.xd_hull[0, 1].copy()), mode=mode,
-                          consistent=consistent, events=tuple(events))
+        return importlib.import_module(".tracker", __package__).Tracker
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

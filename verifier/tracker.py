@@ -48,7 +48,7 @@ import numpy as np
 from . import interval as I
 from crosscert.robots.errors import InputError
 from .settings import TrackerSettings, Verdict, VelocityModel
-from .step import Backend, advance, configure, init_state, pose_solutions
+from .step import Backend, Event, StepResult, advance, configure, init_state, pose_solutions, step
 
 __all__ = [
     "Verdict",
@@ -61,6 +61,7 @@ __all__ = [
     "track",
     "track_batch",
     "SampleStream",
+    "Tracker",
 ]
 
 
@@ -391,3 +392,57 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
         elapsed_s=time.perf_counter() - t0,
         settings=s,
     )
+
+
+class Tracker:
+    """Online tracker of one scenario: feed it one reading at a time.
+
+    Parameters
+    ----------
+    model : verifier.model.IntervalModel
+    settings : TrackerSettings
+    x0 : (lo, hi)
+        Initial pose box ``(n,)``, m.
+    xi_box : (lo, hi), optional
+        Calibration box, the robot's by default.
+    backend : {"compiled", "numpy"}
+    spread_hypotheses : bool
+        Spread the hypotheses of each sample over numba's threads: lower
+        latency on dedicated cores, erratic on busy ones (see :class:`StepConfig`).
+
+    Examples
+    --------
+    >>> tr = Tracker(model, settings, x0)          # doctest: +SKIP
+    >>> r = tr.update(q)                            # q: (n,) rad
+    >>> r.mode, r.x, r.events                       # doctest: +SKIP
+    """
+
+    def __init__(self, model, settings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
+                 spread_hypotheses: bool = False):
+        self.config = configure(model, settings, backend, spread_hypotheses=spread_hypotheses)
+        self.state = init_state(self.config, x0, batch=1, xi_box=xi_box)
+        self._mode = 0
+        self._consistent = True
+
+    def update(self, q) -> StepResult:
+        """Advance by one reading ``q`` ``(n,)``, rad; returns the new boxes and events."""
+        st = self.state
+        step(self.config, st, np.asarray(q, dtype=np.float64).reshape(1, -1))
+        k = st.k - 1
+        mode = int(st.mode[0])
+        consistent = bool(st.bad_at[0] < 0)
+        events = []
+        if not consistent and self._consistent:
+            events.append(Event.INCONSISTENT)
+        elif consistent:
+            if mode != self._mode:
+                if self._mode == 0:
+                    events.append(Event.MODE_GAINED)
+                elif mode == 0:
+                    events.append(Event.MODE_LOST)
+                else:
+                    events.append(Event.MODE_CHANGED)
+        self._mode, self._consistent = mode, consistent
+        return StepResult(k=k, x=(st.x_hull[0, 0].copy(), st.x_hull[0, 1].copy()),
+                          xd=(st.xd_hull[0, 0].copy(), st.xd_hull[0, 1].copy()), mode=mode,
+                          consistent=consistent, events=tuple(events))

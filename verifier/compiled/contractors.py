@@ -1,128 +1,188 @@
 """Contractors of one scenario, compiled: those of :mod:`verifier.contractors`
-in the same order of operations, on bounds arrays ``(2, n)`` (row 0 the lower
-bounds, row 1 the upper) contracted in place.
+in the same order of operations, contracting boxes in place.
 
-``prog`` is a :class:`verifier.compiled.tape.Program` unpacked into
-``code, value, outs, meta``; ``nl, nh`` (node bounds), ``il, ih`` (tape
-inputs) and ``ws`` (temporaries, :func:`workspace_size` floats) are scratch
-vectors: the hot path allocates nothing.
-Tape inputs are concatenated in the order ``x, q, xi, *rest``.
+View-free and allocation-free: a box is an index into an array of boxes
+``(N, 2, d)`` (``[i, 0]`` lower and ``[i, 1]`` upper bounds), so a kernel
+receives ``X, ix`` rather than a slice ``X[ix]``; temporaries come from the
+:class:`Scratch` of the calling thread (node bounds, tape inputs, a flat
+float vector ``w`` carved by offsets, scratch boxes ``tb`` whose slots are
+named below, split pieces, integers).  Tape inputs are concatenated in the
+order ``x, q, xi, *rest``; ``prog`` is a :class:`verifier.compiled.tape.Program`.
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from . import ops
-from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse, work
+from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 from .ops import jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
+
+# slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
+# differences of the baselines follow from TB_DQ on
+TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = range(10)
+
+
+class Scratch(NamedTuple):
+    """Scratch of one thread (see :func:`scratch_arrays` for the sizes).
+
+    Attributes
+    ----------
+    nl, nh : float64 (n_nodes,)
+        Node bounds of the tape being evaluated.
+    il, ih : float64 (5 n + m,)
+        Tape inputs.
+    w : float64 (:func:`workspace_size`,)
+        Flat temporaries (matrices and vectors at offsets).
+    tb : float64 (TB_DQ + J, 2, max(n, m))
+        Scratch boxes, slots ``TB_*``.
+    pieces : float64 (2 cap, 2, n)
+        Two generations of split-and-prune pieces, ``cap = 2 max_pieces + 2``.
+    wi : int64 (J + 2 cap,)
+        Baseline slots, then the pieces' modes and split flags.
+    modes : int64 (P,)
+        Mode of each geometry hypothesis of the current sample.
+    row_qdd : float64 (P, 2, n)
+        Joint-acceleration bound of each hypothesis (then ``|qdd|`` in row 0).
+    """
+
+    nl: np.ndarray
+    nh: np.ndarray
+    il: np.ndarray
+    ih: np.ndarray
+    w: np.ndarray
+    tb: np.ndarray
+    pieces: np.ndarray
+    wi: np.ndarray
+    modes: np.ndarray
+    row_qdd: np.ndarray
 
 
 @jit
 def workspace_size(n):
-    """Scratch floats the contractors need for dimension ``n``: at most
-    ``12 n + 7 n^2`` (the displacement contractor's chain), with room."""
+    """Floats of ``Scratch.w`` for dimension ``n``: at most ``13 n + 14 n^2``
+    (interval Newton, then the joint-acceleration bound's two solves), with room."""
     return 16 * n + 16 * n * n + 64
 
 
-@jit
-def set_input(in_lo, in_hi, slot, box):
-    """Copy a ``(2, len)`` box into the input vector from ``slot`` on."""
-    for i in range(box.shape[1]):
-        in_lo[slot + i] = box[0, i]
-        in_hi[slot + i] = box[1, i]
+def scratch_arrays(threads, n_nodes, n, m, baselines, max_pieces, hypotheses):
+    """Per-thread scratch as numpy arrays with a leading ``threads`` axis, in
+    the order of :class:`Scratch` (allocated once per tracker)."""
+    cap = 2 * max(int(max_pieces), 0) + 2
+    T = int(threads)
+    return Scratch(np.zeros((T, n_nodes)), np.zeros((T, n_nodes)), np.zeros((T, 5 * n + m)),
+                   np.zeros((T, 5 * n + m)), np.zeros((T, workspace_size(n))),
+                   np.zeros((T, TB_DQ + max(int(baselines), 1), 2, max(n, m))), np.zeros((T, 2 * cap, 2, n)),
+                   np.zeros((T, max(int(baselines), 1) + 2 * cap), np.int64), np.zeros((T, hypotheses), np.int64),
+                   np.zeros((T, hypotheses, 2, n)))
 
 
 @jit
-def scratch(n_nodes, n, m):
-    """The scratch vectors of one thread: node bounds ``nl, nh``, tape inputs
-    ``il, ih`` (every tape's inputs, at most ``5 n + m``) and temporaries ``ws``."""
-    return (np.empty(n_nodes), np.empty(n_nodes), np.empty(5 * n + m), np.empty(5 * n + m),
-            np.empty(workspace_size(n)))
+def thread_scratch(S, t):
+    """The :class:`Scratch` of thread slot ``t`` (rows of the arrays ``S``)."""
+    return Scratch(S.nl[t], S.nh[t], S.il[t], S.ih[t], S.w[t], S.tb[t], S.pieces[t], S.wi[t], S.modes[t],
+                   S.row_qdd[t])
 
 
 @jit
-def hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih, joints_too):
-    """HC4Revise on ``f(x, q, xi) = 0``: contracts ``X`` in place, and ``Q``
-    and ``XI`` too when ``joints_too`` (else they are kept as given)."""
-    n = X.shape[1]
-    m = XI.shape[1]
-    set_input(il, ih, 0, X)
-    set_input(il, ih, n, Q)
-    set_input(il, ih, 2 * n, XI)
-    hc4(code, value, outs, meta, T_F, n, il, ih, nl, nh)
+def copy_box(S, s, D, d, k):
+    """``D[d] <- S[s]`` over the first ``k`` components."""
+    for i in range(k):
+        D[d, 0, i] = S[s, 0, i]
+        D[d, 1, i] = S[s, 1, i]
+
+
+@jit
+def set_input(in_lo, in_hi, slot, B, b, k):
+    """Copy the box ``B[b]`` (``k`` components) into the input vector from ``slot`` on."""
+    for i in range(k):
+        in_lo[slot + i] = B[b, 0, i]
+        in_hi[slot + i] = B[b, 1, i]
+
+
+@jit
+def _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m):
+    set_input(sc.il, sc.ih, 0, X, ix, n)
+    set_input(sc.il, sc.ih, n, Q, iq, n)
+    set_input(sc.il, sc.ih, 2 * n, XI, ixi, m)
+
+
+@jit
+def hc4_pose(prog, X, ix, Q, iq, XI, ixi, n, m, sc, joints_too):
+    """HC4Revise on ``f(x, q, xi) = 0``: contracts ``X[ix]`` in place, and
+    ``Q[iq]`` and ``XI[ixi]`` too when ``joints_too`` (else they are kept)."""
+    il = sc.il
+    ih = sc.ih
+    _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
+    hc4(prog, T_F, n, il, ih, sc.nl, sc.nh)
     for i in range(n):
-        X[0, i] = il[i]
-        X[1, i] = ih[i]
+        X[ix, 0, i] = il[i]
+        X[ix, 1, i] = ih[i]
     if joints_too:
         for i in range(n):
-            Q[0, i] = il[n + i]
-            Q[1, i] = ih[n + i]
+            Q[iq, 0, i] = il[n + i]
+            Q[iq, 1, i] = ih[n + i]
         for i in range(m):
-            XI[0, i] = il[2 * n + i]
-            XI[1, i] = ih[2 * n + i]
+            XI[ixi, 0, i] = il[2 * n + i]
+            XI[ixi, 1, i] = ih[2 * n + i]
 
 
 @jit
-def newton(code, value, outs, meta, X, Q, XI, on_x, nl, nh, il, ih, ws):
+def newton(prog, X, ix, Q, iq, XI, ixi, on_x, n, m, sc):
     """One preconditioned Hansen–Sengupta step on ``f = 0`` in ``x`` (``on_x``)
-    or in ``q``; contracts that box in place."""
-    n = X.shape[1]
+    or in ``q``; contracts that box in place.  Uses ``sc.w[:7 n + 7 n^2]``."""
+    w = sc.w
+    il = sc.il
+    ih = sc.ih
     nn = n * n
+    mid, fl, fh, bl, bh, yl, yh = 0, n, 2 * n, 3 * n, 4 * n, 5 * n, 6 * n
+    jl = 7 * n
+    jh = jl + nn
+    jm = jl + 2 * nn
+    c = jl + 3 * nn
+    al = jl + 4 * nn
+    ah = jl + 5 * nn
     V = X if on_x else Q
-    mid = ws[0:n]
-    Fl = ws[n:2 * n]
-    Fh = ws[2 * n:3 * n]
-    bl = ws[3 * n:4 * n]
-    bh = ws[4 * n:5 * n]
-    yl = ws[5 * n:6 * n]
-    yh = ws[6 * n:7 * n]
-    Jl = work(ws, 7 * n, n, n)
-    Jh = work(ws, 7 * n + nn, n, n)
-    Jm = work(ws, 7 * n + 2 * nn, n, n)
-    C = work(ws, 7 * n + 3 * nn, n, n)
-    Al = work(ws, 7 * n + 4 * nn, n, n)
-    Ah = work(ws, 7 * n + 5 * nn, n, n)
+    iv = ix if on_x else iq
+    tape_j = T_JX if on_x else T_JQ
     for i in range(n):
-        mid[i] = ops.midpoint(V[0, i], V[1, i])
-    set_input(il, ih, 0, X)
-    set_input(il, ih, n, Q)
-    set_input(il, ih, 2 * n, XI)
+        w[mid + i] = ops.midpoint(V[iv, 0, i], V[iv, 1, i])
+    _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
     off = 0 if on_x else n
     for i in range(n):
-        il[off + i] = mid[i]
-        ih[off + i] = mid[i]
-    forward(code, value, meta, T_F, il, ih, nl, nh)
+        il[off + i] = w[mid + i]
+        ih[off + i] = w[mid + i]
+    forward(prog, T_F, il, ih, sc.nl, sc.nh)
     for i in range(n):
-        Fl[i], Fh[i] = output(outs, meta, T_F, i, nl, nh)
-    set_input(il, ih, off, V)
-    forward(code, value, meta, T_JX if on_x else T_JQ, il, ih, nl, nh)
+        w[fl + i], w[fh + i] = output(prog, T_F, i, sc.nl, sc.nh)
+    set_input(il, ih, off, V, iv, n)
+    forward(prog, tape_j, il, ih, sc.nl, sc.nh)
+    for e in range(nn):
+        lo, hi = output(prog, tape_j, e, sc.nl, sc.nh)
+        w[jl + e] = lo
+        w[jh + e] = hi
+        w[jm + e] = ops.midpoint(lo, hi)
+    point_inverse(w, jm, c, jl + 6 * nn, n)
+    pmat_imat(w, c, jl, jh, al, ah, n)
+    pmat_ivec(w, c, fl, fh, bl, bh, n)
     for i in range(n):
-        for j in range(n):
-            Jl[i, j], Jh[i, j] = output(outs, meta, T_JX if on_x else T_JQ, i * n + j, nl, nh)
-            Jm[i, j] = ops.midpoint(Jl[i, j], Jh[i, j])
-    point_inverse(Jm, C, ws, 7 * n + 6 * nn)
-    pmat_imat(C, Jl, Jh, Al, Ah)
-    pmat_ivec(C, Fl, Fh, bl, bh)
+        w[bl + i], w[bh + i] = -w[bh + i], -w[bl + i]
+        w[yl + i], w[yh + i] = ops.sub(V[iv, 0, i], V[iv, 1, i], w[mid + i], w[mid + i])
+    gauss_seidel(w, al, ah, bl, bh, yl, yh, n, 1)
     for i in range(n):
-        bl[i], bh[i] = -bh[i], -bl[i]
-        yl[i], yh[i] = ops.sub(V[0, i], V[1, i], mid[i], mid[i])
-    gauss_seidel(Al, Ah, bl, bh, yl, yh, 1)
-    for i in range(n):
-        vl, vh = ops.add(mid[i], mid[i], yl[i], yh[i])
-        V[0, i], V[1, i] = ops.intersect(V[0, i], V[1, i], vl, vh)
+        vl, vh = ops.add(w[mid + i], w[mid + i], w[yl + i], w[yh + i])
+        V[iv, 0, i], V[iv, 1, i] = ops.intersect(V[iv, 0, i], V[iv, 1, i], vl, vh)
 
 
 @jit
-def mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
+def mode_of(prog, X, ix, Q, iq, XI, ixi, n, m, sc):
     """+1 / -1 when ``mode_sign det J_x`` has that sign over the box, else 0."""
-    n = X.shape[1]
-    set_input(il, ih, 0, X)
-    set_input(il, ih, n, Q)
-    set_input(il, ih, 2 * n, XI)
-    forward(code, value, meta, T_DET, il, ih, nl, nh)
-    dl, dh = output(outs, meta, T_DET, 0, nl, nh)
+    _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
+    forward(prog, T_DET, sc.il, sc.ih, sc.nl, sc.nh)
+    dl, dh = output(prog, T_DET, 0, sc.nl, sc.nh)
     if dl > 0.0:
         return 1
     if dh < 0.0:
@@ -131,254 +191,274 @@ def mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih):
 
 
 @jit
-def velocity_gs(code, value, outs, meta, X, Q, XI, XD, QD, nl, nh, il, ih, ws):
-    """Contract ``XD`` in place with ``J_x xd = -J_q qd`` (one enclosure of ``J_q qd``)."""
-    n = X.shape[1]
-    m = XI.shape[1]
-    set_input(il, ih, 0, X)
-    set_input(il, ih, n, Q)
-    set_input(il, ih, 2 * n, XI)
-    set_input(il, ih, 2 * n + m, QD)
-    _solve_vel(code, value, outs, meta, XD, nl, nh, il, ih, None, 1, ws, 0)
-
-
-@jit
-def _solve_vel(code, value, outs, meta, Y, nl, nh, il, ih, slack, sweeps, ws, off):
-    # evaluate the vel tape (inputs already set), then Y <- enclosure of
-    # J_x u = -J_q qd from the start box Y (+ slack when given) (+ slack after)
-    n = Y.shape[1]
+def _solve_vel(prog, sc, y, slack, sweeps, off, n):
+    # evaluate the vel tape (inputs already set), then [y] (at w[y], w[y + n])
+    # <- enclosure of J_x u = -J_q qd from the start box [y] (+ slack at
+    # w[slack], w[slack + n], when slack >= 0) (+ slack after)
+    w = sc.w
     nn = n * n
-    forward(code, value, meta, T_VEL, il, ih, nl, nh)
-    Jl = work(ws, off, n, n)
-    Jh = work(ws, off + nn, n, n)
-    o = off + 2 * nn
-    bl = ws[o:o + n]
-    bh = ws[o + n:o + 2 * n]
-    yl = ws[o + 2 * n:o + 3 * n]
-    yh = ws[o + 3 * n:o + 4 * n]
+    forward(prog, T_VEL, sc.il, sc.ih, sc.nl, sc.nh)
+    jl = off
+    jh = off + nn
+    bl = off + 2 * nn
+    bh = bl + n
+    yl = bh + n
+    yh = yl + n
     for i in range(n):
         for j in range(n):
-            Jl[i, j], Jh[i, j] = output(outs, meta, T_VEL, i * n + j, nl, nh)
-        rl, rh = output(outs, meta, T_VEL, n * n + i, nl, nh)
-        bl[i] = -rh
-        bh[i] = -rl
+            w[jl + i * n + j], w[jh + i * n + j] = output(prog, T_VEL, i * n + j, sc.nl, sc.nh)
+        rl, rh = output(prog, T_VEL, nn + i, sc.nl, sc.nh)
+        w[bl + i] = -rh
+        w[bh + i] = -rl
     for i in range(n):
-        if slack is None:
-            yl[i] = Y[0, i]
-            yh[i] = Y[1, i]
+        if slack < 0:
+            w[yl + i] = w[y + i]
+            w[yh + i] = w[y + n + i]
         else:
-            yl[i], yh[i] = ops.add(Y[0, i], Y[1, i], slack[0, i], slack[1, i])
-    linear_enclosure(Jl, Jh, bl, bh, yl, yh, True, sweeps, ws, o + 4 * n)
+            w[yl + i], w[yh + i] = ops.add(w[y + i], w[y + n + i], w[slack + i], w[slack + n + i])
+    linear_enclosure(w, jl, jh, bl, bh, yl, yh, n, True, sweeps, yh + n)
     for i in range(n):
-        if slack is None:
-            Y[0, i] = yl[i]
-            Y[1, i] = yh[i]
+        if slack < 0:
+            w[y + i] = w[yl + i]
+            w[y + n + i] = w[yh + i]
         else:
-            Y[0, i], Y[1, i] = ops.add(yl[i], yh[i], slack[0, i], slack[1, i])
+            w[y + i], w[y + n + i] = ops.add(w[yl + i], w[yh + i], w[slack + i], w[slack + n + i])
 
 
 @jit
-def velocity_displacement(code, value, outs, meta, X, Q, XI, XD, past_x, past_q, DQ, h, idx, n_base, a_max,
-                          nl, nh, il, ih, ws):
-    """Contract ``XD`` in place with the displacements over ``n_base`` baselines
-    (see :func:`verifier.contractors.velocity_displacement`).
+def velocity_gs(prog, X, ix, Q, iq, XI, ixi, XD, ixd, QD, iqd, n, m, sc):
+    """Contract ``XD[ixd]`` in place with ``J_x xd = -J_q qd`` (one enclosure of ``J_q qd``)."""
+    w = sc.w
+    _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
+    set_input(sc.il, sc.ih, 2 * n + m, QD, iqd, n)
+    for i in range(n):
+        w[i] = XD[ixd, 0, i]
+        w[n + i] = XD[ixd, 1, i]
+    _solve_vel(prog, sc, 0, -1, 1, 2 * n, n)
+    for i in range(n):
+        XD[ixd, 0, i] = w[i]
+        XD[ixd, 1, i] = w[n + i]
 
-    ``past_x[idx[j]]``, ``past_q[idx[j]]`` are the boxes ``(2, n)`` at
-    ``t_k - h_j``; ``DQ[j]`` encloses ``q_k - q_{k-j}``; ``h[j]`` the baseline
-    ``(lo, hi)``, s; ``a_max`` ``(n,)``, m/s^2.
+
+@jit
+def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, r, DQ, dq0, baseline, idx,
+                          n_base, axis, n, m, sc):
+    """Contract ``XD[ixd]`` in place with the displacements over ``n_base``
+    baselines (see :func:`verifier.contractors.velocity_displacement`).
+
+    ``past_x[r, idx[j]]``, ``past_q[r, idx[j]]`` are the boxes at
+    ``t_k - h_j``; ``DQ[dq0 + j]`` encloses ``q_k - q_{k-j}``;
+    ``baseline[j]`` holds ``h_j`` (``h_lo``, ``h_hi``, s); ``axis[i].a_max``
+    m/s^2.  Uses ``sc.w[:12 n + 7 n^2]``.
     """
     if n_base == 0:
         return
-    n = X.shape[1]
-    m = XI.shape[1]
-    accl = ws[0:n]
-    acch = ws[n:2 * n]
-    U = work(ws, 2 * n, 2, n)
-    slack = work(ws, 4 * n, 2, n)
+    w = sc.w
+    il = sc.il
+    ih = sc.ih
+    accl, acch, u, slack = 0, n, 2 * n, 4 * n
     for jb in range(n_base):
-        Xp = past_x[idx[jb]]
-        Qp = past_q[idx[jb]]
+        p = idx[jb]
+        h_lo = baseline[jb].h_lo
+        h_hi = baseline[jb].h_hi
         for i in range(n):
-            il[i], ih[i] = ops.hull(X[0, i], X[1, i], Xp[0, i], Xp[1, i])
-            il[n + i], ih[n + i] = ops.hull(Q[0, i], Q[1, i], Qp[0, i], Qp[1, i])
-            il[2 * n + m + i], ih[2 * n + m + i] = ops.div(DQ[jb, 0, i], DQ[jb, 1, i], h[jb, 0], h[jb, 1])
+            il[i], ih[i] = ops.hull(X[ix, 0, i], X[ix, 1, i], past_x[r, p, 0, i], past_x[r, p, 1, i])
+            il[n + i], ih[n + i] = ops.hull(Q[iq, 0, i], Q[iq, 1, i], past_q[r, p, 0, i], past_q[r, p, 1, i])
+            il[2 * n + m + i], ih[2 * n + m + i] = ops.div(DQ[dq0 + jb, 0, i], DQ[dq0 + jb, 1, i], h_lo, h_hi)
         for i in range(m):
-            il[2 * n + i] = XI[0, i]
-            ih[2 * n + i] = XI[1, i]
-        half_h = ops.scale(0.5, h[jb, 1], h[jb, 1])[1]
+            il[2 * n + i] = XI[ixi, 0, i]
+            ih[2 * n + i] = XI[ixi, 1, i]
+        half_h = ops.scale(0.5, h_hi, h_hi)[1]
         for i in range(n):
-            slack[0, i], slack[1, i] = ops.mul(-half_h, half_h, -a_max[i], a_max[i])
-            U[0, i] = XD[0, i]
-            U[1, i] = XD[1, i]
-        _solve_vel(code, value, outs, meta, U, nl, nh, il, ih, slack, 1, ws, 6 * n)
+            a = axis[i].a_max
+            w[slack + i], w[slack + n + i] = ops.mul(-half_h, half_h, -a, a)
+            w[u + i] = XD[ixd, 0, i]
+            w[u + n + i] = XD[ixd, 1, i]
+        _solve_vel(prog, sc, u, slack, 1, 6 * n, n)
         for i in range(n):
-            accl[i] = U[0, i] if jb == 0 else ops.maxn(accl[i], U[0, i])
-            acch[i] = U[1, i] if jb == 0 else ops.minn(acch[i], U[1, i])
+            w[accl + i] = w[u + i] if jb == 0 else ops.maxn(w[accl + i], w[u + i])
+            w[acch + i] = w[u + n + i] if jb == 0 else ops.minn(w[acch + i], w[u + n + i])
     for i in range(n):
-        XD[0, i] = ops.maxn(XD[0, i], accl[i])
-        XD[1, i] = ops.minn(XD[1, i], acch[i])
+        XD[ixd, 0, i] = ops.maxn(XD[ixd, 0, i], w[accl + i])
+        XD[ixd, 1, i] = ops.minn(XD[ixd, 1, i], w[acch + i])
 
 
 @jit
-def empty_box(B):
-    """Whether the box ``(2, n)`` is empty: some ``not (lo <= hi)`` (a NaN bound counts)."""
-    for i in range(B.shape[1]):
-        if not (B[0, i] <= B[1, i]):
+def empty_box(B, b, k):
+    """Whether the box ``B[b]`` (``k`` components) is empty: some ``not (lo <= hi)`` (a NaN bound counts)."""
+    for i in range(k):
+        if not (B[b, 0, i] <= B[b, 1, i]):
             return True
     return False
 
 
 @jit
-def inverted_box(B):
+def inverted_box(B, b, k):
     """Whether some ``lo > hi``: the branch and prunes' test (as the
     reference's ``np.any(lo > hi)``, a NaN bound does not count)."""
-    for i in range(B.shape[1]):
-        if B[0, i] > B[1, i]:
+    for i in range(k):
+        if B[b, 0, i] > B[b, 1, i]:
             return True
     return False
 
 
 @jit
-def split_prune(code, value, outs, meta, X, Q, XI, max_pieces, tol, sweeps, nl, nh, il, ih, ws):
+def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, wi0):
     """Branch and prune of one pose box whose mode is undecided (see
-    :func:`verifier.contractors.split_prune`): ``X`` becomes the hull of the
-    surviving pieces (empty when none survives); returns their common mode or 0.
+    :func:`verifier.contractors.split_prune`): ``X[ix]`` becomes the hull of
+    the surviving pieces (empty when none survives); returns their common mode or 0.
 
     Pieces are split generation by generation, in the reference's order: the
-    kept pieces, then every left half, then every right half.
+    kept pieces, then every left half, then every right half.  The two
+    generations live in ``sc.pieces[:cap]`` and ``sc.pieces[cap:]``, their
+    modes and split flags in ``sc.wi[wi0:]``.
     """
-    n = X.shape[1]
     cap = 2 * max_pieces + 2
-    P = np.empty((cap, 2, n))
-    Pm = np.empty(cap, np.int64)
+    P = sc.pieces
+    pm = wi0
+    sp = wi0 + cap
+    wi = sc.wi
+    tb = sc.tb
     N = 1
-    P[0] = X
-    Nw = np.empty((cap, 2, n))
-    split = np.empty(cap, np.bool_)
-    box = np.empty((2, n))
+    copy_box(X, ix, P, 0, n)
     while True:
         any_split = False
         for p in range(N):
-            Pm[p] = mode_of(code, value, outs, meta, P[p], Q, XI, nl, nh, il, ih)
+            wi[pm + p] = mode_of(prog, P, p, Q, iq, XI, ixi, n, m, sc)
             wmax = P[p, 1, 0] - P[p, 0, 0]
             for i in range(1, n):
                 wmax = ops.maxn(wmax, P[p, 1, i] - P[p, 0, i])
-            split[p] = Pm[p] == 0 and wmax >= tol and N < max_pieces
-            any_split |= split[p]
+            s = wi[pm + p] == 0 and wmax >= tol and N < max_pieces
+            wi[sp + p] = 1 if s else 0
+            any_split |= s
         if not any_split:
             break
         M = 0
         for p in range(N):
-            if not split[p]:
-                Nw[M] = P[p]
+            if wi[sp + p] == 0:
+                copy_box(P, p, P, cap + M, n)
                 M += 1
         for side in range(2):
             for p in range(N):
-                if not split[p]:
+                if wi[sp + p] == 0:
                     continue
                 d = 0
                 wd = P[p, 1, 0] - P[p, 0, 0]
                 for i in range(1, n):
-                    w = P[p, 1, i] - P[p, 0, i]
-                    if w > wd:
-                        wd = w
+                    wv = P[p, 1, i] - P[p, 0, i]
+                    if wv > wd:
+                        wd = wv
                         d = i
                 mid = 0.5 * P[p, 0, d] + 0.5 * P[p, 1, d]
-                box[:] = P[p]
+                copy_box(P, p, tb, TB_PIECE, n)
                 if side == 0:
-                    box[1, d] = mid
+                    tb[TB_PIECE, 1, d] = mid
                 else:
-                    box[0, d] = mid
+                    tb[TB_PIECE, 0, d] = mid
                 alive = True
                 for _ in range(sweeps):
-                    hc4_pose(code, value, outs, meta, box, Q, XI, nl, nh, il, ih, False)
-                    if inverted_box(box):
+                    hc4_pose(prog, tb, TB_PIECE, Q, iq, XI, ixi, n, m, sc, False)
+                    if inverted_box(tb, TB_PIECE, n):
                         alive = False
                         break
-                    newton(code, value, outs, meta, box, Q, XI, True, nl, nh, il, ih, ws)
-                    if inverted_box(box):
+                    newton(prog, tb, TB_PIECE, Q, iq, XI, ixi, True, n, m, sc)
+                    if inverted_box(tb, TB_PIECE, n):
                         alive = False
                         break
                 if alive:
-                    Nw[M] = box
+                    copy_box(tb, TB_PIECE, P, cap + M, n)
                     M += 1
         N = M
-        P[:N] = Nw[:N]
+        for p in range(N):
+            copy_box(P, cap + p, P, p, n)
         if N == 0:
             break
     lo_mode = 2
     hi_mode = -2
     for i in range(n):
-        X[0, i] = np.inf
-        X[1, i] = -np.inf
+        X[ix, 0, i] = np.inf
+        X[ix, 1, i] = -np.inf
     for p in range(N):
         for i in range(n):
-            X[0, i] = min(X[0, i], P[p, 0, i])
-            X[1, i] = max(X[1, i], P[p, 1, i])
-        lo_mode = min(lo_mode, Pm[p])
-        hi_mode = max(hi_mode, Pm[p])
+            X[ix, 0, i] = min(X[ix, 0, i], P[p, 0, i])
+            X[ix, 1, i] = max(X[ix, 1, i], P[p, 1, i])
+        lo_mode = min(lo_mode, wi[pm + p])
+        hi_mode = max(hi_mode, wi[pm + p])
     if N > 0 and lo_mode == hi_mode:
         return lo_mode
     return 0
 
 
 @jit
-def pose_solutions(code, value, outs, meta, n_nodes, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode):
-    """Enclose every solution of ``f(x, q, xi) = 0`` in ``X_search`` ``(2, n)``
-    (branch and prune of :func:`verifier.contractors.pose_solutions`, same
-    order: depth first, left half pushed first).
+def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode):
+    """Enclose every solution of ``f(x, q, xi) = 0`` in ``X_search`` (boxes
+    ``(1, 2, n)``, ``(1, 2, n)``, ``(1, 2, m)``; branch and prune of
+    :func:`verifier.contractors.pose_solutions`, same order: depth first,
+    left half pushed first).
 
     Writes the solution boxes to ``out`` ``(max_boxes, 2, n)`` and their
     modes to ``out_mode``; returns their number, or -1 when the budget of
-    ``max_boxes`` boxes ran out.
+    ``max_boxes`` boxes ran out.  Allocates its stack and scratch once per call.
     """
-    n = X_search.shape[1]
-    nl, nh, il, ih, ws = scratch(n_nodes, n, XI.shape[1])
+    n = X_search.shape[2]
+    m = XI.shape[2]
+    S = scratch_alloc(prog.n_nodes, n, m)
+    sc = thread_scratch(S, 0)
     stack = np.empty((max_boxes + 2, 2, n))
-    stack[0] = X_search
+    copy_box(X_search, 0, stack, 0, n)
     top = 1
     found = 0
     seen = 0
-    X = np.empty((2, n))
+    X = np.empty((1, 2, n))
     w0 = np.empty(n)
     while top > 0:
         seen += 1
         if seen > max_boxes:
             return -1
         top -= 1
-        X[:] = stack[top]
+        copy_box(stack, top, X, 0, n)
         for _ in range(sweeps):
             for i in range(n):
-                w0[i] = X[1, i] - X[0, i]
-            hc4_pose(code, value, outs, meta, X, Q, XI, nl, nh, il, ih, False)
-            if inverted_box(X):
+                w0[i] = X[0, 1, i] - X[0, 0, i]
+            hc4_pose(prog, X, 0, Q, 0, XI, 0, n, m, sc, False)
+            if inverted_box(X, 0, n):
                 break
-            newton(code, value, outs, meta, X, Q, XI, True, nl, nh, il, ih, ws)
-            if inverted_box(X):
+            newton(prog, X, 0, Q, 0, XI, 0, True, n, m, sc)
+            if inverted_box(X, 0, n):
                 break
             stalled = True
             for i in range(n):
-                stalled &= X[1, i] - X[0, i] >= 0.9 * w0[i]
+                stalled &= X[0, 1, i] - X[0, 0, i] >= 0.9 * w0[i]
             if stalled:
                 break
-        if inverted_box(X):
+        if inverted_box(X, 0, n):
             continue
-        mode = mode_of(code, value, outs, meta, X, Q, XI, nl, nh, il, ih)
+        mode = mode_of(prog, X, 0, Q, 0, XI, 0, n, m, sc)
         d = 0
-        wmax = X[1, 0] - X[0, 0]
+        wmax = X[0, 1, 0] - X[0, 0, 0]
         for i in range(1, n):
-            if X[1, i] - X[0, i] > wmax:
-                wmax = X[1, i] - X[0, i]
+            if X[0, 1, i] - X[0, 0, i] > wmax:
+                wmax = X[0, 1, i] - X[0, 0, i]
                 d = i
         if (mode != 0 and wmax < small) or wmax < tol:
-            out[found] = X
+            copy_box(X, 0, out, found, n)
             out_mode[found] = mode
             found += 1
             continue
-        mid = 0.5 * (X[0, d] + X[1, d])
-        stack[top] = X
+        mid = 0.5 * (X[0, 0, d] + X[0, 1, d])
+        copy_box(X, 0, stack, top, n)
         stack[top, 1, d] = mid
-        stack[top + 1] = X
+        copy_box(X, 0, stack, top + 1, n)
         stack[top + 1, 0, d] = mid
         top += 2
     return found
+
+
+@jit
+def scratch_alloc(n_nodes, n, m):
+    """One thread's scratch (no baselines, no split pieces), allocated in compiled code."""
+    cap = 2
+    return Scratch(np.empty((1, n_nodes)), np.empty((1, n_nodes)), np.empty((1, 5 * n + m)),
+                   np.empty((1, 5 * n + m)), np.empty((1, workspace_size(n))),
+                   np.empty((1, TB_DQ + 1, 2, max(n, m))), np.empty((1, 2 * cap, 2, n)),
+                   np.empty((1, 1 + 2 * cap), np.int64), np.empty((1, 1), np.int64), np.empty((1, 1, 2, n)))

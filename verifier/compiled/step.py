@@ -1,268 +1,341 @@
 """The tracker's step, compiled: one sample for every scenario, in place on the
-arrays of :class:`verifier.tracker.TrackerState`.
+arrays of :class:`verifier.step.TrackerState`.
 
-The maths is that of :mod:`verifier.tracker` (prediction with Lagrange
-remainder, measurement boxes, velocity information, contraction to a per-row
-fixpoint, mode, branch and prune, hypotheses combined); the numpy step there is
-the reference this kernel must agree with.  Rows ``r = b P + p`` are the
-geometry hypotheses ``p`` of scenario ``b``; a scenario and its rows are
-independent of every other scenario, so :func:`run_parallel` spreads
-scenarios over threads (``prange``) with the sample loop inside.
+The maths is that of the numpy reference step in :mod:`verifier.step`
+(prediction with Lagrange remainder, measurement boxes, velocity
+information, contraction to a per-row fixpoint, mode, branch and prune,
+hypotheses combined); this kernel must agree with it bit for bit.  Rows
+``r = b P + p`` are the geometry hypotheses ``p`` of scenario ``b``; a
+scenario and its rows are independent of every other scenario.
+
+Kernels take a few structured arguments: the robot's
+:class:`~verifier.compiled.tape.Program`, the
+:class:`~verifier.constants.StepConstants` (read by name), the state as
+:class:`Rows` and :class:`Scenarios`, per-thread :class:`Scratch` allocated
+once per tracker, the readings, and the optional record and prior boxes.
+The per-sample path neither allocates nor slices: boxes are indices into the
+state arrays, temporaries live in the thread's scratch.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit, prange
 
+from ..constants import JOINT_FD, SOUND
 from . import ops
 from .contractors import (
+    TB_ACC,
+    TB_DQ,
+    TB_Q0,
+    TB_QD,
+    TB_QN,
+    TB_QS,
+    TB_XDS,
+    TB_XIW,
+    TB_XS,
+    copy_box,
     empty_box,
     hc4_pose,
     mode_of,
     newton,
+    set_input,
     split_prune,
+    thread_scratch,
     velocity_displacement,
     velocity_gs,
-    scratch,
-    workspace_size,
 )
 from .linalg import linear_enclosure
 from .ops import jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
-# indices into the constant arrays built by verifier.tracker._Constants
-F_TS, F_REL_TOL, F_SPLIT_TOL, F_SPLIT_MAX_W = range(4)
-I_VMODEL, I_MAX_ITER, I_SPLIT_BOXES, I_KEEP_XI, I_P, I_HAS_QDD, I_RECORD, I_PRIOR = range(8)
-V_EPS, V_AMAX, V_VMAX, V_H2A_LO, V_H2A_HI, V_TSA_LO, V_TSA_HI, V_QUANT_LO, V_QUANT_HI, V_QDD = range(10)
-SOUND, JOINT_FD, PAPER = range(3)
+
+class Rows(NamedTuple):
+    """Row arrays of the state (see :class:`verifier.step.TrackerState`)."""
+
+    x: np.ndarray
+    xd: np.ndarray
+    xi: np.ndarray
+    q: np.ndarray
+    past_x: np.ndarray
+    past_q: np.ndarray
+    past_r: np.ndarray
+    row_bad: np.ndarray
+
+
+class Scenarios(NamedTuple):
+    """Scenario arrays of the state (see :class:`verifier.step.TrackerState`)."""
+
+    init_mode: np.ndarray
+    mode: np.ndarray
+    streak: np.ndarray
+    bad_at: np.ndarray
+    max_width_pose: np.ndarray
+    max_width_velocity: np.ndarray
+    x_hull: np.ndarray
+    xd_hull: np.ndarray
+    qdd_hull: np.ndarray
+
+
+class Record(NamedTuple):
+    """Every sample's boxes of a block: ``x``, ``xd`` ``(B, Kc, 2, n)``,
+    ``mode`` ``(B, Kc)``, ``qdd`` ``(B, Kc, n)`` (empty arrays: not recorded)."""
+
+    x: np.ndarray
+    xd: np.ndarray
+    mode: np.ndarray
+    qdd: np.ndarray
+
+
+class Prior(NamedTuple):
+    """Boxes known to hold the truth at each sample, ``(B, Kc, 2, n)`` (empty: none)."""
+
+    x: np.ndarray
+    xd: np.ndarray
 
 
 @jit
-def _wsum(B):
+def _wsum(B, b, k):
     s = 0.0
-    for i in range(B.shape[1]):
-        s += ops.width(B[0, i], B[1, i])
+    for i in range(k):
+        s += ops.width(B[b, 0, i], B[b, 1, i])
     return s
 
 
 @jit
-def _qdd_over_step(code, value, outs, meta, X, XD, Qp, Qn, XI, vec, ts, QDD, nl, nh, il, ih, ws):
+def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
     """Joint-acceleration bound over the sampling interval (``JOINT_FD``), see
-    :func:`verifier.tracker._qdd_over_step`; writes ``QDD`` ``(2, n)``."""
-    n = X.shape[1]
-    m = XI.shape[1]
-    Xs = np.empty((2, n))
-    XDs = np.empty((2, n))
-    A = np.empty((2, n))
+    :func:`verifier.step._qdd_over_step`; writes the box ``qdd[iqdd]``.
+    Uses the scratch boxes ``TB_XS .. TB_QS`` and ``sc.w`` after Newton's part."""
+    tb = sc.tb
+    w = sc.w
+    il = sc.il
+    ih = sc.ih
+    nn = n * n
+    o = 7 * n + 7 * nn  # after newton's temporaries
+    jl = o
+    jh = o + nn
+    bl = o + 2 * nn
+    bh = bl + n
+    dl = bh + n
+    dh = dl + n
+    ts = c.t_s
     h2l, h2h = ops.scale(0.5, *ops.mul(ts, ts, ts, ts))
     h2l, h2h = ops.hull(0.0, 0.0, h2l, h2h)
-    Q0 = np.empty((2, n))
     for i in range(n):
-        A[0, i] = -vec[V_AMAX, i]
-        A[1, i] = vec[V_AMAX, i]
-        pl, ph = ops.mul(0.0, ts, XD[0, i], XD[1, i])
-        xl, xh = ops.add(X[0, i], X[1, i], pl, ph)
-        pl, ph = ops.mul(h2l, h2h, A[0, i], A[1, i])
-        Xs[0, i], Xs[1, i] = ops.add(xl, xh, pl, ph)
-        pl, ph = ops.mul(0.0, ts, A[0, i], A[1, i])
-        XDs[0, i], XDs[1, i] = ops.add(XD[0, i], XD[1, i], pl, ph)
-        ql, qh = ops.hull(Qp[0, i], Qp[1, i], Qn[0, i], Qn[1, i])
-        Q0[0, i] = ql - 0.05  # rad; the result must land strictly inside this box
-        Q0[1, i] = qh + 0.05
-    Qs = Q0.copy()
+        a = c.axis[i].a_max
+        tb[TB_ACC, 0, i] = -a
+        tb[TB_ACC, 1, i] = a
+        pl, ph = ops.mul(0.0, ts, XD[r, 0, i], XD[r, 1, i])
+        xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
+        pl, ph = ops.mul(h2l, h2h, -a, a)
+        tb[TB_XS, 0, i], tb[TB_XS, 1, i] = ops.add(xl, xh, pl, ph)
+        pl, ph = ops.mul(0.0, ts, -a, a)
+        tb[TB_XDS, 0, i], tb[TB_XDS, 1, i] = ops.add(XD[r, 0, i], XD[r, 1, i], pl, ph)
+        ql, qh = ops.hull(past_q[r, pq, 0, i], past_q[r, pq, 1, i], tb[TB_QN, 0, i], tb[TB_QN, 1, i])
+        tb[TB_Q0, 0, i] = ql - 0.05  # rad; the result must land strictly inside this box
+        tb[TB_Q0, 1, i] = qh + 0.05
+    copy_box(tb, TB_Q0, tb, TB_QS, n)
     for _ in range(3):
-        newton(code, value, outs, meta, Xs, Qs, XI, False, nl, nh, il, ih, ws)
+        newton(prog, tb, TB_XS, tb, TB_QS, XI, r, False, n, m, sc)
         for i in range(n):
-            if Qs[0, i] > Qs[1, i]:
-                Qs[0, i] = Q0[0, i]
-                Qs[1, i] = Q0[1, i]
+            if tb[TB_QS, 0, i] > tb[TB_QS, 1, i]:
+                tb[TB_QS, 0, i] = tb[TB_Q0, 0, i]
+                tb[TB_QS, 1, i] = tb[TB_Q0, 1, i]
     inside = True
     for i in range(n):
-        inside &= Qs[0, i] > Q0[0, i] and Qs[1, i] < Q0[1, i]
-    for s_, B in ((0, Xs), (n, Qs), (2 * n, XI)):
-        for i in range(B.shape[1]):
-            il[s_ + i] = B[0, i]
-            ih[s_ + i] = B[1, i]
+        inside &= tb[TB_QS, 0, i] > tb[TB_Q0, 0, i] and tb[TB_QS, 1, i] < tb[TB_Q0, 1, i]
+    set_input(il, ih, 0, tb, TB_XS, n)
+    set_input(il, ih, n, tb, TB_QS, n)
+    set_input(il, ih, 2 * n, XI, r, m)
+    set_input(il, ih, 2 * n + m, tb, TB_XDS, n)
+    forward(prog, T_JQ, il, ih, sc.nl, sc.nh)
+    for e in range(nn):
+        w[jl + e], w[jh + e] = output(prog, T_JQ, e, sc.nl, sc.nh)
+    forward(prog, T_JX_XD, il, ih, sc.nl, sc.nh)
     for i in range(n):
-        il[2 * n + m + i] = XDs[0, i]
-        ih[2 * n + m + i] = XDs[1, i]
-    Jl = np.empty((n, n))
-    Jh = np.empty((n, n))
-    forward(code, value, meta, T_JQ, il, ih, nl, nh)
+        rl, rh = output(prog, T_JX_XD, i, sc.nl, sc.nh)
+        w[bl + i] = -rh
+        w[bh + i] = -rl
+    t = dh + n
+    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, False, 2, t)
     for i in range(n):
-        for j in range(n):
-            Jl[i, j], Jh[i, j] = output(outs, meta, T_JQ, i * n + j, nl, nh)
-    forward(code, value, meta, T_JX_XD, il, ih, nl, nh)
-    bl = np.empty(n)
-    bh = np.empty(n)
+        il[3 * n + m + i] = w[dl + i]
+        ih[3 * n + m + i] = w[dh + i]
+        il[4 * n + m + i] = tb[TB_ACC, 0, i]
+        ih[4 * n + m + i] = tb[TB_ACC, 1, i]
+    forward(prog, T_ACCEL, il, ih, sc.nl, sc.nh)
     for i in range(n):
-        rl, rh = output(outs, meta, T_JX_XD, i, nl, nh)
-        bl[i] = -rh
-        bh[i] = -rl
-    QDl = np.empty(n)
-    QDh = np.empty(n)
-    linear_enclosure(Jl, Jh, bl, bh, QDl, QDh, False, 2, ws, 0)
+        rl, rh = output(prog, T_ACCEL, i, sc.nl, sc.nh)
+        w[bl + i] = -rh
+        w[bh + i] = -rl
+    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, False, 2, t)
     for i in range(n):
-        il[3 * n + m + i] = QDl[i]
-        ih[3 * n + m + i] = QDh[i]
-        il[4 * n + m + i] = A[0, i]
-        ih[4 * n + m + i] = A[1, i]
-    forward(code, value, meta, T_ACCEL, il, ih, nl, nh)
-    for i in range(n):
-        rl, rh = output(outs, meta, T_ACCEL, i, nl, nh)
-        bl[i] = -rh
-        bh[i] = -rl
-    linear_enclosure(Jl, Jh, bl, bh, QDl, QDh, False, 2, ws, 0)
-    for i in range(n):
-        ok = inside and math.isfinite(QDl[i]) and math.isfinite(QDh[i]) and not (QDl[i] > QDh[i])
-        QDD[0, i] = QDl[i] if ok else -np.inf
-        QDD[1, i] = QDh[i] if ok else np.inf
+        lo = w[dl + i]
+        hi = w[dh + i]
+        ok = inside and math.isfinite(lo) and math.isfinite(hi) and not (lo > hi)
+        qdd[iqdd, 0, i] = lo if ok else -np.inf
+        qdd[iqdd, 1, i] = hi if ok else np.inf
 
 
 @jit
-def _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad, n_past,
-              fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws, pri_x, pri_xd):
-    """Advance row ``r`` by the reading ``qk`` ``(n,)``; returns its mode.
-    ``QDD`` ``(2, n)`` receives the joint-acceleration bound used; when
-    ``ipar[I_PRIOR]``, the boxes ``pri_x``, ``pri_xd`` ``(2, n)`` known to hold
-    the truth at this sample are intersected with the prediction."""
-    n = qk.shape[0]
+def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``; returns its mode.
+    The box ``qdd[iqdd]`` receives the joint-acceleration bound used; with
+    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
+    hold the truth at this sample are intersected with the prediction."""
+    X = rows.x
+    XD = rows.xd
+    XI = rows.xi
+    Q = rows.q
+    past_x = rows.past_x
+    past_q = rows.past_q
+    past_r = rows.past_r
+    tb = sc.tb
+    n = X.shape[2]
+    m = XI.shape[2]
     D = past_x.shape[1]
-    ts = fpar[F_TS]
-    vmodel = ipar[I_VMODEL]
-    Xr = X[r]
-    XDr = XD[r]
-    XIr = XI[r]
-    Qr = Q[r]
-    Qn = np.empty((2, n))
-    QD = np.empty((2, n))
+    n_past = min(k, D)
+    ts = c.t_s
+    vmodel = c.velocity_model
     for i in range(n):
-        Qn[0, i] = ops.sub(qk[i], qk[i], vec[V_EPS, i], vec[V_EPS, i])[0]
-        Qn[1, i] = ops.add(qk[i], qk[i], vec[V_EPS, i], vec[V_EPS, i])[1]
-        QDD[0, i] = -np.inf
-        QDD[1, i] = np.inf
-        QD[0, i] = -np.inf
-        QD[1, i] = np.inf
+        qk = q[b, kk, i]
+        e = c.axis[i].eps_q
+        tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
+        tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
+        qdd[iqdd, 0, i] = -np.inf
+        qdd[iqdd, 1, i] = np.inf
+        tb[TB_QD, 0, i] = -np.inf
+        tb[TB_QD, 1, i] = np.inf
     if k > 0 and vmodel != SOUND:
         prev = (k - 1) % D
         if vmodel == JOINT_FD:
-            _qdd_over_step(code, value, outs, meta, Xr, XDr, past_q[r, prev], Qn, XIr, vec, ts, QDD,
-                           nl, nh, il, ih, ws)
-            if ipar[I_HAS_QDD]:
+            _qdd_over_step(prog, c, X, r, XD, past_q, prev, XI, n, m, sc, qdd, iqdd)
+            if c.has_qdd_bound:
                 for i in range(n):
-                    QDD[0, i], QDD[1, i] = ops.intersect(QDD[0, i], QDD[1, i], -vec[V_QDD, i], vec[V_QDD, i])
+                    g = c.axis[i].qdd_bound
+                    qdd[iqdd, 0, i], qdd[iqdd, 1, i] = ops.intersect(qdd[iqdd, 0, i], qdd[iqdd, 1, i], -g, g)
         for i in range(n):
+            qk = q[b, kk, i]
             qp = past_r[r, prev, i]
-            dl, dh = ops.sub(qk[i], qk[i], qp, qp)
+            dl, dh = ops.sub(qk, qk, qp, qp)
             fl, fh = ops.div(dl, dh, ts, ts)
-            ql, qh = ops.add(fl, fh, vec[V_QUANT_LO, i], vec[V_QUANT_HI, i])
+            ql, qh = ops.add(fl, fh, c.axis[i].quant_lo, c.axis[i].quant_hi)
             if vmodel == JOINT_FD:
-                tl, th = ops.mul(0.5 * ts, 0.5 * ts, QDD[0, i], QDD[1, i])
+                tl, th = ops.mul(0.5 * ts, 0.5 * ts, qdd[iqdd, 0, i], qdd[iqdd, 1, i])
                 ql, qh = ops.add(ql, qh, tl, th)
                 ql = -np.inf if ql != ql else ql
                 qh = np.inf if qh != qh else qh
-            QD[0, i] = ql
-            QD[1, i] = qh
+            tb[TB_QD, 0, i] = ql
+            tb[TB_QD, 1, i] = qh
     if k > 0:
         for i in range(n):
-            pl, ph = ops.scale(ts, XDr[0, i], XDr[1, i])
-            xl, xh = ops.add(Xr[0, i], Xr[1, i], pl, ph)
-            Xr[0, i], Xr[1, i] = ops.add(xl, xh, vec[V_H2A_LO, i], vec[V_H2A_HI, i])
-            vl, vh = ops.add(XDr[0, i], XDr[1, i], vec[V_TSA_LO, i], vec[V_TSA_HI, i])
-            XDr[0, i], XDr[1, i] = ops.intersect(vl, vh, -vec[V_VMAX, i], vec[V_VMAX, i])
-    if ipar[I_PRIOR]:
+            ax = c.axis[i]
+            pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
+            xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
+            X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
+            vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
+            XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
+    if use_prior:
         for i in range(n):
-            Xr[0, i], Xr[1, i] = ops.intersect(Xr[0, i], Xr[1, i], pri_x[0, i], pri_x[1, i])
-            XDr[0, i], XDr[1, i] = ops.intersect(XDr[0, i], XDr[1, i], pri_xd[0, i], pri_xd[1, i])
-    for i in range(n):
-        Qr[0, i] = Qn[0, i]
-        Qr[1, i] = Qn[1, i]
+            X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
+            XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
+                                                     prior.xd[b, kk, 1, i])
+    copy_box(tb, TB_QN, Q, r, n)
     # displacement baselines: past boxes and readings only, built once per sample
-    J = base.shape[0]
-    idx = np.empty(J, np.int64)
-    DQ = np.empty((J, 2, n))
+    idx = sc.wi
     n_base = 0
     if vmodel == SOUND:
-        for jb in range(J):
-            j = base[jb]
+        for jb in range(c.baseline.shape[0]):
+            j = c.baseline[jb].j
             if j > n_past:
                 break
             p = (k - j) % D
             idx[jb] = p
             for i in range(n):
+                qk = q[b, kk, i]
                 qp = past_r[r, p, i]
-                dl, dh = ops.sub(qk[i], qk[i], qp, qp)
-                DQ[jb, 0, i], DQ[jb, 1, i] = ops.add(dl, dh, diff_err[jb, 0, i], diff_err[jb, 1, i])
+                dl, dh = ops.sub(qk, qk, qp, qp)
+                tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.add(dl, dh, c.diff_err[jb, 0, i],
+                                                                     c.diff_err[jb, 1, i])
             n_base += 1
-    keep_xi = ipar[I_KEEP_XI] != 0
-    XIw = XIr.copy()
+    keep_xi = c.keep_xi
+    copy_box(XI, r, tb, TB_XIW, m)
     has_qd = False
     for i in range(n):
-        has_qd |= math.isfinite(QD[0, i])
+        has_qd |= math.isfinite(tb[TB_QD, 0, i])
     dead = False
-    for _ in range(ipar[I_MAX_ITER]):
-        wx0 = _wsum(Xr)
-        wv0 = _wsum(XDr)
+    for _ in range(c.max_iter):
+        wx0 = _wsum(X, r, n)
+        wv0 = _wsum(XD, r, n)
         if not keep_xi:
-            XIw[:] = XIr
-        hc4_pose(code, value, outs, meta, Xr, Qr, XIw, nl, nh, il, ih, True)
+            copy_box(XI, r, tb, TB_XIW, m)
+        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, True)
         if keep_xi:
-            XIr[:] = XIw
-        newton(code, value, outs, meta, Xr, Qr, XIr, True, nl, nh, il, ih, ws)
+            copy_box(tb, TB_XIW, XI, r, m)
+        newton(prog, X, r, Q, r, XI, r, True, n, m, sc)
         if vmodel == SOUND:
-            velocity_displacement(code, value, outs, meta, Xr, Qr, XIr, XDr, past_x[r], past_q[r], DQ, h, idx,
-                                  n_base, vec[V_AMAX], nl, nh, il, ih, ws)
+            velocity_displacement(prog, X, r, Q, r, XI, r, XD, r, past_x, past_q, r, tb, TB_DQ, c.baseline, idx,
+                                  n_base, c.axis, n, m, sc)
         elif has_qd:
-            velocity_gs(code, value, outs, meta, Xr, Qr, XIr, XDr, QD, nl, nh, il, ih, ws)
-        if empty_box(Xr) or empty_box(XDr) or empty_box(XIr) or empty_box(Qr):
+            velocity_gs(prog, X, r, Q, r, XI, r, XD, r, tb, TB_QD, n, m, sc)
+        if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
             dead = True
             break
-        wx1 = _wsum(Xr)
-        wv1 = _wsum(XDr)
+        wx1 = _wsum(X, r, n)
+        wv1 = _wsum(XD, r, n)
         gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
         gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
-        if not (ops.maxn(gx, gv) > fpar[F_REL_TOL]):
+        if not (ops.maxn(gx, gv) > c.rel_tol):
             break
     mode = 0
     if not dead:
-        mode = mode_of(code, value, outs, meta, Xr, Qr, XIr, nl, nh, il, ih)
-        if ipar[I_SPLIT_BOXES] > 0 and mode == 0:
+        mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
+        if c.split_boxes > 0 and mode == 0:
             narrow = True
             for i in range(n):
-                narrow &= Xr[1, i] - Xr[0, i] <= fpar[F_SPLIT_MAX_W]
+                narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
             if narrow:
-                mode = split_prune(code, value, outs, meta, Xr, Qr, XIr, ipar[I_SPLIT_BOXES],
-                                   fpar[F_SPLIT_TOL], 2, nl, nh, il, ih, ws)
-                dead = empty_box(Xr)
+                mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, 2, n, m, sc,
+                                   c.baseline.shape[0])
+                dead = empty_box(X, r, n)
     if dead:
-        row_bad[r] = k
+        rows.row_bad[r] = k
         mode = 0
     # this sample joins the window of past boxes and readings
     slot = k % D
-    past_x[r, slot] = Xr
-    past_q[r, slot] = Qr
-    past_r[r, slot] = qk
+    for i in range(n):
+        past_x[r, slot, 0, i] = X[r, 0, i]
+        past_x[r, slot, 1, i] = X[r, 1, i]
+        past_q[r, slot, 0, i] = Q[r, 0, i]
+        past_q[r, slot, 1, i] = Q[r, 1, i]
+        past_r[r, slot, i] = q[b, kk, i]
     return mode
 
 
 @jit
-def _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, streak, bad_at, mwx, mwv,
-             x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd):
+def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
     """Combine the geometry hypotheses of scenario ``b`` after sample ``k``:
     hull of the consistent rows, their common mode, streaks, widths, record."""
+    X = rows.x
+    XD = rows.xd
+    row_bad = rows.row_bad
+    xh = scen.x_hull
+    vh = scen.xd_hull
+    qh = scen.qdd_hull
     n = X.shape[2]
     live = 0
     mn = 2
     mx = -2
     for i in range(n):
-        x_hull[b, 0, i] = np.inf
-        x_hull[b, 1, i] = -np.inf
-        xd_hull[b, 0, i] = np.inf
-        xd_hull[b, 1, i] = -np.inf
-        qdd_hull[b, i] = 0.0
+        xh[b, 0, i] = np.inf
+        xh[b, 1, i] = -np.inf
+        vh[b, 0, i] = np.inf
+        vh[b, 1, i] = -np.inf
+        qh[b, i] = 0.0
     for p in range(P):
         r = b * P + p
         if row_bad[r] >= 0:
@@ -271,124 +344,97 @@ def _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, s
         mn = min(mn, modes[p])
         mx = max(mx, modes[p])
         for i in range(n):
-            x_hull[b, 0, i] = ops.minn(x_hull[b, 0, i], X[r, 0, i])
-            x_hull[b, 1, i] = ops.maxn(x_hull[b, 1, i], X[r, 1, i])
-            xd_hull[b, 0, i] = ops.minn(xd_hull[b, 0, i], XD[r, 0, i])
-            xd_hull[b, 1, i] = ops.maxn(xd_hull[b, 1, i], XD[r, 1, i])
-            qdd_hull[b, i] = max(qdd_hull[b, i], row_qdd[p, i])
-    if live == 0 and bad_at[b] < 0:
-        bad_at[b] = k
+            xh[b, 0, i] = ops.minn(xh[b, 0, i], X[r, 0, i])
+            xh[b, 1, i] = ops.maxn(xh[b, 1, i], X[r, 1, i])
+            vh[b, 0, i] = ops.minn(vh[b, 0, i], XD[r, 0, i])
+            vh[b, 1, i] = ops.maxn(vh[b, 1, i], XD[r, 1, i])
+            qh[b, i] = max(qh[b, i], row_qdd[p, 0, i])
+    if live == 0 and scen.bad_at[b] < 0:
+        scen.bad_at[b] = k
     mode = mn if (live > 0 and mn == mx) else 0
     if k == 0:
-        init_mode[b] = mode
-    if mode != cur_mode[b]:
-        streak[b] = k
-    cur_mode[b] = mode
-    if bad_at[b] < 0:
-        wx = ops.width(x_hull[b, 0, 0], x_hull[b, 1, 0])
-        wv = ops.width(xd_hull[b, 0, 0], xd_hull[b, 1, 0])
+        scen.init_mode[b] = mode
+    if mode != scen.mode[b]:
+        scen.streak[b] = k
+    scen.mode[b] = mode
+    if scen.bad_at[b] < 0:
+        wx = ops.width(xh[b, 0, 0], xh[b, 1, 0])
+        wv = ops.width(vh[b, 0, 0], vh[b, 1, 0])
         for i in range(1, n):
-            wx = ops.maxn(wx, ops.width(x_hull[b, 0, i], x_hull[b, 1, i]))
-            wv = ops.maxn(wv, ops.width(xd_hull[b, 0, i], xd_hull[b, 1, i]))
-        mwx[b] = ops.maxn(mwx[b], wx)
-        mwv[b] = ops.maxn(mwv[b], wv)
-    if record:
-        rec_x[b, kk] = x_hull[b]
-        rec_xd[b, kk] = xd_hull[b]
-        rec_mode[b, kk] = mode
-        rec_qdd[b, kk] = qdd_hull[b]
+            wx = ops.maxn(wx, ops.width(xh[b, 0, i], xh[b, 1, i]))
+            wv = ops.maxn(wv, ops.width(vh[b, 0, i], vh[b, 1, i]))
+        scen.max_width_pose[b] = ops.maxn(scen.max_width_pose[b], wx)
+        scen.max_width_velocity[b] = ops.maxn(scen.max_width_velocity[b], wv)
+    if use_record:
+        for i in range(n):
+            rec.x[b, kk, 0, i] = xh[b, 0, i]
+            rec.x[b, kk, 1, i] = xh[b, 1, i]
+            rec.xd[b, kk, 0, i] = vh[b, 0, i]
+            rec.xd[b, kk, 1, i] = vh[b, 1, i]
+            rec.qdd[b, kk, i] = qh[b, i]
+        rec.mode[b, kk] = mode
 
 
 @jit
-def _one_row(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad, fpar, ipar, vec,
-             base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p, pri_x, pri_xd):
-    # one hypothesis of one sample; its mode and |qdd| bound land in modes[p], row_qdd[p]
-    n = qk.shape[0]
-    modes[p] = _row_step(code, value, outs, meta, r, k, qk, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-                         min(k, past_x.shape[1]), fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws,
-                         pri_x, pri_xd)
-    for i in range(n):
-        row_qdd[p, i] = max(abs(QDD[0, i]), abs(QDD[1, i]))
-
-
-@jit
-def scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-                   init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-                   fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd):
-    """Advance scenario ``b`` over the readings ``q[b]`` ``(Kc, n)``, samples
-    ``k0 .. k0 + Kc - 1``, its hypotheses one after the other (``prior_x``,
-    ``prior_xd`` ``(B, Kc, 2, n)``: see :func:`_row_step`)."""
-    P = ipar[I_P]
+def _one_row(prog, c, rows, p, r, k, q, b, kk, sc, use_prior, prior, modes, row_qdd):
+    # one hypothesis of one sample; its mode lands in modes[p], its |qdd| bound in row_qdd[p, 0]
     n = q.shape[2]
-    nl, nh, il, ih, ws = scratch(n_nodes, n, XI.shape[2])
-    QDD = np.empty((2, n))
-    modes = np.empty(P, np.int64)
-    row_qdd = np.empty((P, n))
-    record = ipar[I_RECORD] != 0
-    no_prior = np.empty((2, n))
+    modes[p] = _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, row_qdd, p)
+    for i in range(n):
+        row_qdd[p, 0, i] = max(abs(row_qdd[p, 0, i]), abs(row_qdd[p, 1, i]))
+
+
+@jit
+def scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior):
+    """Advance scenario ``b`` over the readings ``q[b]`` ``(Kc, n)``, samples
+    ``k0 .. k0 + Kc - 1``, its hypotheses one after the other."""
+    P = c.hypotheses
     for kk in range(q.shape[1]):
         k = k0 + kk
-        px = prior_x[b, kk] if ipar[I_PRIOR] else no_prior
-        pxd = prior_xd[b, kk] if ipar[I_PRIOR] else no_prior
         for p in range(P):
             r = b * P + p
-            if row_bad[r] < 0:
-                _one_row(code, value, outs, meta, r, k, q[b, kk], X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-                         fpar, ipar, vec, base, diff_err, h, QDD, nl, nh, il, ih, ws, modes, row_qdd, p, px, pxd)
-        _combine(b, k, kk, P, X, XD, row_bad, modes, row_qdd, init_mode, cur_mode, streak, bad_at, mwx, mwv,
-                 x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd)
-
-
-def run_hypotheses_parallel(code, value, outs, meta, n_nodes, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-                            init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-                            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd):
-    """As :func:`run_serial`, the geometry hypotheses of each sample spread
-    over numba's threads (one scenario online: its latency, not throughput)."""
-    B = q.shape[0]
-    P = ipar[I_P]
-    n = q.shape[2]
-    m = XI.shape[2]
-    NL = np.empty((P, n_nodes))
-    NH = np.empty((P, n_nodes))
-    IL = np.empty((P, 5 * n + m))
-    IH = np.empty((P, 5 * n + m))
-    QDD = np.empty((P, 2, n))
-    WS = np.empty((P, workspace_size(n)))
-    modes = np.empty((B, P), np.int64)
-    row_qdd = np.empty((B, P, n))
-    record = ipar[I_RECORD] != 0
-    no_prior = np.empty((2, n))
-    for kk in range(q.shape[1]):
-        k = k0 + kk
-        for b in range(B):
-            px = prior_x[b, kk] if ipar[I_PRIOR] else no_prior
-            pxd = prior_xd[b, kk] if ipar[I_PRIOR] else no_prior
-            for p in prange(P):
-                r = b * P + p
-                if row_bad[r] < 0:
-                    _one_row(code, value, outs, meta, r, k, q[b, kk], X, XD, XI, Q, past_x, past_q, past_r,
-                             row_bad, fpar, ipar, vec, base, diff_err, h, QDD[p], NL[p], NH[p], IL[p], IH[p], WS[p],
-                             modes[b], row_qdd[b], p, px, pxd)
-            _combine(b, k, kk, P, X, XD, row_bad, modes[b], row_qdd[b], init_mode, cur_mode, streak, bad_at, mwx,
-                     mwv, x_hull, xd_hull, qdd_hull, record, rec_x, rec_xd, rec_mode, rec_qdd)
-
-
-run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True)(run_hypotheses_parallel)
+            if rows.row_bad[r] < 0:
+                _one_row(prog, c, rows, p, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd)
+        _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
 def _make_driver(parallel: bool):
-    def run(code, value, outs, meta, n_nodes, k0, q, X, XD, XI, Q, past_x, past_q, past_r, row_bad,
-            init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-            fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd):
-        for b in prange(q.shape[0]):
-            scenario_steps(code, value, outs, meta, n_nodes, b, k0, q, X, XD, XI, Q, past_x, past_q, past_r,
-                           row_bad, init_mode, cur_mode, streak, bad_at, mwx, mwv, x_hull, xd_hull, qdd_hull,
-                           fpar, ipar, vec, base, diff_err, h, rec_x, rec_xd, rec_mode, rec_qdd, prior_x, prior_xd)
+    def run(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
+        T = S.w.shape[0]
+        B = q.shape[0]
+        for t in prange(T):
+            sc = thread_scratch(S, t)
+            for b in range(t, B, T):
+                scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior)
+
+    # numba names a cached function by its qualified name: without distinct
+    # names the serial driver would load the parallel one from the cache (and
+    # wake the thread pool at every call) or the reverse
     run.__name__ = run.__qualname__ = "run_parallel" if parallel else "run_serial"
     return njit(cache=True, nogil=True, parallel=parallel)(run)
 
 
-#: Every scenario in this thread (one scenario, or a few).
+def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
+    """As :func:`run_serial`, the geometry hypotheses of each sample spread
+    over the threads (one scenario online: its latency, not throughput);
+    thread slot ``t`` runs hypotheses ``t, t + T, ...`` with its scratch."""
+    T = S.w.shape[0]
+    P = c.hypotheses
+    s0 = thread_scratch(S, 0)
+    for kk in range(q.shape[1]):
+        k = k0 + kk
+        for b in range(q.shape[0]):
+            for t in prange(T):
+                sc = thread_scratch(S, t)
+                for p in range(t, P, T):
+                    r = b * P + p
+                    if rows.row_bad[r] < 0:
+                        _one_row(prog, c, rows, p, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd)
+            _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
+
+
+#: Every scenario in this thread (thread slots one after the other).
 run_serial = _make_driver(False)
-#: Scenarios spread over numba's threads.
+#: Scenarios spread over numba's threads, thread slot ``t`` running scenarios ``t, t + T, ...``.
 run_parallel = _make_driver(True)
+run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True)(run_hypotheses_parallel)

@@ -7,7 +7,8 @@ operation for operation: the numpy reference and these kernels compute the
 same floats (see :mod:`verifier.compiled.ops`).
 
 Kernels work on ONE scenario: node bounds in scratch arrays ``lo, hi`` of
-length ``n_nodes``; inputs in a concatenated vector ``in_lo, in_hi``.
+length ``n_nodes``; inputs in a concatenated vector ``in_lo, in_hi``; the
+program travels as one :class:`Program` argument.
 """
 
 from __future__ import annotations
@@ -110,8 +111,12 @@ def pack(model) -> Program:
 
 
 @jit
-def forward(code, value, meta, t, in_lo, in_hi, lo, hi):
-    """Evaluate tape ``t`` over the input box; node bounds land in ``lo, hi``."""
+def forward(prog, t, in_lo, in_hi, lo, hi):
+    """Evaluate tape ``t`` of the :class:`Program` ``prog`` over the input box;
+    node bounds land in ``lo, hi``."""
+    code = prog.code
+    value = prog.value
+    meta = prog.meta
     c0 = meta[t, 0]
     for i in range(meta[t, 1]):
         op = code[c0 + i, 0]
@@ -155,9 +160,9 @@ def forward(code, value, meta, t, in_lo, in_hi, lo, hi):
 
 
 @jit
-def output(outs, meta, t, e, lo, hi):
+def output(prog, t, e, lo, hi):
     """Bounds of dense output entry ``e`` of tape ``t`` after :func:`forward`."""
-    node = outs[meta[t, 2] + e]
+    node = prog.outs[prog.meta[t, 2] + e]
     if node < 0:
         return 0.0, 0.0
     return lo[node], hi[node]
@@ -182,12 +187,16 @@ def _project_square(al, ah, zl, zh):
 
 
 @jit
-def hc4(code, value, outs, meta, t, n_out, in_lo, in_hi, lo, hi):
+def hc4(prog, t, n_out, in_lo, in_hi, lo, hi):
     """HC4Revise: contract the input box in place with ``output_0(inputs) = 0``.
 
     ``n_out`` is the number of entries of output 0 (the constrained one).
     """
-    forward(code, value, meta, t, in_lo, in_hi, lo, hi)
+    forward(prog, t, in_lo, in_hi, lo, hi)
+    code = prog.code
+    value = prog.value
+    outs = prog.outs
+    meta = prog.meta
     o0 = meta[t, 2]
     for e in range(n_out):
         node = outs[o0 + e]

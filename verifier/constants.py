@@ -1,0 +1,123 @@
+"""The step's constants, packed by name from one schema.
+
+Both implementations of the step (:mod:`verifier.step`: the numpy reference
+and the compiled kernels) read the validated settings through this one
+:class:`StepConstants` value, by field name: scalars as fields, per-axis
+vectors as fields of a record array ``axis`` ``(n,)`` (``axis["eps_q"]`` in
+numpy, ``axis[i].eps_q`` in compiled code), the velocity baselines as a
+record array ``baseline`` ``(J,)``.  Derived intervals are rounded outward
+here, once.  :func:`pack_constants` is the only place that reads the
+settings' assumption fields (``t_s``, ``eps_q``, ``a_max``, ``v_max``, the
+drift model, ...).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from . import interval as I
+
+__all__ = ["AXIS_DTYPE", "BASELINE_DTYPE", "StepConstants", "pack_constants", "SOUND", "JOINT_FD", "PAPER"]
+
+#: Codes of the velocity models in :attr:`StepConstants.velocity_model`.
+SOUND, JOINT_FD, PAPER = range(3)
+_VMODEL_CODE = {"sound": SOUND, "joint-fd": JOINT_FD, "paper": PAPER}
+
+#: Per-axis constants (one record per pose / joint coordinate).
+AXIS_DTYPE = np.dtype([
+    ("eps_q", np.float64),  # reading error bound, rad
+    ("a_max", np.float64),  # |xdd| bound, m/s^2
+    ("v_max", np.float64),  # |xd| bound, m/s
+    ("xd0", np.float64),  # |xd| bound at the first sample, m/s
+    ("qdd_bound", np.float64),  # |qdd| bound, rad/s^2 (inf: none given)
+    ("half_ts2_a_lo", np.float64), ("half_ts2_a_hi", np.float64),  # (t_s^2 / 2) [-a_max, a_max], m
+    ("ts_a_lo", np.float64), ("ts_a_hi", np.float64),  # t_s [-a_max, a_max], m/s
+    ("quant_lo", np.float64), ("quant_hi", np.float64),  # [-2 eps_q, 2 eps_q] / t_s, rad/s
+])
+
+#: Velocity baselines of the displacement model: ``j`` samples, ``h = j t_s`` (s, outward).
+BASELINE_DTYPE = np.dtype([("j", np.int64), ("h_lo", np.float64), ("h_hi", np.float64)])
+
+
+class StepConstants(NamedTuple):
+    """What the step reads besides the boxes, built by :func:`pack_constants`.
+
+    Attributes
+    ----------
+    t_s : float
+        Sampling period, s.
+    rel_tol, split_tol, split_max_width : float
+        Fixpoint tolerance (relative width gain), split-and-prune piece width
+        and largest box side it starts on, m.
+    velocity_model : int
+        :data:`SOUND`, :data:`JOINT_FD` or :data:`PAPER`.
+    max_iter, split_boxes, hypotheses : int
+        Contraction rounds, split-and-prune pieces (0: off), geometry hypotheses ``P``.
+    keep_xi, has_qdd_bound : bool
+    axis : record array (n,) of :data:`AXIS_DTYPE`
+    baseline : record array (J,) of :data:`BASELINE_DTYPE`
+    diff_err : float64 (J, 2, n)
+        Error interval of a difference of two readings ``j`` samples apart, rad (outward).
+    depth : int
+        Samples kept in the window of past boxes.
+    """
+
+    t_s: float
+    rel_tol: float
+    split_tol: float
+    split_max_width: float
+    velocity_model: int
+    max_iter: int
+    split_boxes: int
+    hypotheses: int
+    keep_xi: bool
+    has_qdd_bound: bool
+    axis: np.ndarray
+    baseline: np.ndarray
+    diff_err: np.ndarray
+    depth: int
+
+
+def _difference_error(a, j: int, two_eps):
+    """Error interval of a difference of two readings ``j`` samples apart, rad (outward)."""
+    if a.eps_q_fast is None:
+        return two_eps
+    two_fast = I.scale(2.0, -a.eps_q_fast, a.eps_q_fast)[1]
+    span = I.mul(float(j), float(j), a.t_s, a.t_s)[1]  # j t_s, rounded up
+    bound = I.add(two_fast, two_fast, *I.mul(span, span, a.drift_rate, a.drift_rate))[1]
+    bound = np.minimum(bound, two_eps[1])
+    return -bound, bound
+
+
+def pack_constants(s, n: int) -> StepConstants:
+    """The constants of validated settings ``s`` (vectors ``(n,)``), rounded outward."""
+    a = s  # the assumptions (t_s, eps_q, a_max, v_max, xd0, qdd_bound, drift model): their one source
+    ts = a.t_s
+    A = (-a.a_max, a.a_max)
+    with I.quiet_fp():
+        half_ts2_A = I.mul(*I.scale(0.5, *I.mul(ts, ts, ts, ts)), *A)  # (t_s^2 / 2) [a], outward
+        ts_A = I.scale(ts, *A)
+        two_eps = I.scale(2.0, -a.eps_q, a.eps_q)
+        quant = I.div(*two_eps, ts, ts)  # 2 eps / t_s
+        diff = np.array([np.stack(_difference_error(a, j, two_eps)) for j in s.baselines]).reshape(-1, 2, n)
+        h = np.array([np.stack(I.mul(float(j), float(j), ts, ts)) for j in s.baselines]).reshape(-1, 2)
+    axis = np.zeros(n, AXIS_DTYPE)
+    for name, v in (("eps_q", a.eps_q), ("a_max", a.a_max), ("v_max", a.v_max), ("xd0", a.xd0),
+                    ("qdd_bound", np.inf if a.qdd_bound is None else a.qdd_bound),
+                    ("half_ts2_a_lo", half_ts2_A[0]), ("half_ts2_a_hi", half_ts2_A[1]),
+                    ("ts_a_lo", ts_A[0]), ("ts_a_hi", ts_A[1]), ("quant_lo", quant[0]), ("quant_hi", quant[1])):
+        axis[name] = v
+    baseline = np.zeros(len(s.baselines), BASELINE_DTYPE)
+    baseline["j"] = s.baselines
+    baseline["h_lo"], baseline["h_hi"] = h[:, 0], h[:, 1]
+    vmodel = _VMODEL_CODE[s.velocity_model.value]
+    return StepConstants(
+        t_s=float(ts), rel_tol=float(s.rel_tol), split_tol=float(s.split_tol),
+        split_max_width=float(s.split_max_width), velocity_model=int(vmodel), max_iter=int(s.max_iter),
+        split_boxes=int(s.split_boxes),
+        hypotheses=int(np.prod(s.xi_splits)) if s.xi_splits is not None else 1,
+        keep_xi=bool(s.keep_xi), has_qdd_bound=a.qdd_bound is not None, axis=axis, baseline=baseline,
+        diff_err=np.ascontiguousarray(diff, dtype=np.float64),
+        depth=int(max(s.baselines)) if vmodel == SOUND else 1)
