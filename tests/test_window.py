@@ -91,7 +91,11 @@ def test_window_is_sound_on_runs_ending_at_the_locus(runs, settings):
 def test_recordings_ending_at_the_locus(settings, before):
     """A bounce cut where it touches the true locus, or a few samples before: the last reading's poses near
     the truth have no certified mode, and a hypothesis must keep them.  On the locus (mode 0) neither
-    hypothesis is true, so the run is neither inconsistent nor certified; before it, the true mode survives."""
+    hypothesis is true, so the run is neither inconsistent nor certified; before it, the true mode survives.
+
+    End to end, the guard of the undecided forward-kinematics solutions in the final boxes
+    (``_hull_of_mode``): with them dropped, the tubes of both hypotheses lose the truth at the last sample
+    of the cut on the locus (``before`` = 0), and this test fails."""
     from problems import simulate
 
     run = simulate(1.0, True, 0)
@@ -106,6 +110,38 @@ def test_recordings_ending_at_the_locus(settings, before):
     else:
         assert res.verdict is Verdict.UNKNOWN, res.summary()
     check_contains(res.x_lo, res.x_hi, run.x_true[:k + 1], "pose tube")
+    # each hypothesis the truth satisfies (last pose of its mode or on the locus) keeps the truth in its own
+    # tubes; the hull over both would hide a final box that lost the locus (both sides surround it)
+    held = [h for h in res.hypotheses if run.mode_true[k] in (0, h.final_mode)]
+    assert len(held) == (2 if before == 0 else 1)
+    for h in held:
+        assert h.status is HypothesisStatus.CONSISTENT, res.summary()
+        check_contains(h.x_lo, h.x_hi, run.x_true[:k + 1], f"pose tube of final mode {h.final_mode:+d}")
+        check_contains(h.xd_lo, h.xd_hi, run.xd_true[:k + 1], f"velocity tube of final mode {h.final_mode:+d}")
+
+
+def test_both_hypotheses_emptied_in_one_pass_is_inconsistent(settings, monkeypatch):
+    """The hypotheses' passes run in lockstep: when one pass empties the rows of both (as an assumption
+    violated near the end of a recording would), the verdict is ``inconsistent``, not the verdict of the
+    hypothesis that happened to be checked first.  The violation is simulated: every window pass after the
+    forward one reports its rows empty (fails when the rounds stop before the second hypothesis' rows of
+    that pass are taken, as the sequential rounds before 2026-12-02 did)."""
+    import crosscert.verifier.window as W
+    from problems import simulate
+
+    real, calls = W._run, []
+
+    def emptied(config, q, x0, xi_rows, prior):
+        x, xd, md, bad = real(config, q, x0, xi_rows, prior)
+        calls.append(len(bad))
+        return (x, xd, md, np.zeros_like(bad)) if prior is not None else (x, xd, md, bad)
+
+    monkeypatch.setattr(W, "_run", emptied)
+    run = simulate(1.0, False, 0)
+    res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
+    assert res.forward_verdict is Verdict.UNKNOWN and len(calls) >= 2
+    assert res.verdict is Verdict.INCONSISTENT, res.summary()
+    assert all(h.status is HypothesisStatus.REFUTED and h.passes == 1 for h in res.hypotheses), res.summary()
 
 
 def test_final_boxes_keep_poses_of_undecided_mode(settings):
