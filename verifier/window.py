@@ -59,6 +59,9 @@ WINDOW_REL_TOL = 0.02
 #: Resolution (m) of the forward-kinematics enumeration of :class:`FixedLagWindow` (once per sample
 #: and hypothesis: coarser than the whole-recording passes' 1e-5 m, which splits the locus finely).
 _LAG_FK_TOL = 1e-4
+#: Rows (hypothesis, geometry sub-box) per kernel call of :class:`FixedLagWindow`: small, so that the
+#: rows left once the answer is settled are not run (the first call holds one row of each hypothesis).
+_LAG_BATCH = 2
 #: Velocity widths above this (m/s) count as this much when measuring progress (unbounded tubes).
 _WIDTH_CAP = 1e3
 
@@ -620,37 +623,60 @@ class FixedLagWindow:
         lagged_fwd = int(self._mode[-1])
         if r.mode != 0 and lagged_fwd != 0:
             return LagResult(k, r.mode, j, lagged_fwd, True)
-        alive_modes, lagged_modes = self._window()
+        alive_modes, lagged_modes = self._window(need_now=r.mode == 0, need_lagged=lagged_fwd == 0)
         mode_now = r.mode if r.mode != 0 or len(alive_modes) != 1 else alive_modes[0]
         lagged = lagged_fwd
         if lagged == 0 and lagged_modes and all(v == lagged_modes[0] for v in lagged_modes):
             lagged = int(lagged_modes[0])
         return LagResult(k, int(mode_now), j, int(lagged), True)
 
-    def _window(self):
-        """One backward pass over the window per hypothesis and geometry sub-box, all in one ``advance``
-        call: the final modes not refuted, and the modes the surviving rows certify at ``k - lag``."""
+    def _window(self, need_now: bool, need_lagged: bool):
+        """Backward passes over the window, a few (hypothesis, geometry sub-box) rows per ``advance`` call,
+        only while a row can still change the answer: the final modes not refuted (``need_now``: the
+        tracker's mode at ``k`` is open) and the modes the surviving rows certify at ``k - lag``
+        (``need_lagged``).
+
+        A hypothesis is alive once one of its rows survives, and the lagged mode stays open once a surviving
+        row certifies none or two disagree; rows that cannot change either are never run.  The answer is
+        therefore the one all the rows give.  Returns the alive modes and the surviving rows' lagged modes.
+        """
         search = (self._x[0, 0], self._x[0, 1])
         P = self.xi_rows[0].shape[0]
-        # one enumeration of the newest reading's poses per sub-box serves both hypotheses
-        sols = [_solutions(self.model, self._q[0], self.settings, (self.xi_rows[0][p], self.xi_rows[1][p]),
-                           self.backend, search, _LAG_FK_TOL) for p in range(P)]
-        rows, hyp, lo, hi = [], [], [], []
-        for m in (1, -1):
-            for p in range(P):
+        sols = {}
+        alive, lagged_modes = [], []
+
+        def useful(m):
+            open_lag = need_lagged and not (0 in lagged_modes or len(set(lagged_modes)) > 1)
+            return (need_now and m not in alive) or open_lag
+
+        # rows interleaved by hypothesis, so that the first call can show both alive
+        todo = [(m, p) for p in range(P) for m in (1, -1)]
+        while todo:
+            batch, rest = [], []
+            for m, p in todo:
+                if not useful(m):
+                    continue
+                if len(batch) == _LAG_BATCH:
+                    rest.append((m, p))
+                    continue
+                if p not in sols:  # one enumeration of the newest reading's poses serves both hypotheses
+                    sols[p] = _solutions(self.model, self._q[0], self.settings,
+                                         (self.xi_rows[0][p], self.xi_rows[1][p]), self.backend, search, _LAG_FK_TOL)
                 box = _hull_of_mode(sols[p], m, search)
                 if box is not None:
-                    rows.append(p)
-                    hyp.append(m)
-                    lo.append(np.maximum(box[0], search[0]))
-                    hi.append(np.minimum(box[1], search[1]))
-        if not rows:
-            return [], []
-        rows, hyp, R = np.array(rows), np.array(hyp), len(rows)
-        shape = (R,) + self._x.shape
-        prior = (np.broadcast_to(self._x, shape), np.broadcast_to(self._xd_rev, shape))
-        _, _, md, bad = _run(self.cfg_b, self._q, (np.stack(lo), np.stack(hi)),
-                             (self.xi_rows[0][rows], self.xi_rows[1][rows]), prior)
-        live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != hyp))
-        alive_modes = [m for m in (1, -1) if np.any(live & (hyp == m))]
-        return alive_modes, md[live, -1].tolist()
+                    batch.append((m, p, np.maximum(box[0], search[0]), np.minimum(box[1], search[1])))
+            todo = rest
+            if not batch:
+                continue
+            hyp = np.array([b[0] for b in batch])
+            rows = np.array([b[1] for b in batch])
+            shape = (len(batch),) + self._x.shape
+            prior = (np.broadcast_to(self._x, shape), np.broadcast_to(self._xd_rev, shape))
+            _, _, md, bad = _run(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
+                                 (self.xi_rows[0][rows], self.xi_rows[1][rows]), prior)
+            live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != hyp))
+            for m in (1, -1):
+                if m not in alive and np.any(live & (hyp == m)):
+                    alive.append(m)
+            lagged_modes.extend(md[live, -1].tolist())
+        return alive, lagged_modes
