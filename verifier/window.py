@@ -20,7 +20,9 @@ recording may use every reading.  :func:`track_window` does so:
    ``q_{K-1-k}``, velocity ``-xd``, the same acceleration and reading-error
    bounds, which are symmetric in time), started from the final box of the
    hypothesis and intersected with the tubes.  Passes alternate, backward
-   first, until the tubes stop shrinking or a hypothesis is refuted.
+   first, until the tubes stop shrinking or a hypothesis is refuted; the
+   rows of both hypotheses run in one ``advance`` call per pass (each row is
+   its own scenario: batching changes no box).
 4. **Refutation.**  A sub-box whose tubes become empty is refuted; so is one
    whose boxes certify, at the last sample, a mode other than ``m`` (or, at
    the first, other than the initial one).  A hypothesis with every sub-box
@@ -572,6 +574,9 @@ class FixedLagWindow:
     window ending at ``k``).  A hypothesis whose geometry sub-boxes all die is
     refuted: the mode at ``k`` is the other one.  The mode at ``k - lag`` is
     the one every surviving sub-box of every surviving hypothesis certifies.
+    Rows (hypothesis, sub-box) run a pair at a time, and those that can no
+    longer change either answer are skipped (:meth:`_window`); the forward
+    kinematics of the newest reading is enumerated once per sub-box.
 
     Parameters
     ----------
