@@ -25,7 +25,8 @@ S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
     recording (``crosscert simulate --v-sing 1.458 --t-rest 6.221``) and on
     the catalogue's 1.1 m/s crossing and 1.2 m/s bounce.
 
-The speed part uses only names that exist since 2026-12-01, so the same
+``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
+geometries in S1).  The speed part uses only names that exist since 2026-12-01, so the same
 script measures an older checkout (run it with that checkout's interpreter).
 """
 
@@ -147,11 +148,14 @@ def _lag_latency(im, s, q, lag):
     return t
 
 
-def speed(geometries: int) -> None:
+def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
     import crosscert.verifier.window as W
 
     print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
     im, s = interval_model(), default_settings()
+    if "S1" not in parts and "S2" not in parts:
+        _speed_lag(im, s)
+        return
     kin, bench = kinematics(), benchmark_crossing()
     geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0))
                       for i in range(1, geometries)]
@@ -189,6 +193,11 @@ def speed(geometries: int) -> None:
     for name, v in sorted(clock.total.items(), key=lambda kv: -kv[1]):
         print(f"  {name:15s} {v:7.3f} s  {100 * v / total:5.1f} %", flush=True)
     print(f"  {'the rest':15s} {rest:7.3f} s  {100 * rest / total:5.1f} %   (total {total:.3f} s)", flush=True)
+    if "S3" in parts:
+        _speed_lag(im, s)
+
+
+def _speed_lag(im, s) -> None:
     print("[S3] FixedLagWindow.update per sample (monitor --lag): mean / p99 / max, ms", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         csv = Path(tmp) / "rec.csv"
@@ -199,7 +208,17 @@ def speed(geometries: int) -> None:
     cases = [("6.42 s recording, 1.458 m/s", rec), ("1.1 m/s crossing", simulate(1.1, False, 0).q_meas),
              ("1.2 m/s bounce", simulate(1.2, True, 0).q_meas)]
     _lag_latency(im, s, cases[1][1][:60], 20)  # warm-up
+    from crosscert.verifier.step import Tracker
+
     for name, q in cases:
+        tr, t = Tracker(im, s, initial_box_from_mode(im, q[0], 1, s)), np.empty(len(q))
+        for k, qk in enumerate(q):
+            t0 = time.perf_counter()
+            tr.update(qk)
+            t[k] = time.perf_counter() - t0
+        t *= 1e3
+        print(f"  {name:28s} ({len(q)} samples) no lag (Tracker.update): {t.mean():.3f} / "
+              f"{np.percentile(t, 99):.2f} / {t.max():.2f}", flush=True)
         for lag in (20, 50):
             t = 1e3 * _lag_latency(im, s, q, lag)
             print(f"  {name:28s} ({len(q)} samples) lag {lag}: {t.mean():.3f} / {np.percentile(t, 99):.2f} / "
@@ -209,6 +228,7 @@ def speed(geometries: int) -> None:
 
 if __name__ == "__main__":
     if "--speed" in sys.argv:
-        speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20)
+        speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20,
+              sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3")
     else:
         main()
