@@ -120,28 +120,31 @@ def test_recordings_ending_at_the_locus(settings, before):
         check_contains(h.xd_lo, h.xd_hi, run.xd_true[:k + 1], f"velocity tube of final mode {h.final_mode:+d}")
 
 
-def test_both_hypotheses_emptied_in_one_pass_is_inconsistent(settings, monkeypatch):
-    """The hypotheses' passes run in lockstep: when one pass empties the rows of both (as an assumption
-    violated near the end of a recording would), the verdict is ``inconsistent``, not the verdict of the
-    hypothesis that happened to be checked first.  The violation is simulated: every window pass after the
-    forward one reports its rows empty (fails when the rounds stop before the second hypothesis' rows of
-    that pass are taken, as the sequential rounds before 2026-12-02 did)."""
+def test_early_stop_is_reported(settings, monkeypatch):
+    """The rounds stop at the first refutation: the other hypothesis, whose later passes might have
+    refuted it too (then the recording is ``inconsistent``), is reported consistent but incomplete.  The
+    violation is simulated: every window pass after the forward one reports its rows empty, so the first
+    hypothesis is refuted at its first pass and the second never runs one (fails when the survivor is
+    reported complete)."""
     import crosscert.verifier.window as W
     from problems import simulate
 
-    real, calls = W._run, []
+    real = W._run
 
     def emptied(config, q, x0, xi_rows, prior):
         x, xd, md, bad = real(config, q, x0, xi_rows, prior)
-        calls.append(len(bad))
         return (x, xd, md, np.zeros_like(bad)) if prior is not None else (x, xd, md, bad)
 
-    monkeypatch.setattr(W, "_run", emptied)
     run = simulate(1.0, False, 0)
+    honest = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
+    assert honest.forward_verdict is Verdict.UNKNOWN
+    assert all(h.complete for h in honest.hypotheses), honest.summary()  # neither refuted: every round ran
+    monkeypatch.setattr(W, "_run", emptied)
     res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
-    assert res.forward_verdict is Verdict.UNKNOWN and len(calls) >= 2
-    assert res.verdict is Verdict.INCONSISTENT, res.summary()
-    assert all(h.status is HypothesisStatus.REFUTED and h.passes == 1 for h in res.hypotheses), res.summary()
+    first, second = res.hypotheses
+    assert first.status is HypothesisStatus.REFUTED and first.passes == 1 and first.complete, res.summary()
+    assert second.status is HypothesisStatus.CONSISTENT and second.passes == 0, res.summary()
+    assert not second.complete and res.summary()["hypotheses"][1]["complete"] is False, res.summary()
 
 
 def test_final_boxes_keep_poses_of_undecided_mode(settings):

@@ -20,9 +20,7 @@ recording may use every reading.  :func:`track_window` does so:
    ``q_{K-1-k}``, velocity ``-xd``, the same acceleration and reading-error
    bounds, which are symmetric in time), started from the final box of the
    hypothesis and intersected with the tubes.  Passes alternate, backward
-   first, until the tubes stop shrinking or a hypothesis is refuted; the
-   rows of both hypotheses run in one ``advance`` call per pass (each row is
-   its own scenario: batching changes no box).
+   first, until the tubes stop shrinking or a hypothesis is refuted.
 4. **Refutation.**  A sub-box whose tubes become empty is refuted; so is one
    whose boxes certify, at the last sample, a mode other than ``m`` (or, at
    the first, other than the initial one).  A hypothesis with every sub-box
@@ -115,6 +113,12 @@ class HypothesisResult:
         Passes run under this hypothesis (0: decided by the forward pass).
     geometries_alive : int
         Geometry sub-boxes still consistent at the end.
+    complete : bool
+        True when a consistent hypothesis ran every round its budget allows.
+        False when the rounds stopped early because the other hypothesis was
+        refuted (or the forward pass decided): more passes might have refuted
+        this one too, and the recording would then be ``inconsistent``.
+        True for a refuted hypothesis.
     x_lo, x_hi, xd_lo, xd_hi : ndarray, shape (K, n), or None
         Hull over this hypothesis' surviving geometries of its pose (m) and
         velocity (m/s) tubes; ``None`` when refuted.
@@ -125,6 +129,7 @@ class HypothesisResult:
     refutation: Refutation
     passes: int
     geometries_alive: int
+    complete: bool = True
     x_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
     x_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
     xd_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
@@ -174,7 +179,7 @@ class WindowResult:
             "forward_verdict": self.forward_verdict.value,
             "hypotheses": [
                 {"final_mode": h.final_mode, "status": h.status.value, "refutation": h.refutation.value,
-                 "passes": h.passes, "geometries_alive": h.geometries_alive}
+                 "passes": h.passes, "geometries_alive": h.geometries_alive, "complete": h.complete}
                 for h in self.hypotheses
             ],
             "max_width_pose_m": float(self.max_width_pose),
@@ -362,7 +367,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         tubes = [(fx[f_alive], fxd[f_alive])]
     elif mf != 0:
         # the forward pass decided: the other final mode is refuted by its certified boxes
-        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()),
+        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
                                     *_hull(fx[f_alive], fxd[f_alive])),
                    HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
         verdict = forward_verdict
@@ -375,6 +380,9 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         if not any(h.refuted for h in hyps):
             full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
             _decide(hyps, _Passes(q, cfg_f, cfg_b), max_passes, rel_tol, max_geometries, full_w)
+        else:  # refuted by the last reading alone: the other ran no pass
+            for h in hyps:
+                h.complete = h.refuted
         results = tuple(h.result() for h in hyps)
         tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
         alive = [h.final_mode for h in results if h.status is HypothesisStatus.CONSISTENT]
@@ -423,7 +431,7 @@ class _Hypothesis:
         self.xlo, self.xhi, self.tx, self.txd = xlo, xhi, tx, txd
         self.passes = 0
         self.refutation = Refutation.NONE
-        self.width = 0.0  # summed tube widths before the last pass of the round
+        self.complete = True  # False once the rounds stopped before this hypothesis used its budget
         self._final_boxes()
 
     @property
@@ -469,12 +477,12 @@ class _Hypothesis:
         if self.refuted:
             return HypothesisResult(self.m, HypothesisStatus.REFUTED, self.refutation, self.passes, 0)
         return HypothesisResult(self.m, HypothesisStatus.CONSISTENT, self.refutation, self.passes, len(self.xlo),
-                                *_hull(self.tx, self.txd))
+                                self.complete, *_hull(self.tx, self.txd))
 
 
 class _Passes:
-    """Passes over the rows of several hypotheses at once: one ``advance`` call per pass (rows are
-    independent, so batching changes no box; the batch spreads over the threads)."""
+    """Passes over the rows of hypotheses: one ``advance`` call per pass, the rows spread over the threads
+    (each row is its own scenario: the rows batched with it change none of its boxes)."""
 
     def __init__(self, q, cfg_f, cfg_b):
         self.q, self.cfg_f, self.cfg_b = q, cfg_f, cfg_b
@@ -498,40 +506,44 @@ class _Passes:
             h.take(x[i:j], xd[i:j], md[i:j], bad[i:j])
 
 
-def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w):
-    """Rounds of passes on both hypotheses in lockstep (one batched pass each step), halving each one's
-    geometries between rounds while it stays within ``max_geometries``, until a hypothesis is refuted or
-    none can be halved.
+def _round(h, passes, max_passes, rel_tol):
+    """One round of ``h``: backward and forward passes alternate until one shrinks its tubes by less than
+    ``rel_tol`` (after at least two), ``max_passes``, or the hypothesis is refuted."""
+    if h.refuted:  # no row left since its last halving
+        return
+    width = _width(h.tx, h.txd)
+    for p in range(1, max_passes + 1):
+        passes.run([h], backward=bool(p % 2))
+        if h.refuted:
+            return
+        new = _width(h.tx, h.txd)
+        if p >= 2 and not new < (1.0 - rel_tol) * width:
+            return
+        width = new
 
-    A round of a hypothesis alternates backward and forward passes until one shrinks its tubes by less
-    than ``rel_tol`` (after at least two) or ``max_passes``.  The rounds stop at the first pass that
-    refutes a hypothesis: the other has then run the same passes, so a recording that empties both
-    within that pass is reported ``inconsistent``; one that would empty the other only in later rounds
-    is not (soundness needs no more: a refuted hypothesis is false whatever the other one's tubes are).
+
+def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w):
+    """Rounds on each hypothesis in turn (the initial mode's first), halving each one's geometries
+    between rounds while it stays within ``max_geometries``, until a hypothesis is refuted or none can be
+    halved.
+
+    The rounds stop at the first refutation: the other hypothesis is then left as it stands, consistent
+    but marked incomplete (``HypothesisResult.complete``), since its skipped rounds might have refuted
+    it too (the recording would then be ``inconsistent``).  Running them would cost a round of the
+    surviving hypothesis on every decided recording, and a refuted hypothesis is false whatever the
+    other one's tubes are (measured: benchmarks/README.md [8]).
     """
     open_ = list(hyps)
     while open_:
-        running = list(open_)
-        for h in running:
-            h.width = _width(h.tx, h.txd)
-        for p in range(1, max_passes + 1):
-            passes.run(running, backward=bool(p % 2))
-            if any(h.refuted for h in running):
+        for h in open_:
+            _round(h, passes, max_passes, rel_tol)
+            if h.refuted:
+                for other in open_:
+                    other.complete = other.refuted
                 return
-            still = []
-            for h in running:
-                new = _width(h.tx, h.txd)
-                if not (p >= 2 and not new < (1.0 - rel_tol) * h.width):
-                    still.append(h)
-                h.width = new
-            running = still
-            if not running:
-                break
         open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
         for h in open_:
             h.split(full_w)
-        if any(h.refuted for h in open_):
-            return
 
 
 @dataclass(frozen=True)
