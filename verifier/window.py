@@ -481,29 +481,23 @@ class _Hypothesis:
 
 
 class _Passes:
-    """Passes over the rows of hypotheses: one ``advance`` call per pass, the rows spread over the threads
-    (each row is its own scenario: the rows batched with it change none of its boxes)."""
+    """The passes of the window: one ``advance`` call per pass over a hypothesis' rows, spread over the
+    threads (each row is its own scenario: the rows batched with it change none of its boxes)."""
 
     def __init__(self, q, cfg_f, cfg_b):
         self.q, self.cfg_f, self.cfg_b = q, cfg_f, cfg_b
         self.q_rev = np.ascontiguousarray(q[::-1])
 
-    def run(self, hyps, backward):
-        counts = [len(h.xlo) for h in hyps]
-        cat = lambda f: np.concatenate([f(h) for h in hyps])  # noqa: E731
-        xi = (cat(lambda h: h.xlo), cat(lambda h: h.xhi))
-        starts = [h.starts(backward) for h in hyps]
-        x0 = (np.concatenate([a for a, _ in starts]), np.concatenate([b for _, b in starts]))
-        tx, txd = cat(lambda h: h.tx), cat(lambda h: h.txd)
+    def run(self, h, backward):
+        """One pass over the rows of hypothesis ``h``, which takes its tubes."""
+        x0, xi = h.starts(backward), (h.xlo, h.xhi)
         if backward:
-            x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(tx, txd))
+            x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
             x, xd = _reverse(x, xd)
             md = md[:, ::-1]
         else:
-            x, xd, md, bad = _run(self.cfg_f, self.q, x0, xi, (tx, txd))
-        at = np.cumsum([0] + counts)
-        for h, i, j in zip(hyps, at[:-1], at[1:]):
-            h.take(x[i:j], xd[i:j], md[i:j], bad[i:j])
+            x, xd, md, bad = _run(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
+        h.take(x, xd, md, bad)
 
 
 def _round(h, passes, max_passes, rel_tol):
@@ -513,7 +507,7 @@ def _round(h, passes, max_passes, rel_tol):
         return
     width = _width(h.tx, h.txd)
     for p in range(1, max_passes + 1):
-        passes.run([h], backward=bool(p % 2))
+        passes.run(h, backward=bool(p % 2))
         if h.refuted:
             return
         new = _width(h.tx, h.txd)
