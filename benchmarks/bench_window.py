@@ -11,11 +11,31 @@ Prints three tables (docs/tracker.md, "Window reasoning"):
    sample and how many samples it certifies late.
 
 Run: ``python benchmarks/bench_window.py`` (about 10 minutes on 2 cores).
+
+``--speed`` prints the cost figures of issue 17 instead (a few minutes):
+
+S1. window reasoning per sample on the 1.0 m/s crossings of the 20 true
+    geometries, split by outcome (undecided, decided by the window, decided by
+    the forward pass), after a warm-up run;
+S2. where one undecided run spends its time: the kernel passes
+    (``advance``), the forward-kinematics enumeration of the final boxes
+    (``pose_solutions``) and the rest (tube bookkeeping in Python);
+S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
+    sample) with lags 20 and 50: mean, p99 and max per sample on a 6.42 s
+    recording (``crosscert simulate --v-sing 1.458 --t-rest 6.221``) and on
+    the catalogue's 1.1 m/s crossing and 1.2 m/s bounce.
+
+``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
+geometries in S1).  The speed part uses only names that exist since 2026-12-01, so the same
+script measures an older checkout (run it with that checkout's interpreter).
 """
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -80,5 +100,136 @@ def main() -> None:
                   f"{1e3 * np.max(t):.1f} ms  {np.mean([r.lagged_mode != 0 for r in lagged]):.3f}  {late}", flush=True)
 
 
+def _load(note: str) -> str:
+    la = os.getloadavg()
+    return f"{note}load average {la[0]:.2f} / {la[1]:.2f} / {la[2]:.2f} on {os.cpu_count()} cores"
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown CPU"
+
+
+class _Clock:
+    """Wall time spent inside some functions of :mod:`verifier.window` (patched in its namespace)."""
+
+    def __init__(self, module, names):
+        self.module, self.total = module, {}
+        self.saved = {n: getattr(module, n) for n in names if hasattr(module, n)}
+
+    def __enter__(self):
+        for name, fn in self.saved.items():
+            def timed(*a, _fn=fn, _name=name, **kw):
+                t0 = time.perf_counter()
+                try:
+                    return _fn(*a, **kw)
+                finally:
+                    self.total[_name] = self.total.get(_name, 0.0) + time.perf_counter() - t0
+            setattr(self.module, name, timed)
+        return self
+
+    def __exit__(self, *exc):
+        for name, fn in self.saved.items():
+            setattr(self.module, name, fn)
+
+
+def _lag_latency(im, s, q, lag):
+    x0 = initial_box_from_mode(im, q[0], 1, s)
+    fl = FixedLagWindow(im, s, x0, lag=lag)
+    t = np.empty(len(q))
+    for k, qk in enumerate(q):
+        t0 = time.perf_counter()
+        fl.update(qk)
+        t[k] = time.perf_counter() - t0
+    return t
+
+
+def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
+    import crosscert.verifier.window as W
+
+    print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
+    im, s = interval_model(), default_settings()
+    if "S1" not in parts and "S2" not in parts:
+        _speed_lag(im, s)
+        return
+    kin, bench = kinematics(), benchmark_crossing()
+    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0))
+                      for i in range(1, geometries)]
+    runs = [simulate_crossing(kin, bench.point, bench.direction, 1.0, xi_true=xi, t_rest=0.05,
+                              working_guess=bench.q_point, seed=1, cruise=cruise_for(1.0)).q_meas for xi in geoms]
+    track_window(im, runs[0], s, initial_mode=1)  # warm-up: kernels loaded, caches filled
+    print(f"[S1] window reasoning, 1.0 m/s crossings, {len(runs)} true geometries (ms per sample)", flush=True)
+    rows = []
+    for i, q in enumerate(runs):
+        t0 = time.perf_counter()
+        w = track_window(im, q, s, initial_mode=1)
+        dt = time.perf_counter() - t0
+        kind = ("forward" if w.forward_verdict.value != "unknown" else
+                "undecided" if w.verdict.value == "unknown" else "window")
+        rows.append((kind, dt / len(q), dt, len(q), w))
+        print(f"  geometry {i:2d}: {len(q)} samples  {w.verdict.value:15s} {kind:9s} {dt:7.3f} s  "
+              f"{1e3 * dt / len(q):7.3f} ms/sample  passes {[h.passes for h in w.hypotheses]}  "
+              f"alive {[h.geometries_alive for h in w.hypotheses]}", flush=True)
+    for kind in ("undecided", "window", "forward"):
+        sel = [r for r in rows if r[0] == kind]
+        if sel:
+            per = np.array([r[1] for r in sel])
+            print(f"  {kind:9s} ({len(sel):2d} runs): mean {1e3 * per.mean():.3f} ms/sample, min {1e3 * per.min():.3f}, "
+                  f"max {1e3 * per.max():.3f}; mean {np.mean([r[2] for r in sel]):.3f} s per run", flush=True)
+    print(f"  verdicts: {[r[4].verdict.value for r in rows]}")
+    print(f"  {_load('')}", flush=True)
+    und = [i for i, r in enumerate(rows) if r[0] == "undecided"] or [0]
+    q = runs[und[0]]
+    print(f"[S2] where an undecided run spends its time (geometry {und[0]}, {len(q)} samples)", flush=True)
+    with _Clock(W, ("advance", "pose_solutions")) as clock:
+        t0 = time.perf_counter()
+        track_window(im, q, s, initial_mode=1)
+        total = time.perf_counter() - t0
+    rest = total - sum(clock.total.values())
+    for name, v in sorted(clock.total.items(), key=lambda kv: -kv[1]):
+        print(f"  {name:15s} {v:7.3f} s  {100 * v / total:5.1f} %", flush=True)
+    print(f"  {'the rest':15s} {rest:7.3f} s  {100 * rest / total:5.1f} %   (total {total:.3f} s)", flush=True)
+    if "S3" in parts:
+        _speed_lag(im, s)
+
+
+def _speed_lag(im, s) -> None:
+    print("[S3] FixedLagWindow.update per sample (monitor --lag): mean / p99 / max, ms", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        csv = Path(tmp) / "rec.csv"
+        subprocess.run([sys.executable, "-m", "crosscert", "simulate", "--v-sing", "1.458", "--t-rest", "6.221",
+                        "-o", str(csv)], check=True, capture_output=True)
+        head = [c.strip() for c in csv.open().readline().split(",")]
+        rec = np.loadtxt(csv, delimiter=",", skiprows=1)[:, [head.index(f"q{i + 1}") for i in range(im.n)]]
+    cases = [("6.42 s recording, 1.458 m/s", rec), ("1.1 m/s crossing", simulate(1.1, False, 0).q_meas),
+             ("1.2 m/s bounce", simulate(1.2, True, 0).q_meas)]
+    _lag_latency(im, s, cases[1][1][:60], 20)  # warm-up
+    from crosscert.verifier.step import Tracker
+
+    for name, q in cases:
+        tr, t = Tracker(im, s, initial_box_from_mode(im, q[0], 1, s)), np.empty(len(q))
+        for k, qk in enumerate(q):
+            t0 = time.perf_counter()
+            tr.update(qk)
+            t[k] = time.perf_counter() - t0
+        t *= 1e3
+        print(f"  {name:28s} ({len(q)} samples) no lag (Tracker.update): {t.mean():.3f} / "
+              f"{np.percentile(t, 99):.2f} / {t.max():.2f}", flush=True)
+        for lag in (20, 50):
+            t = 1e3 * _lag_latency(im, s, q, lag)
+            print(f"  {name:28s} ({len(q)} samples) lag {lag}: {t.mean():.3f} / {np.percentile(t, 99):.2f} / "
+                  f"{t.max():.2f}", flush=True)
+    print(f"  {_load('')}", flush=True)
+
+
 if __name__ == "__main__":
-    main()
+    if "--speed" in sys.argv:
+        speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20,
+              sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3")
+    else:
+        main()

@@ -91,7 +91,11 @@ def test_window_is_sound_on_runs_ending_at_the_locus(runs, settings):
 def test_recordings_ending_at_the_locus(settings, before):
     """A bounce cut where it touches the true locus, or a few samples before: the last reading's poses near
     the truth have no certified mode, and a hypothesis must keep them.  On the locus (mode 0) neither
-    hypothesis is true, so the run is neither inconsistent nor certified; before it, the true mode survives."""
+    hypothesis is true, so the run is neither inconsistent nor certified; before it, the true mode survives.
+
+    End to end, the guard of the undecided forward-kinematics solutions in the final boxes
+    (``_hull_of_mode``): with them dropped, the tubes of both hypotheses lose the truth at the last sample
+    of the cut on the locus (``before`` = 0), and this test fails."""
     from problems import simulate
 
     run = simulate(1.0, True, 0)
@@ -106,6 +110,41 @@ def test_recordings_ending_at_the_locus(settings, before):
     else:
         assert res.verdict is Verdict.UNKNOWN, res.summary()
     check_contains(res.x_lo, res.x_hi, run.x_true[:k + 1], "pose tube")
+    # each hypothesis the truth satisfies (last pose of its mode or on the locus) keeps the truth in its own
+    # tubes; the hull over both would hide a final box that lost the locus (both sides surround it)
+    held = [h for h in res.hypotheses if run.mode_true[k] in (0, h.final_mode)]
+    assert len(held) == (2 if before == 0 else 1)
+    for h in held:
+        assert h.status is HypothesisStatus.CONSISTENT, res.summary()
+        check_contains(h.x_lo, h.x_hi, run.x_true[:k + 1], f"pose tube of final mode {h.final_mode:+d}")
+        check_contains(h.xd_lo, h.xd_hi, run.xd_true[:k + 1], f"velocity tube of final mode {h.final_mode:+d}")
+
+
+def test_early_stop_is_reported(settings, monkeypatch):
+    """The rounds stop at the first refutation: the other hypothesis, whose later passes might have
+    refuted it too (then the recording is ``inconsistent``), is reported consistent but incomplete.  The
+    violation is simulated: every window pass after the forward one reports its rows empty, so the first
+    hypothesis is refuted at its first pass and the second never runs one (fails when the survivor is
+    reported complete)."""
+    import crosscert.verifier.window as W
+    from problems import simulate
+
+    real = W._run
+
+    def emptied(config, q, x0, xi_rows, prior):
+        x, xd, md, bad = real(config, q, x0, xi_rows, prior)
+        return (x, xd, md, np.zeros_like(bad)) if prior is not None else (x, xd, md, bad)
+
+    run = simulate(1.0, False, 0)
+    honest = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
+    assert honest.forward_verdict is Verdict.UNKNOWN
+    assert all(h.complete for h in honest.hypotheses), honest.summary()  # neither refuted: every round ran
+    monkeypatch.setattr(W, "_run", emptied)
+    res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
+    first, second = res.hypotheses
+    assert first.status is HypothesisStatus.REFUTED and first.passes == 1 and first.complete, res.summary()
+    assert second.status is HypothesisStatus.CONSISTENT and second.passes == 0, res.summary()
+    assert not second.complete and res.summary()["hypotheses"][1]["complete"] is False, res.summary()
 
 
 def test_final_boxes_keep_poses_of_undecided_mode(settings):
@@ -203,3 +242,22 @@ def test_fixed_lag_modes_are_true(runs, settings):
                 assert r.lagged_mode in (0, sc.mode[r.lagged]), (sc.name, r)
                 gained += r.lagged_mode != 0 and fwd[r.lagged] == 0
     assert gained > 0
+
+
+def test_fixed_lag_runs_only_rows_that_can_change_the_answer(runs, settings, monkeypatch):
+    """The fixed-lag window runs its (hypothesis, geometry) rows a pair at a time and stops once no row left
+    can change the answer: the results must be those of running every row at once (on runs where the
+    window certifies lagged modes the tracker did not)."""
+    import crosscert.verifier.window as W
+
+    def results(sc):
+        x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
+        fl = W.FixedLagWindow(interval_model(), settings, x0, lag=20)
+        return [fl.update(q) for q in sc.q_meas]
+
+    for sc in (runs[3], runs[N_RUNS + 4], runs[N_RUNS + 9]):
+        lazy = results(sc)
+        monkeypatch.setattr(W, "_LAG_BATCH", 10 ** 6)  # every useful row in the first call: nothing skipped
+        full = results(sc)
+        monkeypatch.undo()
+        assert lazy == full, sc.name

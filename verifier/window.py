@@ -59,6 +59,9 @@ WINDOW_REL_TOL = 0.02
 #: Resolution (m) of the forward-kinematics enumeration of :class:`FixedLagWindow` (once per sample
 #: and hypothesis: coarser than the whole-recording passes' 1e-5 m, which splits the locus finely).
 _LAG_FK_TOL = 1e-4
+#: Rows (hypothesis, geometry sub-box) per kernel call of :class:`FixedLagWindow`: small, so that the
+#: rows left once the answer is settled are not run (the first call holds one row of each hypothesis).
+_LAG_BATCH = 2
 #: Velocity widths above this (m/s) count as this much when measuring progress (unbounded tubes).
 _WIDTH_CAP = 1e3
 
@@ -110,6 +113,15 @@ class HypothesisResult:
         Passes run under this hypothesis (0: decided by the forward pass).
     geometries_alive : int
         Geometry sub-boxes still consistent at the end.
+    complete : bool
+        True when a consistent hypothesis ran every round its budget allows.
+        False when the rounds stopped early because the other hypothesis was
+        refuted (or the forward pass decided): more passes might have refuted
+        this one too, and the recording would then be ``inconsistent``.
+        True for a refuted hypothesis.
+    x_lo, x_hi, xd_lo, xd_hi : ndarray, shape (K, n), or None
+        Hull over this hypothesis' surviving geometries of its pose (m) and
+        velocity (m/s) tubes; ``None`` when refuted.
     """
 
     final_mode: int
@@ -117,6 +129,11 @@ class HypothesisResult:
     refutation: Refutation
     passes: int
     geometries_alive: int
+    complete: bool = True
+    x_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
+    x_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
+    xd_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
+    xd_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -162,7 +179,7 @@ class WindowResult:
             "forward_verdict": self.forward_verdict.value,
             "hypotheses": [
                 {"final_mode": h.final_mode, "status": h.status.value, "refutation": h.refutation.value,
-                 "passes": h.passes, "geometries_alive": h.geometries_alive}
+                 "passes": h.passes, "geometries_alive": h.geometries_alive, "complete": h.complete}
                 for h in self.hypotheses
             ],
             "max_width_pose_m": float(self.max_width_pose),
@@ -189,28 +206,80 @@ def _run(config, q, x0, xi_rows, prior):
     return rec[0], rec[1], rec[2], st.bad_at.copy()
 
 
+def _hull(x, xd):
+    """Hull over the rows of tubes ``(R, K, 2, n)``: ``x_lo, x_hi, xd_lo, xd_hi`` ``(K, n)``."""
+    return x[:, :, 0].min(0), x[:, :, 1].max(0), xd[:, :, 0].min(0), xd[:, :, 1].max(0)
+
+
 def _width(x, xd):
     w = np.minimum(x[..., 1, :] - x[..., 0, :], _WIDTH_CAP).sum() + np.minimum(xd[..., 1, :] - xd[..., 0, :],
                                                                                  _WIDTH_CAP).sum()
     return float(w)
 
 
+def _search_box(model, search):
+    """The box known to hold the last pose: ``search`` or the robot's ``x_bounds``."""
+    if search is None:
+        search = model.robot.x_bounds
+    return np.asarray(search[0], dtype=np.float64), np.asarray(search[1], dtype=np.float64)
+
+
+def _solutions(model, q_last, s, xi_row, backend, search, tol):
+    """Pose solutions of the last reading ``q_last`` (rad, widened by ``eps_q``) for the geometry sub-box
+    ``xi_row`` inside ``search``: boxes ``(N, 2, n)`` (m) and their modes ``(N,)`` (0: undecided), or
+    ``None`` when the enumeration gave up.  One enumeration serves both final-mode hypotheses."""
+    eps = s.eps_q
+    Q = I.sub(q_last, q_last, eps, eps)[0], I.add(q_last, q_last, eps, eps)[1]
+    sols = pose_solutions(model, Q, xi_row, search, tol=tol, backend=backend)
+    if sols is None:
+        return None
+    boxes = np.array([np.stack(b) for b, _ in sols], dtype=np.float64).reshape(-1, 2, model.n)
+    return boxes, np.array([m for _, m in sols], dtype=np.int64)
+
+
+def _hull_of_mode(sols, mode, search):
+    """Hull ``(2, n)`` of the solution boxes of mode ``mode`` or undecided; ``None`` when there is none;
+    the search box when the solutions were not isolated (``sols`` is ``None``)."""
+    if sols is None:
+        return np.stack(search)
+    boxes, modes = sols
+    # undecided boxes stay: a pose on the singular locus is the limit of both modes
+    mine = boxes[(modes == mode) | (modes == 0)]
+    if not len(mine):
+        return None
+    return np.stack([mine[:, 0].min(0), mine[:, 1].max(0)])
+
+
 def _final_box(model, q_last, mode, s, xi_row, backend, search=None, tol=1e-5):
     """Hull ``(2, n)`` of the pose solutions of the last reading in mode ``mode`` or undecided, inside
     ``search`` (the robot's ``x_bounds`` by default; any box known to hold the pose), ``None`` when there
     is none (the geometry cannot end in that mode), the search box when they could not be isolated."""
-    eps = s.eps_q
-    Q = I.sub(q_last, q_last, eps, eps)[0], I.add(q_last, q_last, eps, eps)[1]
-    if search is None:
-        lo, hi = model.robot.x_bounds
-        search = (np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64))
-    sols = pose_solutions(model, Q, xi_row, search, tol=tol, backend=backend)
-    if sols is None:
-        return np.stack(search)
-    mine = [b for b, m in sols if m in (mode, 0)]
-    if not mine:
-        return None
-    return np.stack([np.min([b[0] for b in mine], axis=0), np.max([b[1] for b in mine], axis=0)])
+    search = _search_box(model, search)
+    return _hull_of_mode(_solutions(model, q_last, s, xi_row, backend, search, tol), mode, search)
+
+
+class _FinalBoxes:
+    """Final boxes of geometry sub-boxes, enumerated once per sub-box and shared by both hypotheses
+    (they start from the same sub-boxes, and a halved sub-box is often alive under both)."""
+
+    def __init__(self, model, q_last, s, backend):
+        self.model, self.q_last, self.s, self.backend = model, q_last, s, backend
+        self.search = _search_box(model, None)
+        self.cache = {}
+
+    def of(self, xlo, xhi, mode):
+        """Final boxes ``(R, 2, n)`` of the rows ``xlo, xhi`` ``(R, m)`` under ``mode``, and which rows have one."""
+        boxes, ok = [], np.zeros(len(xlo), dtype=bool)
+        for i, (lo, hi) in enumerate(zip(xlo, xhi)):
+            key = lo.tobytes() + hi.tobytes()
+            if key not in self.cache:
+                self.cache[key] = _solutions(self.model, self.q_last, self.s, (lo, hi), self.backend, self.search,
+                                             1e-5)
+            box = _hull_of_mode(self.cache[key], mode, self.search)
+            if box is not None:
+                ok[i] = True
+                boxes.append(box)
+        return (np.stack(boxes) if boxes else np.empty((0, 2, self.model.n))), ok
 
 
 def _combined_mode(modes, alive):
@@ -298,14 +367,22 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         tubes = [(fx[f_alive], fxd[f_alive])]
     elif mf != 0:
         # the forward pass decided: the other final mode is refuted by its certified boxes
-        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum())),
+        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
+                                    *_hull(fx[f_alive], fxd[f_alive])),
                    HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
         verdict = forward_verdict
         tubes = [(fx[f_alive], fxd[f_alive])]
     else:
-        hyps = [_Hypothesis(model, q, s, cfg_f, cfg_b, xi_rows, fx, fxd, f_alive, m0, m, backend) for m in (m0, -m0)]
+        finals = _FinalBoxes(model, q[K - 1], s, str(Backend(backend)))
+        keep = np.nonzero(f_alive)[0]
+        hyps = [_Hypothesis(finals, xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep], m0, m)
+                for m in (m0, -m0)]
         if not any(h.refuted for h in hyps):
-            _decide(hyps, max_passes, rel_tol, max_geometries)
+            full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
+            _decide(hyps, _Passes(q, cfg_f, cfg_b), max_passes, rel_tol, max_geometries, full_w)
+        else:  # refuted by the last reading alone: the other ran no pass
+            for h in hyps:
+                h.complete = h.refuted
         results = tuple(h.result() for h in hyps)
         tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
         alive = [h.final_mode for h in results if h.status is HypothesisStatus.CONSISTENT]
@@ -315,13 +392,11 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
             verdict = Verdict.UNKNOWN
         else:
             verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
-    x_lo, x_hi, xd_lo, xd_hi = (np.full((K, n), np.nan) for _ in range(4))
     tubes = [t for t in tubes if len(t[0])]
     if tubes:
-        X = np.concatenate([t[0] for t in tubes])
-        XD = np.concatenate([t[1] for t in tubes])
-        x_lo, x_hi = X[:, :, 0].min(0), X[:, :, 1].max(0)
-        xd_lo, xd_hi = XD[:, :, 0].min(0), XD[:, :, 1].max(0)
+        x_lo, x_hi, xd_lo, xd_hi = _hull(np.concatenate([t[0] for t in tubes]), np.concatenate([t[1] for t in tubes]))
+    else:
+        x_lo, x_hi, xd_lo, xd_hi = (np.full((K, n), np.nan) for _ in range(4))
     with np.errstate(invalid="ignore"):
         wx = float(np.nanmax(x_hi - x_lo)) if tubes else 0.0
         wv = float(np.nanmax(xd_hi - xd_lo)) if tubes else 0.0
@@ -345,21 +420,18 @@ def _bisect(xi_lo, xi_hi, full_w):
 
 
 class _Hypothesis:
-    """The passes under "the last pose is in mode ``m``", one round at a time.
+    """The rows (geometry sub-boxes with their tubes) under "the last pose is in mode ``m``".
 
-    Rows are geometry sub-boxes with their tubes; a row is dropped once its
-    tubes become empty or certify another mode at an end of the recording.
+    A row is dropped once its tubes become empty or certify another mode at
+    an end of the recording; the hypothesis is refuted when no row is left.
     """
 
-    def __init__(self, model, q, s, cfg_f, cfg_b, xi_rows, fx, fxd, f_alive, m0, m, backend):
-        self.model, self.q, self.s, self.cfg_f, self.cfg_b = model, q, s, cfg_f, cfg_b
-        self.q_rev = np.ascontiguousarray(q[::-1])
-        self.m0, self.m, self.backend = m0, m, str(Backend(backend))
-        self.full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
-        keep = np.nonzero(f_alive)[0]
-        self.xlo, self.xhi, self.tx, self.txd = xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep]
+    def __init__(self, finals, xlo, xhi, tx, txd, m0, m):
+        self.finals, self.m0, self.m = finals, m0, m
+        self.xlo, self.xhi, self.tx, self.txd = xlo, xhi, tx, txd
         self.passes = 0
         self.refutation = Refutation.NONE
+        self.complete = True  # False once the rounds stopped before this hypothesis used its budget
         self._final_boxes()
 
     @property
@@ -371,69 +443,101 @@ class _Hypothesis:
         self.final = self.final[live]
 
     def _final_boxes(self):
-        K = self.q.shape[0]
-        final = [_final_box(self.model, self.q[K - 1], self.m, self.s, (lo, hi), self.backend)
-                 for lo, hi in zip(self.xlo, self.xhi)]
-        ok = np.array([f is not None for f in final], dtype=bool)
-        self.final = np.stack([f for f in final if f is not None]) if ok.any() else np.empty((0, 2, self.model.n))
+        self.final, ok = self.finals.of(self.xlo, self.xhi, self.m)
         self.xlo, self.xhi, self.tx, self.txd = self.xlo[ok], self.xhi[ok], self.tx[ok], self.txd[ok]
         if not ok.any():
             self.refutation = Refutation.NO_SOLUTION if self.passes == 0 else Refutation.EMPTY_TUBE
 
-    def round(self, max_passes, rel_tol):
-        """Alternate backward and forward passes until the tubes stall or the row set empties."""
-        K = self.q.shape[0]
-        width = _width(self.tx, self.txd)
-        for p in range(1, max_passes + 1):
-            self.passes += 1
-            xi = (self.xlo, self.xhi)
-            if p % 2:  # backward, from the hypothesis' final box
-                end = self.tx[:, K - 1]
-                x0 = (np.maximum(self.final[:, 0], end[:, 0]), np.minimum(self.final[:, 1], end[:, 1]))
-                x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(self.tx, self.txd))
-                x, xd = _reverse(x, xd)
-                md = md[:, ::-1]
-            else:
-                x, xd, md, bad = _run(self.cfg_f, self.q, (self.tx[:, 0, 0], self.tx[:, 0, 1]), xi, (self.tx, self.txd))
-            last, first = md[:, K - 1], md[:, 0]
-            other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
-            live = (bad < 0) & ~other
-            self.tx, self.txd = x, xd
-            if not live.any():
-                self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
-                self._keep(live)
-                return
-            self._keep(live)
-            new = _width(self.tx, self.txd)
-            stalled = p >= 2 and not new < (1.0 - rel_tol) * width
-            width = new
-            if stalled:
-                return
+    def starts(self, backward):
+        """Initial boxes ``(R, n)`` of a pass: the final box within the tube's last box (backward), or the
+        tube's first box (forward)."""
+        if backward:
+            end = self.tx[:, -1]
+            return np.maximum(self.final[:, 0], end[:, 0]), np.minimum(self.final[:, 1], end[:, 1])
+        return self.tx[:, 0, 0], self.tx[:, 0, 1]
 
-    def split(self):
+    def take(self, x, xd, md, bad):
+        """The tubes of a pass over this hypothesis' rows (forward time); drop the rows it refutes."""
+        self.passes += 1
+        last, first = md[:, -1], md[:, 0]
+        other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
+        live = (bad < 0) & ~other
+        self.tx, self.txd = x, xd
+        if not live.any():
+            self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
+        self._keep(live)
+
+    def split(self, full_w):
         """Halve every surviving geometry sub-box; children start from their parent's tubes."""
-        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, self.full_w)
+        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w)
         self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
         self._final_boxes()
 
     def result(self) -> HypothesisResult:
-        status = HypothesisStatus.REFUTED if self.refuted else HypothesisStatus.CONSISTENT
-        return HypothesisResult(self.m, status, self.refutation, self.passes, len(self.xlo))
+        if self.refuted:
+            return HypothesisResult(self.m, HypothesisStatus.REFUTED, self.refutation, self.passes, 0)
+        return HypothesisResult(self.m, HypothesisStatus.CONSISTENT, self.refutation, self.passes, len(self.xlo),
+                                self.complete, *_hull(self.tx, self.txd))
 
 
-def _decide(hyps, max_passes, rel_tol, max_geometries):
-    """Rounds on both hypotheses in step, halving each one's geometries between its rounds while it
-    stays within ``max_geometries``, until one hypothesis is refuted (at once: the other is then left
-    as it stands, consistent) or none can be halved."""
+class _Passes:
+    """The passes of the window: one ``advance`` call per pass over a hypothesis' rows, spread over the
+    threads (each row is its own scenario: the rows batched with it change none of its boxes)."""
+
+    def __init__(self, q, cfg_f, cfg_b):
+        self.q, self.cfg_f, self.cfg_b = q, cfg_f, cfg_b
+        self.q_rev = np.ascontiguousarray(q[::-1])
+
+    def run(self, h, backward):
+        """One pass over the rows of hypothesis ``h``, which takes its tubes."""
+        x0, xi = h.starts(backward), (h.xlo, h.xhi)
+        if backward:
+            x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
+            x, xd = _reverse(x, xd)
+            md = md[:, ::-1]
+        else:
+            x, xd, md, bad = _run(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
+        h.take(x, xd, md, bad)
+
+
+def _round(h, passes, max_passes, rel_tol):
+    """One round of ``h``: backward and forward passes alternate until one shrinks its tubes by less than
+    ``rel_tol`` (after at least two), ``max_passes``, or the hypothesis is refuted."""
+    if h.refuted:  # no row left since its last halving
+        return
+    width = _width(h.tx, h.txd)
+    for p in range(1, max_passes + 1):
+        passes.run(h, backward=bool(p % 2))
+        if h.refuted:
+            return
+        new = _width(h.tx, h.txd)
+        if p >= 2 and not new < (1.0 - rel_tol) * width:
+            return
+        width = new
+
+
+def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w):
+    """Rounds on each hypothesis in turn (the initial mode's first), halving each one's geometries
+    between rounds while it stays within ``max_geometries``, until a hypothesis is refuted or none can be
+    halved.
+
+    The rounds stop at the first refutation: the other hypothesis is then left as it stands, consistent
+    but marked incomplete (``HypothesisResult.complete``), since its skipped rounds might have refuted
+    it too (the recording would then be ``inconsistent``).  Running them would cost a round of the
+    surviving hypothesis on every decided recording, and a refuted hypothesis is false whatever the
+    other one's tubes are (measured: benchmarks/README.md [8]).
+    """
     open_ = list(hyps)
     while open_:
         for h in open_:
-            h.round(max_passes, rel_tol)
-            if h.refuted:  # one refuted hypothesis decides: the other's round could only cost time
+            _round(h, passes, max_passes, rel_tol)
+            if h.refuted:
+                for other in open_:
+                    other.complete = other.refuted
                 return
         open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
         for h in open_:
-            h.split()
+            h.split(full_w)
 
 
 @dataclass(frozen=True)
@@ -476,6 +580,9 @@ class FixedLagWindow:
     window ending at ``k``).  A hypothesis whose geometry sub-boxes all die is
     refuted: the mode at ``k`` is the other one.  The mode at ``k - lag`` is
     the one every surviving sub-box of every surviving hypothesis certifies.
+    Rows (hypothesis, sub-box) run a pair at a time, and those that can no
+    longer change either answer are skipped (:meth:`_window`); the forward
+    kinematics of the newest reading is enumerated once per sub-box.
 
     Parameters
     ----------
@@ -502,55 +609,85 @@ class FixedLagWindow:
         self.xi_rows = (np.ascontiguousarray(lo[0]), np.ascontiguousarray(hi[0]))
         self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None), backend, parallel=False)
         L, n = self.lag + 1, model.n
+        # the last L samples newest first, the order of the backward pass: readings (rad), the tracker's
+        # pose boxes (m) and its velocity boxes of the reversed motion ([-hi, -lo], m/s), its modes
         self._q = np.zeros((L, n))
         self._x = np.zeros((L, 2, n))
-        self._xd = np.zeros((L, 2, n))
+        self._xd_rev = np.zeros((L, 2, n))
         self._mode = np.zeros(L, np.int64)
 
     def update(self, q) -> LagResult:
         """Feed the reading ``q`` ``(n,)``, rad."""
         r = self.tracker.update(q)
-        k, L = r.k, self.lag + 1
-        slot = k % L
-        self._q[slot] = np.asarray(q, dtype=np.float64)
-        self._x[slot] = np.stack(r.x)
-        self._xd[slot] = np.stack(r.xd)
-        self._mode[slot] = r.mode
+        k = r.k
+        for buf in (self._q, self._x, self._xd_rev, self._mode):
+            buf[1:] = buf[:-1]  # one slot older (numpy copies overlapping ranges correctly)
+        self._q[0] = np.asarray(q, dtype=np.float64)
+        self._x[0] = r.x
+        self._xd_rev[0, 0], self._xd_rev[0, 1] = -r.xd[1], -r.xd[0]  # negation is exact
+        self._mode[0] = r.mode
         j = k - self.lag
         if not r.consistent:
             return LagResult(k, 0, j if j >= 0 else -1, 0, False)
         if j < 0:
             return LagResult(k, r.mode, -1, 0, True)
-        lagged_fwd = int(self._mode[j % L])
+        lagged_fwd = int(self._mode[-1])
         if r.mode != 0 and lagged_fwd != 0:
             return LagResult(k, r.mode, j, lagged_fwd, True)
-        order = [(k - i) % L for i in range(L)]  # newest first: the reversed window
-        q_rev = np.ascontiguousarray(self._q[order])
-        P = self.xi_rows[0].shape[0]
-        px = np.ascontiguousarray(np.broadcast_to(self._x[order], (P, L, 2, self.model.n)))
-        pxd = np.ascontiguousarray(np.broadcast_to(-self._xd[order][:, ::-1], (P, L, 2, self.model.n)))
-        alive_modes, lagged_modes = [], []
-        for m in (1, -1):
-            rows, starts = [], []
-            for p in range(P):
-                box = _final_box(self.model, self._q[slot], m, self.settings,
-                                 (self.xi_rows[0][p], self.xi_rows[1][p]), self.backend,
-                                 search=(self._x[slot, 0], self._x[slot, 1]), tol=_LAG_FK_TOL)
-                if box is not None:
-                    rows.append(p)
-                    starts.append((np.maximum(box[0], px[p, 0, 0]), np.minimum(box[1], px[p, 0, 1])))
-            if not rows:
-                continue
-            rows = np.array(rows)
-            x0 = (np.stack([a for a, _ in starts]), np.stack([b for _, b in starts]))
-            _, _, md, bad = _run(self.cfg_b, q_rev, x0, (self.xi_rows[0][rows], self.xi_rows[1][rows]),
-                                 (px[rows], pxd[rows]))
-            live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != m))
-            if live.any():
-                alive_modes.append(m)
-                lagged_modes.extend(md[live, -1].tolist())
+        alive_modes, lagged_modes = self._window(need_now=r.mode == 0, need_lagged=lagged_fwd == 0)
         mode_now = r.mode if r.mode != 0 or len(alive_modes) != 1 else alive_modes[0]
         lagged = lagged_fwd
         if lagged == 0 and lagged_modes and all(v == lagged_modes[0] for v in lagged_modes):
             lagged = int(lagged_modes[0])
         return LagResult(k, int(mode_now), j, int(lagged), True)
+
+    def _window(self, need_now: bool, need_lagged: bool):
+        """Backward passes over the window, a few (hypothesis, geometry sub-box) rows per ``advance`` call,
+        only while a row can still change the answer: the final modes not refuted (``need_now``: the
+        tracker's mode at ``k`` is open) and the modes the surviving rows certify at ``k - lag``
+        (``need_lagged``).
+
+        A hypothesis is alive once one of its rows survives, and the lagged mode stays open once a surviving
+        row certifies none or two disagree; rows that cannot change either are never run.  The answer is
+        therefore the one all the rows give.  Returns the alive modes and the surviving rows' lagged modes.
+        """
+        search = (self._x[0, 0], self._x[0, 1])
+        P = self.xi_rows[0].shape[0]
+        sols = {}
+        alive, lagged_modes = [], []
+
+        def useful(m):
+            open_lag = need_lagged and not (0 in lagged_modes or len(set(lagged_modes)) > 1)
+            return (need_now and m not in alive) or open_lag
+
+        # rows interleaved by hypothesis, so that the first call can show both alive
+        todo = [(m, p) for p in range(P) for m in (1, -1)]
+        while todo:
+            batch, rest = [], []
+            for m, p in todo:
+                if not useful(m):
+                    continue
+                if len(batch) == _LAG_BATCH:
+                    rest.append((m, p))
+                    continue
+                if p not in sols:  # one enumeration of the newest reading's poses serves both hypotheses
+                    sols[p] = _solutions(self.model, self._q[0], self.settings,
+                                         (self.xi_rows[0][p], self.xi_rows[1][p]), self.backend, search, _LAG_FK_TOL)
+                box = _hull_of_mode(sols[p], m, search)
+                if box is not None:
+                    batch.append((m, p, np.maximum(box[0], search[0]), np.minimum(box[1], search[1])))
+            todo = rest
+            if not batch:
+                continue
+            hyp = np.array([b[0] for b in batch])
+            rows = np.array([b[1] for b in batch])
+            shape = (len(batch),) + self._x.shape
+            prior = (np.broadcast_to(self._x, shape), np.broadcast_to(self._xd_rev, shape))
+            _, _, md, bad = _run(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
+                                 (self.xi_rows[0][rows], self.xi_rows[1][rows]), prior)
+            live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != hyp))
+            for m in (1, -1):
+                if m not in alive and np.any(live & (hyp == m)):
+                    alive.append(m)
+            lagged_modes.extend(md[live, -1].tolist())
+        return alive, lagged_modes
