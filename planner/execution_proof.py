@@ -1,0 +1,541 @@
+"""The ``cartesian`` execution class proved by interval analysis over the whole calibration box.
+
+:func:`planner.execution.cartesian_class` *measures* the class's ``C``,
+``e`` and ``d`` on sampled geometries.  :func:`prove_cartesian_class`
+bounds the same quantities for every geometry of ``[xi]`` at once, so that
+every execution following the planned path is in the class by construction.
+
+The argument, step by step (docs/soundness.md, "The execution class"):
+
+1. *Effective joints.*  With ``Robot.joint_offsets`` (``f`` reads joint
+   ``i`` only through ``u_i = q_i + xi_j``) the loop closure is rewritten in
+   ``u`` by substituting ``q_i = u_i - xi_j`` in the robot's one CasADi
+   definition; CasADi must then report that it no longer depends on the
+   offsets (``depends_on``), else nothing is proved.  The effective
+   deviation ``D_k(xi) = u_k(xi) - u_plan,k`` therefore depends only on the
+   other parameters: the offsets drop out of ``C``, ``e`` and ``d``.  A joint
+   without an offset parameter keeps ``u_i = q_i`` (in its own unit, rad or
+   m) and its whole deviation is drift (``c_i = 0``).
+2. *The branch.*  At each planned pose ``x_k`` the box
+   ``U_k = u_plan,k +- r_k`` is inflated until the Krawczyk image over the
+   whole box ``[xi]`` lies strictly inside it: then every geometry has
+   exactly one root in ``U_k`` (the plan's branch: the planned joints are
+   the root at the planning geometry), ``J_u`` is regular there, and the
+   root ``u_k(xi)`` is continuously differentiable.  No inflation proved:
+   ``proved: false`` with the sample.
+3. *Mean-value forms.*  On a sub-box ``B`` of the free parameters with
+   centre ``c``: ``u_k(c)`` is enclosed by Krawczyk contraction at the point
+   ``c`` and the slope ``du_k/dxi`` over ``U_k x B`` by the interval
+   solution of ``J_u G = -J_xi``.  Then for every ``xi`` in ``B``::
+
+       D_k - D_r in (u_k(c) - u_r(c)) + (G_k - G_r)(B - c)
+       D_k - D_{k-1} - (u_plan,k - u_plan,k-1) in (u_k(c) - u_{k-1}(c)) - (...) + (G_k - G_{k-1})(B - c)
+
+   for a reference sample ``r`` (the middle one).  For an offset joint, with
+   ``m`` the midpoint of the hull of the first enclosure over ``k``, the
+   constant ``c = D_r(xi) + m`` lies in ``D_r(B) + m`` and ``|D_k - c|`` is
+   at most the larger distance from ``m`` to that hull: this is the box's
+   ``C`` and ``e``; ``d`` is the largest magnitude of the second enclosure.
+4. *Branch and bound.*  Boxes are bisected (along the parameter of the
+   largest slope times width) until each box's bounds are within ``tol``
+   (relative) of the largest values met at box centres, the exact
+   termination rule, or until ``max_boxes`` boxes were evaluated (the bounds
+   are proved either way; only their tightness differs).  The class takes
+   the hull of the leaves' ``C`` and the largest ``e`` and ``d``: a proved
+   enclosure over the union of the leaves, which is ``[xi]``.
+
+Every operation is outward-rounded (:mod:`verifier.interval`); an empty
+enclosure contradicts step 2 and is reported as ``proved: false``
+(inconsistent), never as a bound.  Nothing here names a robot.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from dataclasses import dataclass, field, replace
+
+import casadi as ca
+import numpy as np
+
+from crosscert.verifier import interval as I
+from crosscert.verifier.implicit import (ImplicitTapes, contract_roots, krawczyk, root_gradient, slope_change,
+                                         strictly_inside)
+from crosscert.verifier.linalg import imat_ivec
+
+from .execution import ExecutionClass, ExecutionKind
+
+__all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "proved_class", "offset_split"]
+
+#: How the bounds are proved (reported in certificate.json).
+METHOD = ("interval branch and bound over [xi]: Krawczyk-proved IK enclosures, mean-value forms with "
+          "interval slopes du/dxi, outward rounding")
+
+#: Inflation attempts of step 2 (each quadruples the radius of the boxes not yet proved).
+_INFLATIONS = 8
+
+
+@dataclass(frozen=True, eq=False)
+class ClassProof:
+    """Outcome of :func:`prove_cartesian_class`.
+
+    Attributes
+    ----------
+    proved : bool
+    reason : str
+        Why not proved (empty when proved).
+    c_lo, c_hi : ndarray, shape (n,)
+        Proved enclosure of the constant part per joint (rad, or m for a
+        prismatic joint; exactly 0 for a joint without an offset parameter).
+    drift : float
+        ``e``: proved bound on ``|D_k - c|``.
+    step : float
+        ``d``: proved bound on the change of ``D`` per sample.
+    boxes : int
+        Sub-boxes of ``[xi]`` evaluated by the branch and bound.
+    time_s : float
+        Wall time of the proof, s.
+    found : dict
+        Largest values met at evaluated geometries (lower bounds of the true
+        maxima): ``drift``, ``step``, ``c_lo``, ``c_hi`` and the geometries
+        (full ``xi`` vectors) where the drift and step maxima were met.
+    converged : bool
+        Whether the termination rule was met (``False``: the box budget ran
+        out first; the bounds are proved but may be looser than ``tol``).
+    """
+
+    proved: bool
+    reason: str = ""
+    c_lo: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    c_hi: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    drift: float = float("nan")
+    step: float = float("nan")
+    boxes: int = 0
+    time_s: float = 0.0
+    found: dict = field(default_factory=dict)
+    converged: bool = False
+    tol: float = 0.0
+
+    def summary(self) -> dict:
+        """The ``execution.proof`` object of certificate.json."""
+        if not self.proved:
+            return {"proved": False, "reason": self.reason, "time_s": self.time_s}
+        return {"proved": True, "method": METHOD, "boxes_explored": self.boxes, "time_s": self.time_s,
+                "converged": self.converged, "tolerance": self.tol,
+                "largest_drift_found_rad": self.found.get("drift"),
+                "largest_step_found_rad": self.found.get("step")}
+
+
+def offset_split(lo_min, hi_max, r_lo, r_hi):
+    """Centre ``m``, half-width bound ``e`` and constant range of an offset joint, outward rounded.
+
+    ``D_k - D_r`` lies in ``[lo_min, hi_max]`` for every ``k`` and ``D_r`` in
+    ``[r_lo, r_hi]``; with ``c = D_r + m``: ``|D_k - c| <= e`` and ``c`` in
+    ``[c_lo, c_hi]``.  Returns ``(m, e, c_lo, c_hi)``.
+    """
+    m = I.midpoint(lo_min, hi_max)
+    e = np.maximum(I.sub(hi_max, hi_max, m, m)[1], I.sub(m, m, lo_min, lo_min)[1])
+    c_lo, c_hi = I.add(r_lo, r_hi, m, m)
+    return m, e, c_lo, c_hi
+
+
+@functools.lru_cache(maxsize=8)
+def _tapes(robot):
+    """Tapes of the loop closure in the effective joints and the free parameters, or why there are none."""
+    x = ca.SX.sym("x", robot.n)
+    u = ca.SX.sym("u", robot.n)
+    xi = ca.SX.sym("xi", robot.m)
+    offs = _offsets(robot)
+    q = ca.vertcat(*[u[i] - xi[offs[i]] if i in offs else u[i] for i in range(robot.n)])
+    g = ca.vec(robot.loop_closure(x, q, xi))
+    still = [robot.param_names[j] for j in offs.values() if ca.depends_on(g, xi[j])]
+    if still:
+        return None, (f"the loop closure still depends on the offsets {still} once written in q + offset "
+                      "(joint_offsets does not hold symbolically)")
+    # the parameters the proof branches on: those g reads whose interval is not a point
+    lo, hi = robot.xi_lo_array, robot.xi_hi_array
+    free = [j for j in range(robot.m) if hi[j] > lo[j] and ca.depends_on(g, xi[j])]
+    numeric = ca.Function("g_ju", [x, u, xi], [g, ca.jacobian(g, u)])
+    return (ImplicitTapes(x, u, xi, g, free), free, numeric), ""
+
+
+def _offsets(robot) -> dict[int, int]:
+    return {i: j for i, j in enumerate(robot.joint_offsets or ()) if j is not None}
+
+
+def _rows(a, reps):
+    return np.repeat(a, reps, axis=0)
+
+
+class _Path:
+    """One planned path: its proved root boxes (step 2), the slope changes between samples, and the
+    evaluation of sub-boxes of the free parameters (step 3)."""
+
+    def __init__(self, tapes, numeric, robot, free, x, u_plan, U0, slope_steps, remainder):
+        self.tapes, self.numeric, self.free, self.remainder = tapes, numeric, free, remainder
+        self.x, self.u_plan, self.U0 = x, u_plan, U0
+        self.lo, self.hi = robot.xi_lo_array, robot.xi_hi_array
+        self.K, self.n = u_plan.shape
+        self.r = self.K // 2  # reference sample of the constant part
+        self.off = np.array([i in _offsets(robot) for i in range(self.n)])
+        self.slope_steps = slope_steps  # (K-1, n, p) boxes: G_k - G_{k-1} over the whole [xi], or None
+
+    def full(self, v):
+        """Full xi vectors (N, m) with the free parameters set to ``v`` (N, p), the others at their midpoint."""
+        out = np.repeat(I.midpoint(self.lo, self.hi)[None], len(v), axis=0)
+        out[:, self.free] = v
+        return out
+
+    def boxes(self, blo, bhi):
+        """Full xi boxes (nb K, m) of the sub-boxes ``[blo, bhi]`` (nb, p), one row per sample."""
+        Plo, Phi = self.full(blo), self.full(bhi)
+        keep = [j for j in range(len(self.lo)) if j not in self.free]
+        Plo[:, keep], Phi[:, keep] = self.lo[keep], self.hi[keep]
+        return _rows(Plo, self.K), _rows(Phi, self.K)
+
+    def newton(self, points, U, steps: int = 3):
+        """Float roots (N, K, n) at the geometries ``points`` (N, m) by Newton from the midpoints of ``U`` (N K, n).
+
+        Floats, not enclosures: for lower bounds and as the centre of a proved box.
+        """
+        N = len(points)
+        X = np.tile(self.x, (N, 1))
+        P = _rows(points, self.K)
+        u = I.midpoint(*U)
+        for _ in range(steps):
+            g, J = (np.asarray(v) for v in self.numeric(X.T, u.T, P.T))
+            J = J.T.reshape(-1, self.n, self.n).transpose(0, 2, 1) if self.n > 1 else J.reshape(-1, 1, 1)
+            try:
+                u = u - np.linalg.solve(J, g.T[:, :, None])[:, :, 0]
+            except np.linalg.LinAlgError:
+                break
+        return u.reshape(N, self.K, self.n)
+
+    def roots_at(self, points, U):
+        """Root enclosures (N, K, n) at the geometries ``points`` (N, m), within ``U`` (N K, n) valid there.
+
+        A tiny box around Newton's float root inside ``U`` whose Krawczyk image
+        lies strictly inside it holds the root, the only one in ``U``; other
+        rows are contracted from ``U``.
+        """
+        N, n = len(points), self.n
+        X = np.tile(self.x, (N, 1))
+        P = _rows(points, self.K)
+        uf = self.newton(points, U).reshape(-1, n)
+        r = 1e-13 + 16.0 * np.spacing(np.abs(uf))
+        T = (I.sub(uf, uf, r, r)[0], I.add(uf, uf, r, r)[1])
+        Kt = krawczyk(self.tapes, (X, X), T, (P, P))
+        ok = strictly_inside(Kt, T) & np.all((T[0] >= U[0]) & (T[1] <= U[1]), axis=1)
+        Ul, Uh = I.intersect(T[0], T[1], Kt[0], Kt[1])
+        if not ok.all():
+            rest = contract_roots(self.tapes, (X[~ok], X[~ok]), (U[0][~ok], U[1][~ok]), (P[~ok], P[~ok]), sweeps=3)
+            Ul[~ok], Uh[~ok] = rest
+        return Ul.reshape(N, self.K, n), Uh.reshape(N, self.K, n)
+
+    def values(self, u):
+        """``e``, ``d`` and the constant ``c`` (floats) of the geometries whose float roots are ``u`` (N, K, n).
+
+        Lower bounds of the maxima for the termination rule only (never a bound of the class).
+        """
+        D = u - self.u_plan
+        dd = D - D[:, self.r:self.r + 1]
+        e = np.where(self.off, 0.5 * (dd.max(axis=1) - dd.min(axis=1)), np.abs(D).max(axis=1)).max(axis=1)
+        c = np.where(self.off, D[:, self.r] + 0.5 * (dd.max(axis=1) + dd.min(axis=1)), 0.0)
+        d = np.abs(np.diff(D, axis=1)).max(axis=(1, 2)) if self.K > 1 else np.zeros(len(D))
+        return e, d, c
+
+    def evaluate(self, blo, bhi, Ubox):
+        """Proved bounds of the sub-boxes ``[blo, bhi]`` (nb, p), given root boxes ``Ubox`` (nb, K, n) valid on them."""
+        nb, K, n, p = len(blo), self.K, self.n, len(self.free)
+        N, r = nb * K, self.r
+        P = self.boxes(blo, bhi)
+        X = np.tile(self.x, (nb, 1))
+        U = contract_roots(self.tapes, (X, X), (Ubox[0].reshape(N, n), Ubox[1].reshape(N, n)), P, sweeps=1)
+        ctr = I.midpoint(blo, bhi)
+        Ucl, Uch = self.roots_at(self.full(ctr), U)
+        G = root_gradient(self.tapes, (X, X), U, P, self.free)
+        Gl, Gh = G[0].reshape(nb, K, n, p), G[1].reshape(nb, K, n, p)
+        R = I.sub(blo, bhi, ctr, ctr)  # B - c, (nb, p)
+        Rl, Rh = R[0][:, None, :], R[1][:, None, :]
+        use = p > 0 and self.remainder
+
+        def mv(Al, Ah):
+            """The mean-value remainder ``[A] (B - c)``."""
+            if not use:
+                z = np.zeros(Al.shape[:-1])
+                return z, z.copy()
+            return imat_ivec(Al, Ah, Rl, Rh)
+
+        MV = mv(Gl, Gh)  # u_k(xi) - u_k(c)
+        Ul, Uh = I.intersect(U[0].reshape(nb, K, n), U[1].reshape(nb, K, n), *I.add(Ucl, Uch, *MV))
+        bad = (np.any(Ucl > Uch, axis=(1, 2)) | np.any(Ul > Uh, axis=(1, 2))
+               | ~np.all(np.isfinite(MV[0]) & np.isfinite(MV[1]), axis=(1, 2)))
+        # D_k(c) = u_k(c) - u_plan,k
+        Pl, Ph = I.sub(Ucl, Uch, self.u_plan, self.u_plan)
+        # offset joints: D_k - D_r, and D_r; the constant c = D_r + m
+        dG = I.sub(Gl, Gh, Gl[:, r:r + 1], Gh[:, r:r + 1])
+        dl, dh = I.add(*I.sub(Pl, Ph, Pl[:, r:r + 1], Ph[:, r:r + 1]), *mv(*dG))
+        _m, e_off, c_lo, c_hi = offset_split(dl.min(axis=1), dh.max(axis=1), *I.add(Pl[:, r], Ph[:, r],
+                                                                                      MV[0][:, r], MV[1][:, r]))
+        # joints without an offset: the whole deviation D_k is drift (c = 0)
+        Dl, Dh = I.add(Pl, Ph, *MV)
+        e = np.where(self.off, e_off, np.maximum(np.abs(Dl), np.abs(Dh)).max(axis=1)).max(axis=1)
+        c_lo, c_hi = np.where(self.off, c_lo, 0.0), np.where(self.off, c_hi, 0.0)
+        # steps D_k - D_{k-1}: the slopes' difference on the sub-box, intersected with the
+        # slope change along the segment proved on the whole box (much tighter: no cancellation)
+        if K > 1:
+            s = I.sub(*I.sub(Pl[:, 1:], Ph[:, 1:], Pl[:, :-1], Ph[:, :-1]), 0.0, 0.0)
+            s1 = I.add(*s, *mv(*I.sub(Gl[:, 1:], Gh[:, 1:], Gl[:, :-1], Gh[:, :-1])))
+            if self.slope_steps is not None and use:
+                s2 = I.add(*s, *mv(self.slope_steps[0][None], self.slope_steps[1][None]))
+                s1 = I.intersect(*s1, *s2)
+            bad |= np.any(s1[0] > s1[1], axis=(1, 2))
+            d = np.maximum(np.abs(s1[0]), np.abs(s1[1])).max(axis=(1, 2))
+        else:
+            d = np.zeros(nb)
+        mag = np.maximum(np.abs(Gl), np.abs(Gh)).max(axis=(1, 2))
+        return dict(e=e, d=d, c_lo=c_lo, c_hi=c_hi, U=(Ul, Uh), bad=bad, ctr=ctr, Uc=(Ucl, Uch),
+                    score=mag * (bhi - blo), G=(Gl, Gh), dd=(dl, dh), D=(Dl, Dh))
+
+    def candidates(self, blo, bhi, ev):
+        """Corners (N, p) of the worst sub-boxes where the linearised drift and constant are extreme.
+
+        Only lower bounds come from them (the termination rule): which corner is tried never affects soundness.
+        """
+        Gm = I.midpoint(*ev["G"])  # (nb, K, n, p)
+        (dl, dh), (Dl, Dh), r = ev["dd"], ev["D"], self.r
+        worst = {int(np.argmax(ev["e"])), int(np.argmin(ev["c_lo"].min(axis=1))), int(np.argmax(ev["c_hi"].max(axis=1)))}
+        pts = []
+        for b in sorted(worst):
+            for i in range(self.n):
+                if self.off[i]:
+                    k, l = int(np.argmax(dh[b, :, i])), int(np.argmin(dl[b, :, i]))
+                    dirs = [Gm[b, k, i] - Gm[b, l, i], Gm[b, r, i], -Gm[b, r, i]]
+                else:
+                    k = int(np.argmax(np.maximum(np.abs(Dl[b, :, i]), np.abs(Dh[b, :, i]))))
+                    dirs = [np.sign(Dl[b, k, i] + Dh[b, k, i]) * Gm[b, k, i]]
+                pts += [np.where(v > 0, bhi[b], blo[b]) for v in dirs]
+        return np.array(pts), sorted(worst)
+
+
+def _prove_boxes(tapes, X, center, r, P):
+    """Boxes ``center +- r`` (B, n), radii grown 4-fold where needed, proved (Krawczyk image strictly
+    inside) to hold exactly one root for every x in ``X`` and p in ``P``.
+
+    Returns the contracted boxes and the mask of the rows proved (the others are not usable).
+    """
+    r = np.where(np.isfinite(r), r, 1e-3) + 64.0 * np.spacing(np.abs(center)) + 1e-15
+    ok = np.zeros(len(center), bool)
+    for _ in range(_INFLATIONS):
+        U = (I.sub(center, center, r, r)[0], I.add(center, center, r, r)[1])
+        K = krawczyk(tapes, X, U, P)
+        ok = strictly_inside(K, U)
+        if ok.all():
+            break
+        r = np.where(ok[:, None], r, 4.0 * r)
+    U = I.intersect(U[0], U[1], K[0], K[1])
+    return contract_roots(tapes, X, U, P, sweeps=2), ok
+
+
+def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
+    """Steps 2 and the slope changes along the path: a :class:`_Path`, or the reason (str) why not proved."""
+    K, n = u_plan.shape
+    X = (x, x)
+    lo, hi = robot.xi_lo_array, robot.xi_hi_array
+    P = (_rows(lo[None], K), _rows(hi[None], K))
+    # first radius: twice the linear estimate of the root's motion over [xi] (a guess; the proof is Krawczyk's)
+    G = root_gradient(tapes, X, (u_plan, u_plan), P, free)
+    mag = np.maximum(np.abs(G[0]), np.abs(G[1]))
+    r0 = 2.0 * mag @ (0.5 * (hi - lo)[free]) if free else np.zeros((K, n))
+    U0, ok = _prove_boxes(tapes, X, u_plan, r0, P)
+    if not ok.all():
+        k = int(np.nonzero(~ok)[0][0])
+        return (f"the inverse kinematics at path point {k} could not be proved unique in an inflated box "
+                "for every geometry of [xi] (Krawczyk)")
+    if np.any(U0[0] > U0[1]):
+        return "inconsistent: an inverse kinematics enclosure proved to hold a root became empty"
+    steps = None
+    if K > 1 and free:
+        Xs = (np.minimum(x[:-1], x[1:]), np.maximum(x[:-1], x[1:]))
+        dX = I.sub(x[1:], x[1:], x[:-1], x[:-1])
+        Hl, Hh = I.hull(U0[0][:-1], U0[1][:-1], U0[0][1:], U0[1][1:])
+        Ps = (P[0][:-1], P[1][:-1])
+        Us, oks = _prove_boxes(tapes, Xs, I.midpoint(Hl, Hh), 0.625 * (Hh - Hl), Ps)
+        oks &= ~np.any(Us[0] > Us[1], axis=1)
+        Gs = root_gradient(tapes, Xs, Us, Ps, free)
+        Tl, Th = slope_change(tapes, Xs, dX, Us, Ps, Gs)
+        # a segment whose root box was not proved gives no information
+        bad = ~oks[:, None, None] | np.isnan(Tl) | np.isnan(Th)
+        steps = (np.where(bad, -np.inf, Tl), np.where(bad, np.inf, Th))
+    return _Path(tapes, numeric, robot, free, x, u_plan, U0, steps, remainder)
+
+
+def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, max_boxes: int = 256,
+                          remainder: bool = True) -> ClassProof:
+    """Prove ``C``, ``e`` and ``d`` of the ``cartesian`` class over the whole box ``[xi]`` (module docstring).
+
+    Parameters
+    ----------
+    robot : Robot
+    x_path : array (K, n) or list of them
+        Planned poses at consecutive samples, SI.
+    q_plan : array (K, n) or list of them
+        Planned joints there (planning geometry ``xi_plan``), rad (m for a prismatic joint).
+    xi_plan : array (m,)
+        Planning geometry, SI.
+    tol : float
+        Relative tolerance of the termination rule: a sub-box is settled when
+        its bounds exceed the largest values met at evaluated geometries by
+        at most ``tol`` times them (``C``: times the width of the range met).
+    max_boxes : int
+        Budget of evaluated sub-boxes per path (the bounds are proved when it
+        runs out too, only possibly looser than ``tol``).
+    remainder : bool
+        Keep the remainder term of the mean-value forms.  ``False`` only for
+        the tests' removal check: the bounds are then *not* proved.
+
+    Returns
+    -------
+    ClassProof
+        ``proved`` false (with the reason) when the model is not supported or
+        an inverse kinematics enclosure could not be proved.
+    """
+    t0 = time.perf_counter()
+    xs = list(x_path) if isinstance(x_path, (list, tuple)) else [x_path]
+    qs = list(q_plan) if isinstance(q_plan, (list, tuple)) else [q_plan]
+    built, why = _tapes(robot)
+    if built is None:
+        return ClassProof(False, why, time_s=time.perf_counter() - t0)
+    tapes, free, numeric = built
+    offs = _offsets(robot)
+    xi_plan = np.asarray(xi_plan, float)
+    n = robot.n
+    c_lo, c_hi = np.zeros(n), np.zeros(n)
+    e = d = 0.0
+    found = {"drift": 0.0, "step": 0.0, "c_lo": np.zeros(n), "c_hi": np.zeros(n), "drift_xi": None, "step_xi": None}
+    boxes, converged = 0, True
+    with I.quiet_fp():
+        for x, q in zip(xs, qs):
+            x, q = np.asarray(x, float), np.asarray(q, float)
+            u_plan = q + np.array([xi_plan[offs[i]] if i in offs else 0.0 for i in range(n)])
+            path = _setup_path(tapes, numeric, robot, free, x, u_plan, remainder)
+            res = path if isinstance(path, str) else _branch_and_bound(path, tol, max_boxes)
+            if isinstance(res, str):
+                return ClassProof(False, res, time_s=time.perf_counter() - t0)
+            boxes += res["boxes"]
+            converged &= res["converged"]
+            c_lo, c_hi = np.minimum(c_lo, res["c_lo"]), np.maximum(c_hi, res["c_hi"])
+            e, d = max(e, res["e"]), max(d, res["d"])
+            f = res["found"]
+            if f["drift"] >= found["drift"]:
+                found.update(drift=f["drift"], drift_xi=f["drift_xi"])
+            if f["step"] >= found["step"]:
+                found.update(step=f["step"], step_xi=f["step_xi"])
+            found["c_lo"] = np.minimum(found["c_lo"], f["c_lo"])
+            found["c_hi"] = np.maximum(found["c_hi"], f["c_hi"])
+    return ClassProof(True, "", c_lo, c_hi, float(e), float(d), boxes, time.perf_counter() - t0, found, converged,
+                      float(tol))
+
+
+def _branch_and_bound(path: _Path, tol: float, max_boxes: int):
+    """Step 4 on one path: a dict of proved bounds, or the reason (str) why nothing is proved."""
+    p, n = len(path.free), path.n
+    blo, bhi = path.lo[path.free][None].copy(), path.hi[path.free][None].copy()
+    Uparent = (path.U0[0][None], path.U0[1][None])
+    L = None  # the leaves: boxes and proved bounds
+    best = {"drift": 0.0, "step": 0.0, "c_lo": np.full(n, np.inf), "c_hi": np.full(n, -np.inf),
+            "drift_xi": None, "step_xi": None}
+    boxes, atol = 0, 1e-15
+
+    def met(points, U):
+        """Update the largest values met with the geometries ``points`` (N, p)."""
+        full = path.full(points)
+        e, d, c = path.values(path.newton(full, U))
+        i, j = int(np.argmax(e)), int(np.argmax(d))
+        if e[i] >= best["drift"]:
+            best.update(drift=float(e[i]), drift_xi=full[i])
+        if d[j] >= best["step"]:
+            best.update(step=float(d[j]), step_xi=full[j])
+        best["c_lo"] = np.minimum(best["c_lo"], c.min(axis=0))
+        best["c_hi"] = np.maximum(best["c_hi"], c.max(axis=0))
+
+    while True:
+        ev = path.evaluate(blo, bhi, Uparent)
+        boxes += len(blo)
+        if ev["bad"].any():
+            return ("inconsistent: an enclosure of the inverse kinematics became empty or unbounded on a sub-box "
+                    "of [xi], which contradicts its proved existence")
+        met(ev["ctr"], (ev["U"][0].reshape(-1, n), ev["U"][1].reshape(-1, n)))
+        if p:
+            pts, owners = path.candidates(blo, bhi, ev)
+            reps = len(pts) // len(owners)
+            own = np.repeat(owners, reps)
+            met(pts, (ev["U"][0][own].reshape(-1, n), ev["U"][1][own].reshape(-1, n)))
+        new = dict(lo=blo, hi=bhi, e=ev["e"], d=ev["d"], c_lo=ev["c_lo"], c_hi=ev["c_hi"], U=ev["U"],
+                   score=ev["score"])
+        L = new if L is None else {k: _cat(L[k], new[k]) for k in L}
+        # the exact termination rule: a leaf is settled when its bounds are within tol of what was met
+        wc = best["c_hi"] - best["c_lo"]
+        settled = ((L["e"] <= (1.0 + tol) * best["drift"] + atol) & (L["d"] <= (1.0 + tol) * best["step"] + atol)
+                   & np.all(L["c_lo"] >= best["c_lo"] - tol * wc - atol, axis=1)
+                   & np.all(L["c_hi"] <= best["c_hi"] + tol * wc + atol, axis=1))
+        open_ = np.nonzero(~settled)[0]
+        if open_.size == 0 or p == 0 or boxes + 2 > max_boxes:
+            break
+        # split the worst leaves first, as many as the budget allows
+        excess = np.maximum(L["e"] / max(best["drift"], atol), L["d"] / max(best["step"], atol))[open_]
+        take = open_[np.argsort(-excess, kind="stable")][: max(1, (max_boxes - boxes) // 2)]
+        keep = np.setdiff1d(np.arange(len(L["e"])), take)
+        sl, sh = L["lo"][take], L["hi"][take]
+        axis = np.argmax(L["score"][take], axis=1)
+        rows = np.arange(len(take))
+        mid = I.midpoint(sl[rows, axis], sh[rows, axis])
+        left_hi, right_lo = sh.copy(), sl.copy()
+        left_hi[rows, axis] = mid
+        right_lo[rows, axis] = mid
+        blo, bhi = np.concatenate([sl, right_lo]), np.concatenate([left_hi, sh])
+        Uparent = (np.concatenate([L["U"][0][take]] * 2), np.concatenate([L["U"][1][take]] * 2))
+        L = {k: (v[0][keep], v[1][keep]) if k == "U" else v[keep] for k, v in L.items()}
+    return {"e": float(L["e"].max()), "d": float(L["d"].max()), "c_lo": L["c_lo"].min(axis=0),
+            "c_hi": L["c_hi"].max(axis=0), "boxes": boxes, "converged": bool(open_.size == 0), "found": best}
+
+
+def _cat(a, b):
+    if isinstance(a, tuple):
+        return (np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]]))
+    return np.concatenate([a, b])
+
+
+def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error: float = 0.0) -> ExecutionClass:
+    """The ``cartesian`` :class:`ExecutionClass` of a successful proof.
+
+    ``C`` is ``delta_plan`` plus the proved constant range, outward rounded,
+    and hulled with the robot's own offset intervals (as the measured class:
+    the certifying run never assumes a narrower offset box than the run-time
+    tracker has to); ``e`` and ``d`` as proved; nothing is widened by a
+    safety factor.
+    """
+    if not proof.proved:
+        raise ValueError("proved_class needs a successful proof")
+    xi_plan = np.asarray(xi_plan, float)
+    lo, hi = robot.xi_lo_array.copy(), robot.xi_hi_array.copy()
+    for i, j in _offsets(robot).items():
+        cl, ch = I.add(xi_plan[j], xi_plan[j], proof.c_lo[i], proof.c_hi[i])
+        lo[j], hi[j] = min(float(cl), lo[j]), max(float(ch), hi[j])
+    fast = float(eps_q + tracking_error)
+    reading = float(I.add(fast, fast, proof.drift, proof.drift)[1])
+    derivation = {
+        "constant_range_rad": [[float(a), float(b)] for a, b in zip(proof.c_lo, proof.c_hi)],
+        "largest_drift_rad": proof.drift,
+        "largest_step_rad": proof.step,
+        "largest_drift_found_rad": proof.found.get("drift"),
+        "largest_step_found_rad": proof.found.get("step"),
+        "offset_box": "hull of the proved constants and the robot's offset intervals",
+    }
+    return ExecutionClass(ExecutionKind.CARTESIAN, reading, proof.drift, lo, hi, derivation, fast, proof.step,
+                          proved=True, proof=proof.summary())
+
+
+def with_proof_failure(cls: ExecutionClass, proof: ClassProof) -> ExecutionClass:
+    """A measured class marked ``proved: false`` with the proof's reason."""
+    return replace(cls, proved=False, proof=proof.summary())
