@@ -65,7 +65,8 @@ from crosscert.verifier.linalg import imat_ivec
 
 from .execution import ExecutionClass, ExecutionKind
 
-__all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "proved_class", "offset_split"]
+__all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "prove_cartesian_class_cached", "proved_class",
+           "with_proof_failure", "describe", "offset_split"]
 
 #: How the bounds are proved (reported in certificate.json).
 METHOD = ("interval branch and bound over [xi]: Krawczyk-proved IK enclosures, mean-value forms with "
@@ -504,6 +505,41 @@ def _cat(a, b):
     if isinstance(a, tuple):
         return (np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]]))
     return np.concatenate([a, b])
+
+
+#: Proofs of recent plans: a plan's class depends only on the plan and the robot (the speed
+#: search at the robot's own a_max asks again for plans already proved).
+_CACHE: dict = {}
+_CACHE_SIZE = 64
+
+
+def prove_cartesian_class_cached(robot, x_path, q_plan, xi_plan) -> ClassProof:
+    """:func:`prove_cartesian_class` with its defaults, remembered per robot and plan (exact bytes)."""
+    xs = list(x_path) if isinstance(x_path, (list, tuple)) else [x_path]
+    qs = list(q_plan) if isinstance(q_plan, (list, tuple)) else [q_plan]
+    key = (id(robot), robot.name, tuple(np.asarray(a, float).tobytes() for a in (*xs, *qs, xi_plan)))
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0] is robot:
+        return hit[1]
+    proof = prove_cartesian_class(robot, xs, qs, xi_plan)
+    if len(_CACHE) >= _CACHE_SIZE:
+        _CACHE.pop(next(iter(_CACHE)))
+    _CACHE[key] = (robot, proof)
+    return proof
+
+
+def describe(cls: ExecutionClass, joint_unit: str = "joint units") -> str:
+    """One line about how the class's bounds were obtained (``crosscert certify`` prints it)."""
+    if cls.kind is not ExecutionKind.CARTESIAN:
+        return f"execution class: {cls.kind.value} (stated, nothing derived)"
+    e, d = cls.drift, cls.drift_per_sample
+    if cls.proved:
+        pr = cls.proof
+        return (f"execution class: cartesian, C, e and d proved for every geometry of [xi] (interval branch and "
+                f"bound, {pr.get('boxes_explored')} boxes, {pr.get('time_s', 0.0):.2f} s): e = {e:.4g}, d = {d:.4g} "
+                f"per sample ({joint_unit})")
+    return (f"execution class: cartesian, C, e and d measured on sampled geometries, NOT proved "
+            f"({cls.proof.get('reason', 'no proof')}): e = {e:.4g}, d = {d:.4g} per sample ({joint_unit})")
 
 
 def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error: float = 0.0) -> ExecutionClass:
