@@ -59,8 +59,8 @@ import casadi as ca
 import numpy as np
 
 from crosscert.verifier import interval as I
-from crosscert.verifier.implicit import (ImplicitTapes, contract_roots, krawczyk, root_gradient, slope_change,
-                                         strictly_inside)
+from crosscert.verifier.implicit import (ImplicitTapes, contract_roots, inflate_roots, krawczyk, root_gradient,
+                                         slope_change, strictly_inside)
 from crosscert.verifier.linalg import imat_ivec
 
 from .execution import ExecutionClass, ExecutionKind
@@ -71,10 +71,6 @@ __all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "prove_cartesian_cla
 #: How the bounds are proved (reported in certificate.json).
 METHOD = ("interval branch and bound over [xi]: Krawczyk-proved IK enclosures, mean-value forms with "
           "interval slopes du/dxi, outward rounding")
-
-#: Inflation attempts of step 2 (each quadruples the radius of the boxes not yet proved).
-_INFLATIONS = 8
-
 
 @dataclass(frozen=True, eq=False)
 class ClassProof:
@@ -240,9 +236,9 @@ class _Path:
         """
         D = u - self.u_plan
         dd = D - D[:, self.r:self.r + 1]
-        e = np.where(self.off, 0.5 * (dd.max(axis=1) - dd.min(axis=1)), np.abs(D).max(axis=1)).max(axis=1)
+        e = np.where(self.off, 0.5 * (dd.max(axis=1) - dd.min(axis=1)), np.abs(D).max(axis=1))
         c = np.where(self.off, D[:, self.r] + 0.5 * (dd.max(axis=1) + dd.min(axis=1)), 0.0)
-        d = np.abs(np.diff(D, axis=1)).max(axis=(1, 2)) if self.K > 1 else np.zeros(len(D))
+        d = np.abs(np.diff(D, axis=1)).max(axis=1) if self.K > 1 else np.zeros(e.shape)
         return e, d, c
 
     def evaluate(self, blo, bhi, Ubox):
@@ -251,7 +247,7 @@ class _Path:
         N, r = nb * K, self.r
         P = self.boxes(blo, bhi)
         X = np.tile(self.x, (nb, 1))
-        U = contract_roots(self.tapes, (X, X), (Ubox[0].reshape(N, n), Ubox[1].reshape(N, n)), P, sweeps=1)
+        U = (Ubox[0].reshape(N, n), Ubox[1].reshape(N, n))
         ctr = I.midpoint(blo, bhi)
         Ucl, Uch = self.roots_at(self.full(ctr), U)
         G = root_gradient(self.tapes, (X, X), U, P, self.free)
@@ -274,68 +270,65 @@ class _Path:
         # D_k(c) = u_k(c) - u_plan,k
         Pl, Ph = I.sub(Ucl, Uch, self.u_plan, self.u_plan)
         # offset joints: D_k - D_r, and D_r; the constant c = D_r + m
-        dG = I.sub(Gl, Gh, Gl[:, r:r + 1], Gh[:, r:r + 1])
-        dl, dh = I.add(*I.sub(Pl, Ph, Pl[:, r:r + 1], Ph[:, r:r + 1]), *mv(*dG))
+        dGr = I.sub(Gl, Gh, Gl[:, r:r + 1], Gh[:, r:r + 1])
+        dl, dh = I.add(*I.sub(Pl, Ph, Pl[:, r:r + 1], Ph[:, r:r + 1]), *mv(*dGr))
         _m, e_off, c_lo, c_hi = offset_split(dl.min(axis=1), dh.max(axis=1), *I.add(Pl[:, r], Ph[:, r],
                                                                                       MV[0][:, r], MV[1][:, r]))
         # joints without an offset: the whole deviation D_k is drift (c = 0)
         Dl, Dh = I.add(Pl, Ph, *MV)
-        e = np.where(self.off, e_off, np.maximum(np.abs(Dl), np.abs(Dh)).max(axis=1)).max(axis=1)
+        e = np.where(self.off, e_off, np.maximum(np.abs(Dl), np.abs(Dh)).max(axis=1))  # (nb, n)
         c_lo, c_hi = np.where(self.off, c_lo, 0.0), np.where(self.off, c_hi, 0.0)
         # steps D_k - D_{k-1}: the slopes' difference on the sub-box, intersected with the
         # slope change along the segment proved on the whole box (much tighter: no cancellation)
         if K > 1:
-            s = I.sub(*I.sub(Pl[:, 1:], Ph[:, 1:], Pl[:, :-1], Ph[:, :-1]), 0.0, 0.0)
-            s1 = I.add(*s, *mv(*I.sub(Gl[:, 1:], Gh[:, 1:], Gl[:, :-1], Gh[:, :-1])))
-            if self.slope_steps is not None and use:
-                s2 = I.add(*s, *mv(self.slope_steps[0][None], self.slope_steps[1][None]))
-                s1 = I.intersect(*s1, *s2)
+            s = I.sub(Pl[:, 1:], Ph[:, 1:], Pl[:, :-1], Ph[:, :-1])
+            # both enclose the slope of D_k - D_{k-1} at every geometry of the sub-box: intersect them
+            dG = I.sub(Gl[:, 1:], Gh[:, 1:], Gl[:, :-1], Gh[:, :-1])
+            if self.slope_steps is not None:
+                dG = I.intersect(*dG, self.slope_steps[0][None], self.slope_steps[1][None])
+            s1 = I.add(*s, *mv(*dG))
+            score_d = (dG[1] - dG[0]).max(axis=1) * (bhi - blo)[:, None]
             bad |= np.any(s1[0] > s1[1], axis=(1, 2))
-            d = np.maximum(np.abs(s1[0]), np.abs(s1[1])).max(axis=(1, 2))
+            d = np.maximum(np.abs(s1[0]), np.abs(s1[1])).max(axis=1)  # (nb, n)
+            S = (s1, I.midpoint(*dG))
         else:
-            d = np.zeros(nb)
-        mag = np.maximum(np.abs(Gl), np.abs(Gh)).max(axis=(1, 2))
+            d = np.zeros((nb, n))
+            score_d = np.zeros((nb, n, p))
+            S = None
+        # where to split: the parameter whose slope is least sharp times its width (the remainder's
+        # excess over the linear part), for e and for d, per joint
+        slope_e = np.where(self.off[None, None, :, None], dGr[1] - dGr[0], Gh - Gl)
+        score_e = slope_e.max(axis=1) * (bhi - blo)[:, None]
         return dict(e=e, d=d, c_lo=c_lo, c_hi=c_hi, U=(Ul, Uh), bad=bad, ctr=ctr, Uc=(Ucl, Uch),
-                    score=mag * (bhi - blo), G=(Gl, Gh), dd=(dl, dh), D=(Dl, Dh))
+                    score_e=score_e, score_d=score_d, G=(Gl, Gh), dd=(dl, dh), D=(Dl, Dh), S=S)
 
-    def candidates(self, blo, bhi, ev):
-        """Corners (N, p) of the worst sub-boxes where the linearised drift and constant are extreme.
+    def candidates(self, blo, bhi, ev, i):
+        """Corners (N, p) of the sub-boxes worst for joint ``i`` where its linearised drift, step and
+        constant are extreme, and the index of the box each comes from.
 
         Only lower bounds come from them (the termination rule): which corner is tried never affects soundness.
         """
         Gm = I.midpoint(*ev["G"])  # (nb, K, n, p)
         (dl, dh), (Dl, Dh), r = ev["dd"], ev["D"], self.r
-        worst = {int(np.argmax(ev["e"])), int(np.argmin(ev["c_lo"].min(axis=1))), int(np.argmax(ev["c_hi"].max(axis=1)))}
-        pts = []
-        for b in sorted(worst):
-            for i in range(self.n):
-                if self.off[i]:
-                    k, l = int(np.argmax(dh[b, :, i])), int(np.argmin(dl[b, :, i]))
-                    dirs = [Gm[b, k, i] - Gm[b, l, i], Gm[b, r, i], -Gm[b, r, i]]
-                else:
-                    k = int(np.argmax(np.maximum(np.abs(Dl[b, :, i]), np.abs(Dh[b, :, i]))))
-                    dirs = [np.sign(Dl[b, k, i] + Dh[b, k, i]) * Gm[b, k, i]]
-                pts += [np.where(v > 0, bhi[b], blo[b]) for v in dirs]
-        return np.array(pts), sorted(worst)
-
-
-def _prove_boxes(tapes, X, center, r, P):
-    """Boxes ``center +- r`` (B, n), radii grown 4-fold where needed, proved (Krawczyk image strictly
-    inside) to hold exactly one root for every x in ``X`` and p in ``P``.
-
-    Returns the contracted boxes and the mask of the rows proved (the others are not usable).
-    """
-    r = np.where(np.isfinite(r), r, 1e-3) + 64.0 * np.spacing(np.abs(center)) + 1e-15
-    ok = np.zeros(len(center), bool)
-    for _ in range(_INFLATIONS):
-        U = (I.sub(center, center, r, r)[0], I.add(center, center, r, r)[1])
-        K = krawczyk(tapes, X, U, P)
-        ok = strictly_inside(K, U)
-        if ok.all():
-            break
-        r = np.where(ok[:, None], r, 4.0 * r)
-    U = I.intersect(U[0], U[1], K[0], K[1])
-    return contract_roots(tapes, X, U, P, sweeps=2), ok
+        pts, owner = [], []
+        b = int(np.argmax(ev["e"][:, i]))
+        if self.off[i]:
+            k, l = int(np.argmax(dh[b, :, i])), int(np.argmin(dl[b, :, i]))
+            dirs = [(b, Gm[b, k, i] - Gm[b, l, i])]
+            dirs += [(int(np.argmin(ev["c_lo"][:, i])), -Gm[:, r, i]), (int(np.argmax(ev["c_hi"][:, i])), Gm[:, r, i])]
+            dirs = [(dirs[0][0], dirs[0][1])] + [(bb, g[bb]) for bb, g in dirs[1:]]
+        else:
+            k = int(np.argmax(np.maximum(np.abs(Dl[b, :, i]), np.abs(Dh[b, :, i]))))
+            dirs = [(b, np.sign(Dl[b, k, i] + Dh[b, k, i]) * Gm[b, k, i])]
+        if ev["S"] is not None:
+            (sl, sh), dGm = ev["S"]
+            b = int(np.argmax(ev["d"][:, i]))
+            k = int(np.argmax(np.maximum(np.abs(sl[b, :, i]), np.abs(sh[b, :, i]))))
+            dirs.append((b, np.sign(sl[b, k, i] + sh[b, k, i]) * dGm[b, k, i]))
+        for bb, v in dirs:
+            pts.append(np.where(v > 0, bhi[bb], blo[bb]))
+            owner.append(bb)
+        return np.array(pts), np.array(owner)
 
 
 def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
@@ -348,7 +341,7 @@ def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
     G = root_gradient(tapes, X, (u_plan, u_plan), P, free)
     mag = np.maximum(np.abs(G[0]), np.abs(G[1]))
     r0 = 2.0 * mag @ (0.5 * (hi - lo)[free]) if free else np.zeros((K, n))
-    U0, ok = _prove_boxes(tapes, X, u_plan, r0, P)
+    U0, ok = inflate_roots(tapes, X, u_plan, r0, P)
     if not ok.all():
         k = int(np.nonzero(~ok)[0][0])
         return (f"the inverse kinematics at path point {k} could not be proved unique in an inflated box "
@@ -361,7 +354,7 @@ def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
         dX = I.sub(x[1:], x[1:], x[:-1], x[:-1])
         Hl, Hh = I.hull(U0[0][:-1], U0[1][:-1], U0[0][1:], U0[1][1:])
         Ps = (P[0][:-1], P[1][:-1])
-        Us, oks = _prove_boxes(tapes, Xs, I.midpoint(Hl, Hh), 0.625 * (Hh - Hl), Ps)
+        Us, oks = inflate_roots(tapes, Xs, I.midpoint(Hl, Hh), 0.625 * (Hh - Hl), Ps)
         oks &= ~np.any(Us[0] > Us[1], axis=1)
         Gs = root_gradient(tapes, Xs, Us, Ps, free)
         Tl, Th = slope_change(tapes, Xs, dX, Us, Ps, Gs)
@@ -371,7 +364,7 @@ def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
     return _Path(tapes, numeric, robot, free, x, u_plan, U0, steps, remainder)
 
 
-def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, max_boxes: int = 256,
+def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, max_boxes: int = 16,
                           remainder: bool = True) -> ClassProof:
     """Prove ``C``, ``e`` and ``d`` of the ``cartesian`` class over the whole box ``[xi]`` (module docstring).
 
@@ -389,8 +382,8 @@ def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, 
         its bounds exceed the largest values met at evaluated geometries by
         at most ``tol`` times them (``C``: times the width of the range met).
     max_boxes : int
-        Budget of evaluated sub-boxes per path (the bounds are proved when it
-        runs out too, only possibly looser than ``tol``).
+        Budget of evaluated sub-boxes per path and joint (the bounds are
+        proved when it runs out too, only possibly looser than ``tol``).
     remainder : bool
         Keep the remainder term of the mean-value forms.  ``False`` only for
         the tests' removal check: the bounds are then *not* proved.
@@ -420,45 +413,48 @@ def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, 
             x, q = np.asarray(x, float), np.asarray(q, float)
             u_plan = q + np.array([xi_plan[offs[i]] if i in offs else 0.0 for i in range(n)])
             path = _setup_path(tapes, numeric, robot, free, x, u_plan, remainder)
-            res = path if isinstance(path, str) else _branch_and_bound(path, tol, max_boxes)
-            if isinstance(res, str):
-                return ClassProof(False, res, time_s=time.perf_counter() - t0)
-            boxes += res["boxes"]
-            converged &= res["converged"]
-            c_lo, c_hi = np.minimum(c_lo, res["c_lo"]), np.maximum(c_hi, res["c_hi"])
-            e, d = max(e, res["e"]), max(d, res["d"])
-            f = res["found"]
-            if f["drift"] >= found["drift"]:
-                found.update(drift=f["drift"], drift_xi=f["drift_xi"])
-            if f["step"] >= found["step"]:
-                found.update(step=f["step"], step_xi=f["step_xi"])
-            found["c_lo"] = np.minimum(found["c_lo"], f["c_lo"])
-            found["c_hi"] = np.maximum(found["c_hi"], f["c_hi"])
+            if isinstance(path, str):
+                return ClassProof(False, path, time_s=time.perf_counter() - t0)
+            # one branch and bound per joint: each splits only the parameters its own bounds need
+            for i in range(n):
+                res = _branch_and_bound(path, tol, max_boxes, i)
+                if isinstance(res, str):
+                    return ClassProof(False, res, time_s=time.perf_counter() - t0)
+                boxes += res["boxes"]
+                converged &= res["converged"]
+                c_lo[i], c_hi[i] = min(c_lo[i], res["c_lo"]), max(c_hi[i], res["c_hi"])
+                e, d = max(e, res["e"]), max(d, res["d"])
+                f = res["found"]
+                if f["drift"] >= found["drift"]:
+                    found.update(drift=f["drift"], drift_xi=f["drift_xi"])
+                if f["step"] >= found["step"]:
+                    found.update(step=f["step"], step_xi=f["step_xi"])
+                found["c_lo"][i] = min(found["c_lo"][i], f["c_lo"])
+                found["c_hi"][i] = max(found["c_hi"][i], f["c_hi"])
     return ClassProof(True, "", c_lo, c_hi, float(e), float(d), boxes, time.perf_counter() - t0, found, converged,
                       float(tol))
 
 
-def _branch_and_bound(path: _Path, tol: float, max_boxes: int):
-    """Step 4 on one path: a dict of proved bounds, or the reason (str) why nothing is proved."""
+def _branch_and_bound(path: _Path, tol: float, max_boxes: int, i: int):
+    """Step 4 on one path for joint ``i``: a dict of proved bounds, or the reason (str) why nothing is proved."""
     p, n = len(path.free), path.n
     blo, bhi = path.lo[path.free][None].copy(), path.hi[path.free][None].copy()
     Uparent = (path.U0[0][None], path.U0[1][None])
     L = None  # the leaves: boxes and proved bounds
-    best = {"drift": 0.0, "step": 0.0, "c_lo": np.full(n, np.inf), "c_hi": np.full(n, -np.inf),
-            "drift_xi": None, "step_xi": None}
+    best = {"drift": 0.0, "step": 0.0, "c_lo": np.inf, "c_hi": -np.inf, "drift_xi": None, "step_xi": None}
     boxes, atol = 0, 1e-15
 
-    def met(points, U):
-        """Update the largest values met with the geometries ``points`` (N, p)."""
+    def met(points, U=None, roots=None):
+        """Update the largest values met with the geometries ``points`` (N, p) (float ``roots``, or by Newton in ``U``)."""
         full = path.full(points)
-        e, d, c = path.values(path.newton(full, U))
-        i, j = int(np.argmax(e)), int(np.argmax(d))
-        if e[i] >= best["drift"]:
-            best.update(drift=float(e[i]), drift_xi=full[i])
-        if d[j] >= best["step"]:
-            best.update(step=float(d[j]), step_xi=full[j])
-        best["c_lo"] = np.minimum(best["c_lo"], c.min(axis=0))
-        best["c_hi"] = np.maximum(best["c_hi"], c.max(axis=0))
+        e, d, c = (v[:, i] for v in path.values(path.newton(full, U) if roots is None else roots))
+        a, b = int(np.argmax(e)), int(np.argmax(d))
+        if e[a] >= best["drift"]:
+            best.update(drift=float(e[a]), drift_xi=full[a])
+        if d[b] >= best["step"]:
+            best.update(step=float(d[b]), step_xi=full[b])
+        best["c_lo"] = min(best["c_lo"], float(c.min()))
+        best["c_hi"] = max(best["c_hi"], float(c.max()))
 
     while True:
         ev = path.evaluate(blo, bhi, Uparent)
@@ -466,29 +462,30 @@ def _branch_and_bound(path: _Path, tol: float, max_boxes: int):
         if ev["bad"].any():
             return ("inconsistent: an enclosure of the inverse kinematics became empty or unbounded on a sub-box "
                     "of [xi], which contradicts its proved existence")
-        met(ev["ctr"], (ev["U"][0].reshape(-1, n), ev["U"][1].reshape(-1, n)))
+        Ub = ev["U"]
+        met(ev["ctr"], roots=I.midpoint(*ev["Uc"]))
         if p:
-            pts, owners = path.candidates(blo, bhi, ev)
-            reps = len(pts) // len(owners)
-            own = np.repeat(owners, reps)
-            met(pts, (ev["U"][0][own].reshape(-1, n), ev["U"][1][own].reshape(-1, n)))
-        new = dict(lo=blo, hi=bhi, e=ev["e"], d=ev["d"], c_lo=ev["c_lo"], c_hi=ev["c_hi"], U=ev["U"],
-                   score=ev["score"])
+            pts, own = path.candidates(blo, bhi, ev, i)
+            met(pts, (Ub[0][own].reshape(-1, n), Ub[1][own].reshape(-1, n)))
+        new = dict(lo=blo, hi=bhi, e=ev["e"][:, i], d=ev["d"][:, i], c_lo=ev["c_lo"][:, i], c_hi=ev["c_hi"][:, i],
+                   U=Ub, score_e=ev["score_e"][:, i], score_d=ev["score_d"][:, i])
         L = new if L is None else {k: _cat(L[k], new[k]) for k in L}
         # the exact termination rule: a leaf is settled when its bounds are within tol of what was met
         wc = best["c_hi"] - best["c_lo"]
         settled = ((L["e"] <= (1.0 + tol) * best["drift"] + atol) & (L["d"] <= (1.0 + tol) * best["step"] + atol)
-                   & np.all(L["c_lo"] >= best["c_lo"] - tol * wc - atol, axis=1)
-                   & np.all(L["c_hi"] <= best["c_hi"] + tol * wc + atol, axis=1))
+                   & (L["c_lo"] >= best["c_lo"] - tol * wc - atol) & (L["c_hi"] <= best["c_hi"] + tol * wc + atol))
         open_ = np.nonzero(~settled)[0]
         if open_.size == 0 or p == 0 or boxes + 2 > max_boxes:
             break
-        # split the worst leaves first, as many as the budget allows
-        excess = np.maximum(L["e"] / max(best["drift"], atol), L["d"] / max(best["step"], atol))[open_]
-        take = open_[np.argsort(-excess, kind="stable")][: max(1, (max_boxes - boxes) // 2)]
+        # split the worst leaves first (best-first search, a few per round), along the parameter
+        # whose remainder exceeds the linear part most, for the bound that is furthest off
+        re, rd = L["e"] / max(best["drift"], atol), L["d"] / max(best["step"], atol)
+        excess = np.maximum(re, rd)[open_]
+        take = open_[np.argsort(-excess, kind="stable")][: max(1, min(_SPLITS, (max_boxes - boxes) // 2))]
         keep = np.setdiff1d(np.arange(len(L["e"])), take)
         sl, sh = L["lo"][take], L["hi"][take]
-        axis = np.argmax(L["score"][take], axis=1)
+        by_d = (rd > re)[take]
+        axis = np.argmax(np.where(by_d[:, None], L["score_d"][take], L["score_e"][take]), axis=1)
         rows = np.arange(len(take))
         mid = I.midpoint(sl[rows, axis], sh[rows, axis])
         left_hi, right_lo = sh.copy(), sl.copy()
@@ -497,8 +494,8 @@ def _branch_and_bound(path: _Path, tol: float, max_boxes: int):
         blo, bhi = np.concatenate([sl, right_lo]), np.concatenate([left_hi, sh])
         Uparent = (np.concatenate([L["U"][0][take]] * 2), np.concatenate([L["U"][1][take]] * 2))
         L = {k: (v[0][keep], v[1][keep]) if k == "U" else v[keep] for k, v in L.items()}
-    return {"e": float(L["e"].max()), "d": float(L["d"].max()), "c_lo": L["c_lo"].min(axis=0),
-            "c_hi": L["c_hi"].max(axis=0), "boxes": boxes, "converged": bool(open_.size == 0), "found": best}
+    return {"e": float(L["e"].max()), "d": float(L["d"].max()), "c_lo": float(L["c_lo"].min()),
+            "c_hi": float(L["c_hi"].max()), "boxes": boxes, "converged": bool(open_.size == 0), "found": best}
 
 
 def _cat(a, b):
@@ -506,6 +503,9 @@ def _cat(a, b):
         return (np.concatenate([a[0], b[0]]), np.concatenate([a[1], b[1]]))
     return np.concatenate([a, b])
 
+
+#: Leaves split per round of the branch and bound, worst first (best-first search, batched a little).
+_SPLITS = 4
 
 #: Proofs of recent plans: a plan's class depends only on the plan and the robot (the speed
 #: search at the robot's own a_max asks again for plans already proved).

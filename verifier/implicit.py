@@ -10,6 +10,8 @@ and parameters ``p`` in a box ``[p]``:
   when ``K(U)`` lies strictly inside ``U``, each ``p`` in ``[p]`` has exactly
   one root in ``U`` and every matrix of ``J_u(x, U, [p])`` is regular
   (Krawczyk 1969; Rump 1983 for the regularity).
+* :func:`inflate_roots` — boxes around approximate roots, inflated until
+  that strict inclusion proves them (existence and uniqueness);
 * :func:`contract_roots` — ``U <- K(U) ∩ U`` a few times: never loses a root.
 * :func:`root_gradient` — an enclosure of ``du/dp = -J_u^{-1} J_p`` over the
   boxes (implicit function theorem), the slope of a mean-value form;
@@ -31,7 +33,8 @@ from . import interval as I
 from .linalg import imat_ivec, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 from .tape import Tape
 
-__all__ = ["ImplicitTapes", "krawczyk", "strictly_inside", "contract_roots", "root_gradient", "slope_change"]
+__all__ = ["ImplicitTapes", "krawczyk", "strictly_inside", "inflate_roots", "contract_roots", "root_gradient",
+           "slope_change"]
 
 
 class ImplicitTapes:
@@ -85,6 +88,34 @@ def krawczyk(tapes: ImplicitTapes, X, U, P):
 def strictly_inside(inner, outer) -> np.ndarray:
     """Row mask: ``inner`` lies in the interior of ``outer`` (every component, strict)."""
     return np.all((inner[0] > outer[0]) & (inner[1] < outer[1]), axis=-1)
+
+
+def inflate_roots(tapes: ImplicitTapes, X, center, r, P, *, attempts: int = 8):
+    """Boxes ``center +- r`` (B, n) proved to hold exactly one root for every x in ``X`` and p in ``P``.
+
+    The proof is the Krawczyk image lying strictly inside the box; the radius
+    of a row not proved is multiplied by 4 and tried again, ``attempts``
+    times in all (epsilon-inflation).  The radius is widened by a few ulp of
+    ``center`` so that a point root is never assumed exact.
+
+    Returns
+    -------
+    U : boxes (B, n)
+        The proved boxes, contracted (``K(U) ∩ U``); meaningless where not proved.
+    ok : bool array (B,)
+        Rows proved.
+    """
+    r = np.where(np.isfinite(r), r, 1e-3) + 64.0 * np.spacing(np.abs(center)) + 1e-15
+    ok = np.zeros(len(center), bool)
+    for _ in range(attempts):
+        U = (I.sub(center, center, r, r)[0], I.add(center, center, r, r)[1])
+        K = krawczyk(tapes, X, U, P)
+        ok = strictly_inside(K, U)
+        if ok.all():
+            break
+        r = np.where(ok[:, None], r, 4.0 * r)
+    U = I.intersect(U[0], U[1], K[0], K[1])
+    return contract_roots(tapes, X, U, P, sweeps=2), ok
 
 
 def contract_roots(tapes: ImplicitTapes, X, U, P, sweeps: int = 2):
