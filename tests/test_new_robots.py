@@ -337,6 +337,7 @@ def test_rpr3_certify_on_a_coarse_tolerance(capsys, tmp_path):
     assert "minimal certified v_sing: 0.6000 m/s" in out
     assert "refutation bound (no sound tracker certifies at or below): not computed" in out
     assert "2/2 admissible executions detected" in out and "0 containment failures, 0 wrong verdicts" in out
+    assert "execution class: cartesian, C, e and d proved for every geometry of [xi]" in out
 
 
 @pytest.mark.slow
