@@ -178,12 +178,10 @@ def slope_change(tapes: ImplicitTapes, X, dX, U, P, G):
 
 def _solve_columns(A, R):
     """Enclose ``Y`` with ``A Y = R`` column by column: ``A`` boxes (B, n, n), ``R`` boxes (B, n, c)."""
-    B, n, c = R[0].shape
-    Al = np.repeat(A[0], c, axis=0)
-    Ah = np.repeat(A[1], c, axis=0)
-    bl = np.transpose(R[0], (0, 2, 1)).reshape(B * c, n)
-    bh = np.transpose(R[1], (0, 2, 1)).reshape(B * c, n)
-    yl, yh = linear_enclosure(Al, Ah, bl, bh, sweeps=2)
+    # one matrix per row broadcast over the c right-hand sides: preconditioned once, not c times
+    bl = np.transpose(R[0], (0, 2, 1))
+    bh = np.transpose(R[1], (0, 2, 1))
+    yl, yh = linear_enclosure(A[0][:, None], A[1][:, None], bl, bh, sweeps=2)
     yl = np.where(np.isnan(yl), -np.inf, yl)
     yh = np.where(np.isnan(yh), np.inf, yh)
-    return (np.transpose(yl.reshape(B, c, n), (0, 2, 1)), np.transpose(yh.reshape(B, c, n), (0, 2, 1)))
+    return np.transpose(yl, (0, 2, 1)), np.transpose(yh, (0, 2, 1))
