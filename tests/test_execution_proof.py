@@ -178,3 +178,18 @@ def test_certifying_path_uses_the_proved_class(plan, kin, proof):
     assert "proved for every geometry of [xi]" in line and f"{proof.boxes} boxes" in line
     joint = execution_class(kin, plan, PlanningBounds(execution="joint"))
     assert joint.proved and "stated" in describe(joint)
+
+
+def test_a_joint_without_offset_has_an_exact_zero_constant(plan, kin):
+    """Only joint 1 declares an offset: joint 2's deviation is all drift (its offset parameter is branched
+    on like a length), its constant is exactly 0, and sampled geometries lie inside."""
+    robot = replace(DEXTAR, joint_offsets=(5, None))
+    pr = prove_cartesian_class(robot, plan.x, plan.q, plan.xi_plan)
+    assert pr.proved, pr.reason
+    assert pr.c_lo[1] == 0.0 and pr.c_hi[1] == 0.0
+    off = _offset_mask(robot)
+    kin2 = KinematicModel(robot)
+    for xi in _geometries(robot, 16, 8, seed=9):
+        assert _violation(pr, effective_deviation(kin2, plan.x, plan.q, plan.xi_plan, xi), off) <= 0.0
+    # the offset of joint 2 moves it by up to 4 mrad: e covers it
+    assert pr.drift > 4e-3
