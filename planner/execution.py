@@ -31,8 +31,11 @@ tracker inputs for each.
     parameters, ``w`` as reading error (``f(x, q_plan + w, (lengths, c)) =
     0``) and the drift bound for differences of readings
     (``TrackerSettings.eps_q_fast`` and ``drift_rate = d / t_s``).  ``C``,
-    ``e`` and ``d`` are derived from the plan by :func:`cartesian_class`; an
-    execution is checked against them by :func:`in_class`.
+    ``e`` and ``d`` are proved over the whole box ``[xi]`` by
+    :mod:`planner.execution_proof` (what a certificate uses); when that proof
+    is not available they are measured by :func:`cartesian_class` on sampled
+    geometries (``ExecutionClass.proved`` says which).  An execution is
+    checked against them by :func:`in_class`.
 
 Nothing here names a robot.
 """
