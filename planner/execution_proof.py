@@ -5,7 +5,8 @@
 bounds the same quantities for every geometry of ``[xi]`` at once, so that
 every execution following the planned path is in the class by construction.
 
-The argument, step by step (docs/soundness.md, "The execution class"):
+The argument, step by step (docs/soundness.md, "The execution class of a
+certificate"):
 
 1. *Effective joints.*  With ``Robot.joint_offsets`` (``f`` reads joint
    ``i`` only through ``u_i = q_i + xi_j``) the loop closure is rewritten in
@@ -15,7 +16,7 @@ The argument, step by step (docs/soundness.md, "The execution class"):
    deviation ``D_k(xi) = u_k(xi) - u_plan,k`` therefore depends only on the
    other parameters: the offsets drop out of ``C``, ``e`` and ``d``.  A joint
    without an offset parameter keeps ``u_i = q_i`` (in its own unit, rad or
-   m) and its whole deviation is drift (``c_i = 0``).
+   m) and its whole deviation is drift (``c_i = 0`` exactly).
 2. *The branch.*  At each planned pose ``x_k`` the box
    ``U_k = u_plan,k +- r_k`` is inflated until the Krawczyk image over the
    whole box ``[xi]`` lies strictly inside it: then every geometry has
@@ -24,25 +25,30 @@ The argument, step by step (docs/soundness.md, "The execution class"):
    root ``u_k(xi)`` is continuously differentiable.  No inflation proved:
    ``proved: false`` with the sample.
 3. *Mean-value forms.*  On a sub-box ``B`` of the free parameters with
-   centre ``c``: ``u_k(c)`` is enclosed by Krawczyk contraction at the point
-   ``c`` and the slope ``du_k/dxi`` over ``U_k x B`` by the interval
+   centre ``c``: ``u_k(c)`` is enclosed by a box Krawczyk proves at the
+   point ``c``, the slope ``G_k = du_k/dxi`` over ``U_k x B`` by the interval
    solution of ``J_u G = -J_xi``.  Then for every ``xi`` in ``B``::
 
-       D_k - D_r in (u_k(c) - u_r(c)) + (G_k - G_r)(B - c)
-       D_k - D_{k-1} - (u_plan,k - u_plan,k-1) in (u_k(c) - u_{k-1}(c)) - (...) + (G_k - G_{k-1})(B - c)
+       D_k(xi) - D_r(xi)     in  D_k(c) - D_r(c)     + (G_k - G_r)(B) (B - c)
+       D_k(xi) - D_{k-1}(xi) in  D_k(c) - D_{k-1}(c) + S_k (B - c)
 
-   for a reference sample ``r`` (the middle one).  For an offset joint, with
+   for a reference sample ``r`` (the middle one), where ``S_k`` is
+   ``(G_k - G_{k-1})(B)`` intersected with the slope's change along the
+   segment ``x_{k-1} -> x_k`` proved once over ``[xi]``
+   (:func:`verifier.implicit.slope_change`).  For an offset joint, with
    ``m`` the midpoint of the hull of the first enclosure over ``k``, the
    constant ``c = D_r(xi) + m`` lies in ``D_r(B) + m`` and ``|D_k - c|`` is
-   at most the larger distance from ``m`` to that hull: this is the box's
-   ``C`` and ``e``; ``d`` is the largest magnitude of the second enclosure.
-4. *Branch and bound.*  Boxes are bisected (along the parameter of the
-   largest slope times width) until each box's bounds are within ``tol``
-   (relative) of the largest values met at box centres, the exact
-   termination rule, or until ``max_boxes`` boxes were evaluated (the bounds
-   are proved either way; only their tightness differs).  The class takes
-   the hull of the leaves' ``C`` and the largest ``e`` and ``d``: a proved
-   enclosure over the union of the leaves, which is ``[xi]``.
+   at most the larger distance from ``m`` to that hull
+   (:func:`offset_split`): the box's ``C`` and ``e``; ``d`` is the largest
+   magnitude of the second enclosure.
+4. *Branch and bound*, one per joint, best first.  A sub-box is bisected
+   along the parameter whose remainder exceeds the linear part most, until
+   every leaf's bounds are within ``tol`` (relative) of the largest values
+   met at evaluated geometries (box centres and the corners the
+   linearisation points to), the exact termination rule, or until
+   ``max_boxes`` sub-boxes were evaluated (the bounds are proved either way;
+   only their tightness differs).  The class takes the hull of the leaves'
+   ``C`` and the largest ``e`` and ``d``: the leaves partition ``[xi]``.
 
 Every operation is outward-rounded (:mod:`verifier.interval`); an empty
 enclosure contradicts step 2 and is reported as ``proved: false``
@@ -58,6 +64,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
+from crosscert.robots.errors import InputError
 from crosscert.verifier import interval as I
 from crosscert.verifier.implicit import (ImplicitTapes, contract_roots, inflate_roots, krawczyk, root_gradient,
                                          slope_change, strictly_inside)
@@ -71,6 +78,7 @@ __all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "prove_cartesian_cla
 #: How the bounds are proved (reported in certificate.json).
 METHOD = ("interval branch and bound over [xi]: Krawczyk-proved IK enclosures, mean-value forms with "
           "interval slopes du/dxi, outward rounding")
+
 
 @dataclass(frozen=True, eq=False)
 class ClassProof:
@@ -99,6 +107,8 @@ class ClassProof:
     converged : bool
         Whether the termination rule was met (``False``: the box budget ran
         out first; the bounds are proved but may be looser than ``tol``).
+    tol : float
+        Relative tolerance of that rule.
     """
 
     proved: bool
@@ -401,6 +411,9 @@ def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, 
     if built is None:
         return ClassProof(False, why, time_s=time.perf_counter() - t0)
     tapes, free, numeric = built
+    if not free:
+        return ClassProof(False, "no parameter of the loop closure has a calibration interval wider than a point: "
+                                 "nothing to branch on (not supported)", time_s=time.perf_counter() - t0)
     offs = _offsets(robot)
     xi_plan = np.asarray(xi_plan, float)
     n = robot.n
@@ -552,7 +565,7 @@ def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error
     safety factor.
     """
     if not proof.proved:
-        raise ValueError("proved_class needs a successful proof")
+        raise InputError(f"proved_class needs a successful proof, got one not proved: {proof.reason}")
     xi_plan = np.asarray(xi_plan, float)
     lo, hi = robot.xi_lo_array.copy(), robot.xi_hi_array.copy()
     for i, j in _offsets(robot).items():
