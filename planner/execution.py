@@ -31,8 +31,11 @@ tracker inputs for each.
     parameters, ``w`` as reading error (``f(x, q_plan + w, (lengths, c)) =
     0``) and the drift bound for differences of readings
     (``TrackerSettings.eps_q_fast`` and ``drift_rate = d / t_s``).  ``C``,
-    ``e`` and ``d`` are derived from the plan by :func:`cartesian_class`; an
-    execution is checked against them by :func:`in_class`.
+    ``e`` and ``d`` are proved over the whole box ``[xi]`` by
+    :mod:`planner.execution_proof` (what a certificate uses); when that proof
+    is not available they are measured by :func:`cartesian_class` on sampled
+    geometries (``ExecutionClass.proved`` says which).  An execution is
+    checked against them by :func:`in_class`.
 
 Nothing here names a robot.
 """
@@ -83,6 +86,11 @@ class ExecutionClass:
     derivation : dict
         How ``C`` and ``e`` were obtained (geometries tried, largest drift and
         constant part measured, safety factor).
+    proved : bool
+        Whether ``C``, ``e`` and ``d`` are proved for every geometry of
+        ``[xi]`` (:mod:`planner.execution_proof`) rather than measured.
+    proof : dict
+        The proof's method and cost, or why it was not proved.
     """
 
     kind: ExecutionKind
@@ -93,6 +101,8 @@ class ExecutionClass:
     derivation: dict = field(default_factory=dict, compare=False)
     fast_error: float = 0.0
     drift_per_sample: float | None = None
+    proved: bool = False
+    proof: dict = field(default_factory=dict, compare=False)
 
     @property
     def xi_box(self) -> tuple[np.ndarray, np.ndarray]:
@@ -118,6 +128,8 @@ class ExecutionClass:
             "xi_lo": self.xi_lo.tolist(),
             "xi_hi": self.xi_hi.tolist(),
             "derivation": self.derivation,
+            "proved": self.proved,
+            "proof": self.proof,
         }
 
 
@@ -125,7 +137,8 @@ def joint_class(robot, eps_q: float, tracking_error: float = 0.0) -> ExecutionCl
     """Joints within ``eps_q + tracking_error`` (rad) of the plan, geometry in ``[xi]``."""
     return ExecutionClass(ExecutionKind.JOINT, float(eps_q + tracking_error), 0.0, robot.xi_lo_array.copy(),
                           robot.xi_hi_array.copy(), {"source": "robot calibration box"},
-                          float(eps_q + tracking_error), None)
+                          float(eps_q + tracking_error), None, True,
+                          {"proved": True, "method": "stated, not derived: eps_q + tracking_error and [xi] as given"})
 
 
 def _offsets(robot):

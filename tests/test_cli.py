@@ -270,6 +270,8 @@ def test_certify_names_the_gap_and_times_the_bounce(tmp_path, capsys):
     assert main([*CERTIFY_NARROW, "--out", str(tmp_path / "c")]) == 0
     out = capsys.readouterr().out
     report = json.loads((tmp_path / "c" / "certificate.json").read_text())
+    assert report["execution"]["proved"] is True and report["execution"]["proof"]["boxes_explored"] > 0
+    assert "execution class: cartesian, C, e and d proved for every geometry of [xi]" in out
     line = next(v for v in out.splitlines() if v.startswith("gap"))
     diff, ratio = map(float, re.fullmatch(r"gap \(mode-changed\): v_min - refutation bound = ([0-9.]+) m/s "
                                           r"\(gap_mps\); ratio v_min / refutation bound = ([0-9.]+)", line).groups())

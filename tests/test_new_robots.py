@@ -368,6 +368,7 @@ def test_rpr3_certify_on_a_coarse_tolerance(capsys, tmp_path):
     mc = report["monte_carlo"]
     assert mc["runs"] == mc["detected"] == mc["detected_in_class"] == 2
     assert mc["containment_failures"] == mc["wrong_verdicts"] == []
+    assert report["execution"]["proved"] is True, report["execution"]
 
 
 @pytest.mark.slow

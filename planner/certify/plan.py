@@ -60,6 +60,7 @@ from crosscert.verifier.tracker import TrackResult, track
 from crosscert.verifier.window import Reasoning, WindowResult, track_window
 
 from .. import execution as ex_
+from .. import execution_proof as exp_
 from ..acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
 from ..plan import plan_crossing
 from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
@@ -107,16 +108,22 @@ def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -
 def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
     """The admissible executions of one plan or a list of plans (union of their paths) under ``bounds``.
 
-    See :mod:`planner.execution`; ``cartesian`` classes are derived from the
-    planned poses and joints (seeded, deterministic).
+    See :mod:`planner.execution`; ``cartesian`` classes are proved over the
+    whole box ``[xi]`` (:mod:`planner.execution_proof`) and, when the proof
+    is not available for the robot's model, measured on sampled geometries
+    (seeded, deterministic) and marked ``proved: false`` with the reason.
     """
     robot = kin.robot
     b = bounds.for_robot(robot)
     if b.execution is ExecutionKind.JOINT:
         return ex_.joint_class(robot, b.eps_q, b.tracking_error)
     plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)
-    return ex_.cartesian_class(kin, [p.x for p in plans], [p.q for p in plans], plans[0].xi_plan, b.eps_q,
-                               b.tracking_error)
+    xs, qs = [p.x for p in plans], [p.q for p in plans]
+    proof = exp_.prove_cartesian_class_cached(robot, xs, qs, plans[0].xi_plan)
+    if proof.proved:
+        return exp_.proved_class(robot, proof, plans[0].xi_plan, b.eps_q, b.tracking_error)
+    return exp_.with_proof_failure(ex_.cartesian_class(kin, xs, qs, plans[0].xi_plan, b.eps_q, b.tracking_error),
+                                   proof)
 
 
 def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int, *,

@@ -13,6 +13,7 @@ from crosscert.verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
 from ..certify.crossing import certify_crossing
+from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
 from ..task import Method, PlanningBounds
@@ -107,6 +108,8 @@ def certify(a) -> int:
               f"({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
               f"{len(mc.wrong_verdicts)} wrong verdicts")
     phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
+    if cert.execution is not None:
+        print(describe_execution(cert.execution))
     print("a_max used: " + ("none (no certificate)" if cert.a_max_used is None else cert.a_max_used.describe()))
     _print_at_robot_a_max(cert, a.no_refute)
     extra = cert.at_robot_a_max
