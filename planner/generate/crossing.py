@@ -14,7 +14,7 @@ from crosscert.robots.kinematics import KinematicModel
 
 from ..task import CrossingTask, crossing_on_segment, parse_option
 from .check import CRITERION_TOL, verify
-from .nlp import CrossingSite, IpoptSettings, Transcription, crossing_solver, initial_guess, sample, solve_nlp
+from .nlp import CrossingNlp, CrossingSite, IpoptSettings, Transcription, initial_guess, sample, solve_nlp
 from .types import GeneratedTrajectory, GenerationLimits, LimitExceeded, Objective
 
 __all__ = ["GenerationOptions", "generate_crossing", "crossing_point_and_joints"]
@@ -270,13 +270,14 @@ class _Run:
     opts: GenerationOptions
     torque: bool
 
-    def shape(self, objective: Objective) -> Transcription:
-        return Transcription(*self.opts.intervals, objective, self.torque)
+    def nlp(self, objective: Objective) -> CrossingNlp:
+        """The NLP of this request with ``objective``."""
+        return CrossingNlp(self.kin, self.dyn, self.task, self.site, self.lim,
+                           Transcription(*self.opts.intervals, objective, self.torque), self.opts.ipopt)
 
     def solve(self, objective: Objective, duration, guess, margin: float):
         """:func:`solve_nlp` of this request with ``objective``; ``guess`` None: from the nearest speed solved."""
-        return solve_nlp(self.kin, self.dyn, self.task, self.site, self.lim, self.shape(objective), v_sing=self.v_sing,
-                         margin=margin, duration=duration, guess=guess, ipopt=self.opts.ipopt)
+        return solve_nlp(self.nlp(objective), v_sing=self.v_sing, margin=margin, duration=duration, guess=guess)
 
     def cold_guess(self) -> tuple:
         """The straight initial guess (InputError when its IK continuation fails)."""
@@ -288,9 +289,7 @@ class _Run:
 
     def start(self, objective: Objective) -> tuple | None:
         """None (warm: the nearest speed's solution) when this objective's solver has one, else the cold guess."""
-        solver = crossing_solver(self.kin, self.dyn, self.task, self.site, self.lim, self.shape(objective),
-                                 self.opts.ipopt)
-        return None if solver.has_solutions() else self.cold_guess()
+        return None if self.nlp(objective).solver().has_solutions() else self.cold_guess()
 
 
 def _duration_and_guess(run: _Run, margin: float) -> tuple:

@@ -48,7 +48,7 @@ from ..ipopt import ParametricSolver
 from ..sampling import align_to_samples
 from .types import NotConverged, Objective, Samples
 
-__all__ = ["CrossingSite", "CrossingSolver", "IpoptSettings", "NlpSolution", "Transcription", "crossing_solver",
+__all__ = ["CrossingNlp", "CrossingSite", "CrossingSolver", "IpoptSettings", "NlpSolution", "Transcription",
            "initial_guess", "sample", "solve_nlp"]
 
 #: Each leg of the initial guess lasts this many ``length / v_sing``: a quintic
@@ -169,8 +169,50 @@ class IpoptSettings:
                 "tol": _IPOPT_TOL, "constr_viol_tol": _IPOPT_CONSTR_VIOL_TOL, "acceptable_iter": 0}
 
 
+@dataclass(frozen=True, eq=False)
+class CrossingNlp:
+    """What one crossing NLP is built from: the models, the task, the site, the limits, its shape and IPOPT's
+    settings (everything but the speed, the back-off and the duration, which are its parameters).
+
+    Parameters
+    ----------
+    kin, dyn : KinematicModel, LumpedDynamics
+    task : CrossingTask
+    site : CrossingSite
+    lim : dict
+        :meth:`GenerationLimits.resolved` arrays.
+    shape : Transcription
+    ipopt : IpoptSettings
+    """
+
+    kin: object
+    dyn: object
+    task: object
+    site: CrossingSite
+    lim: dict
+    shape: Transcription
+    ipopt: IpoptSettings
+
+    def key(self) -> tuple:
+        """Hashable value of these data: equal keys build the same solver."""
+        lim = tuple((k, None if v is None else np.asarray(v, float).tobytes()) for k, v in sorted(self.lim.items()))
+        ends = tuple(np.asarray(a, float).tobytes() for a in (self.task.start, self.task.goal))
+        return (self.kin.robot, self.dyn.model, ends, self.site.key(), lim, self.shape, self.ipopt)
+
+    def solver(self) -> CrossingSolver:
+        """The :class:`CrossingSolver` of these data, built on first use and kept (:data:`_SOLVERS`)."""
+        key = self.key()
+        solver = _SOLVERS.get(key)
+        if solver is None:
+            while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:
+                _SOLVERS.popitem(last=False)
+            solver = _SOLVERS[key] = CrossingSolver(self)
+        _SOLVERS.move_to_end(key)
+        return solver
+
+
 class CrossingSolver:
-    """The crossing NLP of one (robot, dynamics, task, site, limits, transcription), built once.
+    """The crossing NLP of one :class:`CrossingNlp`, built once.
 
     The speed at the crossing ``v_sing``, the back-off ``1 - margin`` and the
     scaled duration are CasADi parameters: with the variables scaled by
@@ -189,21 +231,16 @@ class CrossingSolver:
 
     Parameters
     ----------
-    kin, dyn : KinematicModel, LumpedDynamics
-    task : CrossingTask
-    site : CrossingSite
-    lim : dict
-        :meth:`GenerationLimits.resolved` arrays.
-    shape : Transcription
-    ipopt : IpoptSettings
+    nlp : CrossingNlp
     """
 
-    def __init__(self, kin, dyn, task, site: CrossingSite, lim: dict, shape: Transcription, ipopt: IpoptSettings):
-        self.n, self.shape = kin.n, shape
+    def __init__(self, nlp: CrossingNlp):
+        task, site, shape = nlp.task, nlp.site, nlp.shape
+        self.n, self.shape = nlp.kin.n, shape
         self.L = float(np.linalg.norm(task.goal - task.start))
-        z, p, obj, g, self._lbg, self._ubg = _transcribe(kin, dyn, self.L, site, lim, shape)
-        self._lbx, self._ubx = _variable_bounds(kin.robot, task, site, self.L, shape)
-        self._solver = ParametricSolver("crossing", z, p, obj, g, ipopt=ipopt.options())
+        z, p, obj, g, self._lbg, self._ubg = _transcribe(nlp.kin, nlp.dyn, self.L, site, nlp.lim, shape)
+        self._lbx, self._ubx = _variable_bounds(nlp.kin.robot, task, site, self.L, shape)
+        self._solver = ParametricSolver("crossing", z, p, obj, g, ipopt=nlp.ipopt.options())
         self._solutions: dict[float, np.ndarray] = {}
         # nodes fixed by bounds, restored exactly after a solve (undo the rounding of the scaling)
         self._fixed = ((0, task.start), (shape.NA, site.point), (shape.NA + shape.NB, task.goal)), site.q_point
@@ -242,32 +279,17 @@ _SOLVERS: OrderedDict = OrderedDict()
 _SOLVER_CACHE_SIZE = 4
 
 
-def crossing_solver(kin, dyn, task, site: CrossingSite, lim: dict, shape: Transcription,
-                    ipopt: IpoptSettings) -> CrossingSolver:
-    """The :class:`CrossingSolver` of these data, built on first use and kept (:data:`_SOLVERS`)."""
-    lim_key = tuple((k, None if v is None else np.asarray(v, float).tobytes()) for k, v in sorted(lim.items()))
-    key = (kin.robot, dyn.model, *(np.asarray(a, float).tobytes() for a in (task.start, task.goal)),
-           site.key(), lim_key, shape, ipopt)
-    solver = _SOLVERS.get(key)
-    if solver is None:
-        while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:
-            _SOLVERS.popitem(last=False)
-        solver = _SOLVERS[key] = CrossingSolver(kin, dyn, task, site, lim, shape, ipopt)
-    _SOLVERS.move_to_end(key)
-    return solver
-
-
-def solve_nlp(kin, dyn, task, site: CrossingSite, lim: dict, shape: Transcription, *, v_sing: float,
-              margin: float, duration: float | None, guess: tuple | None, ipopt: IpoptSettings) -> NlpSolution:
+def solve_nlp(nlp: CrossingNlp, *, v_sing: float, margin: float, duration: float | None,
+              guess: tuple | None) -> NlpSolution:
     """Solve the NLP of the module docstring at ``v_sing`` (m/s); NotConverged unless IPOPT reports success.
 
     ``guess`` is the SI tuple of the module docstring, or None to start from
     the solution of the nearest speed already solved on the same solver
-    (:class:`CrossingSolver`; one must exist).  ``margin`` is the relative
+    (:meth:`CrossingNlp.solver`; one must exist).  ``margin`` is the relative
     back-off of every limit at the nodes, ``duration`` the motion time (s)
     of ``Objective.JERK`` (None for ``Objective.TIME``).
     """
-    return crossing_solver(kin, dyn, task, site, lim, shape, ipopt).solve(v_sing, margin, duration, guess)
+    return nlp.solver().solve(v_sing, margin, duration, guess)
 
 
 def _scaled(guess: tuple, L: float, Vs: float) -> np.ndarray:
