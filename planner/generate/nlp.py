@@ -38,6 +38,7 @@ A guess or solution is passed around as the tuple ``(X, V, A, J, Q, h_A, h_B)``
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -202,12 +203,13 @@ class CrossingNlp:
     def solver(self) -> CrossingSolver:
         """The :class:`CrossingSolver` of these data, built on first use and kept (:data:`_SOLVERS`)."""
         key = self.key()
-        solver = _SOLVERS.get(key)
-        if solver is None:
-            while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:
-                _SOLVERS.popitem(last=False)
-            solver = _SOLVERS[key] = CrossingSolver(self)
-        _SOLVERS.move_to_end(key)
+        with _SOLVERS_LOCK:
+            solver = _SOLVERS.get(key)
+            if solver is None:
+                while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:
+                    _SOLVERS.popitem(last=False)
+                solver = _SOLVERS[key] = CrossingSolver(self)
+            _SOLVERS.move_to_end(key)
         return solver
 
 
@@ -242,6 +244,7 @@ class CrossingSolver:
         self._lbx, self._ubx = _variable_bounds(nlp.kin.robot, task, site, self.L, shape)
         self._solver = ParametricSolver("crossing", z, p, obj, g, ipopt=nlp.ipopt.options())
         self._solutions: dict[float, np.ndarray] = {}
+        self._lock = threading.Lock()  # one solve at a time: plans may come from two threads (a CasADi solver is not shared)
         # nodes fixed by bounds, restored exactly after a solve (undo the rounding of the scaling)
         self._fixed = ((0, task.start), (shape.NA, site.point), (shape.NA + shape.NB, task.goal)), site.q_point
 
@@ -254,17 +257,18 @@ class CrossingSolver:
         docstring) or, when None, from the kept solution of the nearest speed; NotConverged unless success."""
         Vs = float(v_sing)
         T0 = self.L / Vs
-        if guess is None:
-            z0 = self._solutions[min(self._solutions, key=lambda v: abs(v - Vs))]
-        else:
-            z0 = _scaled(guess, self.L, Vs)
         dur = 0.0 if duration is None else float(duration) / T0
-        run = self._solver.solve(p=[Vs, 1.0 - margin, dur], z0=np.clip(z0, self._lbx, self._ubx),
-                                 lbx=self._lbx, ubx=self._ubx, lbg=self._lbg, ubg=self._ubg)
-        if run.status != _SUCCESS:
-            raise NotConverged(run.status)
-        zs = np.asarray(run.solution["x"], dtype=float).reshape(-1)
-        self._solutions[Vs] = zs
+        with self._lock:
+            if guess is None:
+                z0 = self._solutions[min(self._solutions, key=lambda v: abs(v - Vs))]
+            else:
+                z0 = _scaled(guess, self.L, Vs)
+            run = self._solver.solve(p=[Vs, 1.0 - margin, dur], z0=np.clip(z0, self._lbx, self._ubx),
+                                     lbx=self._lbx, ubx=self._ubx, lbg=self._lbg, ubg=self._ubg)
+            if run.status != _SUCCESS:
+                raise NotConverged(run.status)
+            zs = np.asarray(run.solution["x"], dtype=float).reshape(-1)
+            self._solutions[Vs] = zs
         X, V, A, J, Q, hA, hB = _unscaled(zs, self.n, self.shape, self.L, Vs)
         nodes, Q[self.shape.NA] = self._fixed
         for k, x in nodes:
@@ -275,6 +279,7 @@ class CrossingSolver:
 
 #: Crossing solvers built in this process, by the value of what they are built from; most recently used last.
 _SOLVERS: OrderedDict = OrderedDict()
+_SOLVERS_LOCK = threading.Lock()
 #: How many :data:`_SOLVERS` are kept (a speed search plans one task with one objective at a time).
 _SOLVER_CACHE_SIZE = 4
 
