@@ -52,17 +52,10 @@ class ParametricSolver:
                                  {"ipopt": {**STRICT_BOUNDS, **ipopt}, "print_time": False})
         self.n_variables, self.n_constraints = int(z.numel()), int(g.numel())
 
-    def solve(self, *, p, z0, lbx, ubx, lbg, ubg, lam_x0=None, lam_g0=None) -> IpoptRun:
-        """Solve the instance of parameters ``p`` from ``z0``.
-
-        ``lam_x0`` and ``lam_g0`` (the multipliers of a neighbouring solve,
-        e.g. ``solution["lam_x"]``) are used by IPOPT only when the solver was
-        built with ``warm_start_init_point = "yes"``; the solution dict holds
-        the multipliers of this solve under the same names without ``0``.
-        """
-        duals = {k: v for k, v in (("lam_x0", lam_x0), ("lam_g0", lam_g0)) if v is not None}
+    def solve(self, *, p, z0, lbx, ubx, lbg, ubg) -> IpoptRun:
+        """Solve the instance of parameters ``p`` from ``z0``."""
         t0 = time.perf_counter()
-        sol = self._solver(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, **duals)
+        sol = self._solver(x0=z0, p=p, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
         elapsed = time.perf_counter() - t0
         stats = self._solver.stats()
         return IpoptRun(sol, stats, str(stats.get("return_status", "unknown")), elapsed)
