@@ -273,13 +273,13 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
 
 
 def _mapped_start(warm: Counterexample, qm: np.ndarray, ts: float):
-    """A neighbouring recording's counterexample carried to the readings ``qm``: ``(xi, X, V, U, Q)``.
+    """A neighbouring recording's counterexample carried to the readings ``qm``: ``(X, V, U, Q)``.
 
-    The two recordings follow one path at different speeds (or turn back at
-    different points), so samples are matched by the arc length of the
-    joints along each (the counterexample's own joints stand for its
-    readings: they lie within ``eps_q`` of them); speeds and accelerations
-    are rescaled by the local rate of that match.
+    The two recordings follow one path at different speeds, so samples are
+    matched by the arc length of the joints along each (the
+    counterexample's own joints stand for its readings: they lie within
+    ``eps_q`` of them); velocities are rescaled by the local rate of that
+    match and the accelerations are their differences.
     """
     def arc(Q):
         return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(Q, axis=0), axis=1))])
@@ -295,7 +295,7 @@ def _mapped_start(warm: Counterexample, qm: np.ndarray, ts: float):
 
     X, V, Q = at(warm.x), at(warm.v) * rate[:, None], at(warm.q)
     U = np.diff(V, axis=0) / ts
-    return np.array(warm.xi), X, V, U, Q
+    return X, V, U, Q
 
 
 def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, kind: CounterexampleKind, *,
@@ -313,11 +313,11 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     qm = np.vstack([rb.q_meas, np.repeat(rb.q_meas[-1:], K - K0, axis=0)])
 
     # Initial guess: the FK of the samples with the starting geometry, in mode
-    # m0 (bounce), or in m0 then -m0 (crossing).
+    # m0 (bounce), or in m0 then -m0 (crossing); or a neighbour's counterexample
+    # carried to these readings (xi_start is then its geometry).
     Dq0 = np.zeros((K, n))
     if warm is not None:
-        xi_start, X0, V0, U0, Q0 = _mapped_start(warm, qm, ts)
-        xi_start = np.clip(xi_start, rb.xi_lo, rb.xi_hi)
+        X0, V0, U0, Q0 = _mapped_start(warm, qm, ts)
         U0 = np.clip(U0, -amax, amax)
         Dq0 = (Q0 - qm) / eps[None, :]
     elif kind is CounterexampleKind.BOUNCE:
@@ -384,8 +384,8 @@ def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: Counte
     :func:`search_bounce` and :func:`search_crossing` are this function with
     ``kind`` fixed; their docstrings describe the NLP.
 
-    ``warm``, a counterexample of a neighbouring recording (the next speed,
-    the next turn-back distance), replaces ``xi_start`` and the FK guess:
+    ``warm``, a counterexample of a neighbouring recording (e.g. at the
+    next speed of a bisection), replaces ``xi_start`` and the FK guess:
     the NLP starts from it, carried to these readings sample by sample
     (matched by the joints' arc length along each recording).  Only the
     start changes: the candidate is verified as any other.
