@@ -20,7 +20,8 @@ process, which is waited for when the certificate is returned.
 
 ``--profile`` instead profiles one warm run with every search in the calling
 process (``refute_in_background=False``, so the worker's share is seen too)
-and prints the inclusive time of each part of the work (:data:`PARTS`):
+and prints the inclusive time (``--cpu``: CPU time, steadier on a loaded
+machine) of each part of the work (:data:`PARTS`):
 plans, execution classes, forward tracking, window passes, the CasADi
 kinematics, NLP building, IPOPT, the counterexample checks, the simulations.
 """
@@ -52,12 +53,14 @@ PARTS = (
     ("Monte Carlo (monte_carlo_runs)", "planner/montecarlo.py", "monte_carlo_runs"),
     ("  batched forward tracking (track_batch)", "verifier/tracker.py", "track_batch"),
     ("refutation bound (refute_speed)", "planner/certify/crossing.py", "refute_speed"),
-    ("bounce gap (bounce_gap)", "planner/bounce.py", "bounce_gap"),
+    ("bounce verdicts, tracker side (bounce_verdicts)", "planner/bounce.py", "bounce_verdicts"),
+    ("bounce floor, crossing searches (bounce_floor)", "planner/bounce.py", "bounce_floor"),
     ("  bounce simulations (simulate_bounce)", "planner/simulate/run.py", "simulate_bounce"),
     ("counterexample NLPs (search_counterexample)", "planner/refute/nlp.py", "search_counterexample"),
     ("  FK initial guesses (fk_branch_guess)", "planner/refute/nlp.py", "fk_branch_guess"),
     ("  NLP building (_counterexample_solver)", "planner/refute/nlp.py", "_counterexample_solver"),
     ("  IPOPT iterations (ParametricSolver.solve)", "planner/ipopt.py", "solve"),
+    ("  solver builds (ParametricSolver.__init__)", "planner/ipopt.py", "__init__"),
     ("  trusted checks (verify_counterexample)", "planner/refute/verify.py", "verify_counterexample"),
     ("every window pass (verifier.window._run)", "verifier/window.py", "_run"),
     ("every compiled kernel call (compiled/step.py run)", "verifier/compiled/step.py", "run"),
@@ -95,8 +98,12 @@ def child(repeat: int, method: str, foreground: bool) -> list:
     return runs
 
 
-def profile(method: str) -> None:
-    """One warm ``certify_crossing`` under cProfile, every search in this process; prints the :data:`PARTS` table."""
+def profile(method: str, cpu: bool = False, save: str | None = None) -> None:
+    """One warm ``certify_crossing`` under cProfile, every search in this process; prints the :data:`PARTS` table.
+
+    ``cpu``: time the parts by this process's CPU time (all threads) instead of the wall clock, which a
+    loaded machine inflates; ``save``: also write the raw statistics there (``pstats`` format).
+    """
     import cProfile
     import pstats
 
@@ -110,15 +117,20 @@ def profile(method: str) -> None:
     bounds = PlanningBounds(method=method, dynamics=entry.dynamics if method == "dynamic" else None)
     kin, imodel = KinematicModel(robot), IntervalModel(robot)
     certify_speed(kin, imodel, task, bounds, 1.0)  # loads the kernels (not profiled)
-    prof = cProfile.Profile()
-    t0 = time.perf_counter()
+    clock = time.process_time if cpu else time.perf_counter
+    prof = cProfile.Profile(clock)
+    t0 = clock()
     prof.enable()
     cert = certify_crossing(robot, task, bounds, kin=kin, imodel=imodel, refute_in_background=False)
     prof.disable()
-    wall = time.perf_counter() - t0
+    wall = clock() - t0
+    if save:
+        prof.dump_stats(save)
     stats = pstats.Stats(prof).stats
-    print(f"one warm certify_crossing under cProfile, every search in this process: {wall:.1f} s "
-          f"(v_min {cert.v_min}, refutation bound {cert.refutation_bound}); inclusive times:")
+    load = " / ".join(f"{v:.2f}" for v in os.getloadavg())
+    print(f"one warm certify_crossing under cProfile, every search in this process: {wall:.1f} "
+          f"{'CPU-s' if cpu else 's'} (v_min {cert.v_min}, refutation bound {cert.refutation_bound}; load average "
+          f"{load} at the end); inclusive {'CPU ' if cpu else ''}times:")
     print(f"{'part':<52}{'calls':>7}{'s':>9}{'share':>8}")
     for label, path, name in PARTS:
         calls = tot = 0.0
@@ -150,10 +162,12 @@ def main(argv=None) -> int:
     p.add_argument("--no-cold", action="store_true", help="skip the run with an empty numba cache")
     p.add_argument("--json")
     p.add_argument("--profile", action="store_true", help="profile one warm run by part of the work instead")
+    p.add_argument("--cpu", action="store_true", help="with --profile: CPU time instead of wall time")
+    p.add_argument("--save", help="with --profile: write the raw cProfile statistics to this file")
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.profile:
-        profile(a.method)
+        profile(a.method, a.cpu, a.save)
         return 0
     if a.child:
         print(json.dumps(child(a.repeat, a.method, a.foreground)))

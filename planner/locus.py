@@ -12,6 +12,8 @@ Plans (:func:`planner.task.crossing_on_segment`) and simulations
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,7 +76,12 @@ def scan_line(model, p, u, xi, q_guess, s_lo, s_hi, h) -> LineScan:
     """Continue the IK from ``s = 0`` outwards to ``s_lo < 0`` and ``s_hi > 0``, stopping when invalid.
 
     A pose is valid when IK converges with ``J_q`` regular, the pose lies in
-    ``robot.x_bounds`` and the joints within their limits.
+    ``robot.x_bounds`` and the joints within their limits.  The points on
+    the grid ``s = +-h k`` are kept per line (:data:`_SIDES`) and reused by
+    a later scan of the same line to any extent: the bounce searches
+    simulate one line for many turn-back distances.  Each point depends only
+    on the two before it, so a reused scan is the one computed afresh, to
+    the last bit.
     """
     Q0, ok0 = model.ik_batch(p[None, :], xi, q_guess[None, :])
     if not valid_poses(model, p[None, :], Q0, ok0)[0]:
@@ -85,30 +92,61 @@ def scan_line(model, p, u, xi, q_guess, s_lo, s_hi, h) -> LineScan:
     sides = {}
     for sign, lim in ((-1.0, s_lo), (1.0, s_hi)):
         n_steps = int(math.ceil(abs(lim) / h - GRID_TOL))
-        grid = sign * np.minimum(h * np.arange(1, n_steps + 1), abs(lim))
-        s_list, q_list = [], []
-        q_prev = Q0[0]
-        q_prev2 = None
-        done = True
-        fail = math.nan
-        for s in grid:
-            x = p + s * u
-            guess = q_prev if q_prev2 is None else 2.0 * q_prev - q_prev2  # linear predictor
-            Qk, ok = model.ik_batch(x[None, :], xi, guess[None, :])
-            if not valid_poses(model, x[None, :], Qk, ok)[0]:
-                done = False
-                fail = s
-                break
-            s_list.append(s)
-            q_list.append(Qk[0])
-            q_prev2, q_prev = q_prev, Qk[0]
-        sides[sign] = (s_list, q_list, done, fail)
+        sides[sign] = _scan_side(model, p, u, xi, Q0[0], sign, h, n_steps, min(h * n_steps, abs(lim)),
+                                 (model, *(np.asarray(a, float).tobytes() for a in (p, u, xi, q_guess)), h, sign))
     s_neg, q_neg, lo_done, lo_fail = sides[-1.0]
     s_pos, q_pos, hi_done, hi_fail = sides[1.0]
     s_all = np.array(s_neg[::-1] + [0.0] + s_pos)
     q_all = np.array(q_neg[::-1] + [Q0[0]] + q_pos).reshape(-1, model.n)
     det = model.det_batch(p + s_all[:, None] * u, q_all, xi)
     return LineScan(s_all, q_all, det, lo_done, hi_done, lo_fail, hi_fail)
+
+
+#: Continuations of :func:`scan_line` on the grid ``s = sign h k``, by (model, line, guess, h, sign):
+#: ``[joints at k = 1, 2, ...], first invalid k or None``; most recently used last.
+_SIDES: OrderedDict = OrderedDict()
+#: How many continuations :data:`_SIDES` keeps (two per line; a few hundred joint vectors each).
+_SIDES_KEPT = 16
+_SIDES_LOCK = threading.Lock()
+
+
+def _ik_step(model, p, u, xi, s, q_prev, q_prev2):
+    """IK at ``p + s u`` from the linear predictor of the last two joints; None when the pose is invalid."""
+    x = p + s * u
+    guess = q_prev if q_prev2 is None else 2.0 * q_prev - q_prev2
+    Qk, ok = model.ik_batch(x[None, :], xi, guess[None, :])
+    return Qk[0] if valid_poses(model, x[None, :], Qk, ok)[0] else None
+
+
+def _scan_side(model, p, u, xi, q0, sign, h, n_steps, s_end, key):
+    """One side of :func:`scan_line`: the points ``sign h k`` for ``k < n_steps`` (kept in :data:`_SIDES`),
+    then ``sign s_end``; returns ``(s list, q list, done, first invalid s or NaN)``."""
+    with _SIDES_LOCK:
+        grid = _SIDES.pop(key, None) or ([], None)
+        qs, fail_k = grid
+        while len(qs) < n_steps - 1 and fail_k is None:
+            k = len(qs) + 1
+            q = _ik_step(model, p, u, xi, sign * (h * k), qs[-1] if qs else q0,
+                         (qs[-2] if len(qs) >= 2 else q0) if qs else None)
+            if q is None:
+                fail_k = k
+            else:
+                qs.append(q)
+        _SIDES[key] = (qs, fail_k)
+        while len(_SIDES) > _SIDES_KEPT:
+            _SIDES.popitem(last=False)
+    if fail_k is not None and fail_k < n_steps:
+        return [sign * (h * k) for k in range(1, fail_k)], qs[:fail_k - 1], False, sign * (h * fail_k)
+    used = qs[:max(n_steps - 1, 0)]
+    s_list = [sign * (h * k) for k in range(1, len(used) + 1)]
+    if n_steps < 1:
+        return s_list, list(used), True, math.nan
+    prev = used[-1] if used else q0
+    prev2 = (used[-2] if len(used) >= 2 else q0) if used else None
+    q = _ik_step(model, p, u, xi, sign * s_end, prev, prev2)
+    if q is None:
+        return s_list, list(used), False, sign * s_end
+    return s_list + [sign * s_end], list(used) + [q], True, math.nan
 
 
 def refine_edge(model, p, u, xi, s_ok: float, q_ok: np.ndarray, s_bad: float) -> float:

@@ -19,7 +19,13 @@ import pytest
 
 from crosscert.planner.certify.plan import certify_plan
 from crosscert.planner.task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
-from crosscert.planner.generate import GeneratedTrajectory, GenerationLimits, NotConverged, generate_crossing
+from crosscert.planner.generate import (
+    CheckFailed,
+    GeneratedTrajectory,
+    GenerationLimits,
+    NotConverged,
+    generate_crossing,
+)
 from problems import interval_model, kinematics
 from crosscert.robots import DEXTAR
 from crosscert.robots.dextar import benchmark_crossing
@@ -274,3 +280,24 @@ def test_infeasible_and_bad_requests(task, bench):
         generate_crossing(kin, DEXTAR_DYNAMICS, task, V_SING, GenerationLimits(qd_max=-1.0, qdd_max=1.0))
     with pytest.raises(InputError, match="robot"):
         generate_crossing(kin, dataclasses.replace(DEXTAR_DYNAMICS, robot_name="other"), task, V_SING, LIMITS)
+
+
+def test_speeds_share_one_nlp_and_every_warm_solution_is_checked(task, dyn, monkeypatch):
+    """Plans at several speeds solve one NLP (the speed is a parameter), each from the nearest speed's
+    solution, and each is checked independently: with a check that fails, a warm-started plan fails."""
+    import crosscert.planner.generate.crossing as crossing_mod
+    import crosscert.planner.generate.nlp as nlp_mod
+
+    kin = kinematics()
+    nlp_mod._SOLVERS.clear()
+    generate_crossing(kin, DEXTAR_DYNAMICS, task, 1.2, LIMITS)
+    warm = generate_crossing(kin, DEXTAR_DYNAMICS, task, V_SING, LIMITS)
+    assert len(nlp_mod._SOLVERS) == 1  # one solver for both speeds
+    _check_trajectory(warm, task, dyn)  # at V_SING, within every limit
+
+    def failing_check(*args, **kwargs):
+        raise CheckFailed("test", "the check of this test fails every plan")
+
+    monkeypatch.setattr(crossing_mod, "verify", failing_check)
+    with pytest.raises(CheckFailed, match="fails every plan"):
+        generate_crossing(kin, DEXTAR_DYNAMICS, task, 1.25, LIMITS)

@@ -25,6 +25,7 @@ from crosscert.planner.refute import (
     ipopt_outcome,
     refutation_bound,
     search_bounce,
+    search_counterexample,
     verify_bounce,
 )
 from problems import kinematics, simulate
@@ -226,3 +227,29 @@ def test_a_speed_without_attempts_was_not_searched():
     nan = float("nan")
     row = SpeedRefutation(0.5, 0, False, False, None, nan, nan, nan, "no plan: too fast", 0.0, ())
     assert row.outcome is SearchOutcome.NOT_SEARCHED
+
+
+def test_warm_start_from_a_neighbouring_speed_is_verified_like_any_other(slow_case, monkeypatch):
+    """A search started from the 0.6 m/s counterexample carried to the 0.65 m/s readings finds one, from
+    that geometry; the trusted check still judges it: with a check that rejects, it is no counterexample."""
+    import crosscert.planner.refute.nlp as nlp_mod
+
+    kin, _rb, res = slow_case
+    rb = RecordingBounds.for_model(kin, simulate(0.65, False, 0).q_meas, m0=1)
+    warm = res.counterexample
+    att = search_counterexample(kin, rb, "bounce", warm=warm, max_cpu_time=30.0)
+    assert att.verified and att.outcome is SearchOutcome.FOUND
+    assert np.array_equal(att.xi_start, np.clip(warm.xi, rb.xi_lo, rb.xi_hi))
+    assert att.counterexample.q.shape == rb.q_meas.shape
+    rows = refutation_bound(kin, _recording, [0.65], m0=1, xi_starts=[None, _corner()], warm=warm,
+                            max_cpu_time=30.0).rows
+    assert rows[0].verified and np.array_equal(rows[0].attempts[0].xi_start, att.xi_start)
+
+    def reject(kin, ce, rb, kind, dense):
+        return dataclasses.replace(att.verification, ok=False, failures=("rejected by the test",))
+
+    monkeypatch.setattr(nlp_mod, "verify_counterexample", reject)
+    again = search_counterexample(kin, rb, "bounce", warm=warm, max_cpu_time=30.0)
+    assert again.found and not again.verified and again.outcome is SearchOutcome.REJECTED
+    with pytest.raises(InputError, match="warm"):
+        search_counterexample(kin, rb, "bounce", warm=warm, xi_start=DEXTAR.xi_center)

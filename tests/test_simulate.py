@@ -274,3 +274,33 @@ def test_simulator_is_robot_agnostic():
     for word in ("dextar", "five-bar", "five bar", "fivebar"):
         assert word not in src
     assert math.isclose(sim.RAMP_PEAK, 30 / 16)
+
+
+def test_line_scans_reused_across_bounces_are_the_fresh_ones(kin, bench, xi_true, monkeypatch):
+    """Bounces of one line at several turn-back distances share its IK continuation (planner.locus keeps
+    the grid points): each one is, to the last bit, the bounce simulated with nothing kept."""
+    import crosscert.planner.locus as locus
+
+    kw = dict(xi_true=xi_true, working_guess=bench.q_point, seed=3, quantisation="uniform")
+    shorts = (0.004, 0.0, 0.012, 0.0075)  # a short scan first, then longer and shorter ones
+    locus._SIDES.clear()
+    reused = [simulate_bounce(kin, bench.point, bench.direction, 1.2, short=d, **kw) for d in shorts]
+    assert locus._SIDES  # the continuations were kept ...
+    fresh = []
+    for d in shorts:
+        locus._SIDES.clear()  # ... and each is compared with one computed afresh
+        fresh.append(simulate_bounce(kin, bench.point, bench.direction, 1.2, short=d, **kw))
+    for a, b in zip(reused, fresh):
+        assert np.array_equal(a.q_true, b.q_true) and np.array_equal(a.q_meas, b.q_meas)
+    # the scans themselves, to extents off the grid, ending at an invalid pose or not
+    p, u, qg, h = bench.point, bench.direction, bench.q_point, 1.01e-3
+    ends = [(-0.0123, 0.0031), (-0.2, 0.2), (-0.05, 0.0), (-0.0123, 0.0031), (-0.3, 0.009)]
+    locus._SIDES.clear()
+    kept = [locus.scan_line(kin, p, u, xi_true, qg, lo, hi, h) for lo, hi in ends]
+    for (lo, hi), a in zip(ends, kept):
+        locus._SIDES.clear()
+        b = locus.scan_line(kin, p, u, xi_true, qg, lo, hi, h)
+        assert np.array_equal(a.s, b.s) and np.array_equal(a.q, b.q) and np.array_equal(a.det, b.det)
+        assert (a.lo_done, a.hi_done) == (b.lo_done, b.hi_done)
+        assert np.array_equal([a.lo_fail, a.hi_fail], [b.lo_fail, b.hi_fail], equal_nan=True)
+    assert not kept[1].lo_done and kept[0].lo_done  # a long scan ends at an invalid pose, a short one not

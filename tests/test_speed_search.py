@@ -99,6 +99,7 @@ def test_bad_bracket_is_refused(monkeypatch):
 class _Row:
     def __init__(self, v, refuted):
         self.speed, self.verified = v, refuted
+        self.attempts = ()  # no counterexample to warm-start the bisection from
 
 
 def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeypatch):
@@ -106,7 +107,7 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
     bisection stays below it too; the bound is the largest refuted speed within tol."""
     started, gate = [], threading.Event()
 
-    def fake(robot, task, b, m0, starts, v, kin=None):
+    def fake(robot, task, b, m0, starts, v, kin=None, warm=None):
         started.append(v)
         if v == 0.3:
             gate.wait(10)  # hold the first search until the ceiling is set
@@ -125,3 +126,31 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
     assert started[:7] == scan[:7]  # increasing order
     assert 0.83 <= bound <= 0.84 and all(r.speed < 0.99 for r in rows)
     assert len(started) == len(set(started))
+
+
+def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(monkeypatch):
+    """The scan's searches start cold; each bisection step gets the counterexample of the fastest
+    refuted speed so far (deterministic: it comes from the rows, not from what the worker did last)."""
+    calls = []
+
+    class _Attempt:
+        def __init__(self, v):
+            self.verified, self.counterexample = True, f"ce@{v}"
+
+    def fake(robot, task, b, m0, starts, v, kin=None, warm=None):
+        calls.append((v, warm))
+        row = _Row(v, v <= 0.84)
+        row.attempts = (_Attempt(v),) if row.verified else ()
+        return row
+
+    monkeypatch.setattr(pipeline_mod, "refute_speed", fake)
+    ref = Refuter(DEXTAR, None, None, 1, [], None, None)
+    ref.submit([0.5, 0.6, 0.7, 0.8, 0.9])
+    bound, _rows = refutation_search(ref, 0.99, 0.01)
+    assert 0.83 <= bound <= 0.84
+    assert [c for c in calls[:5]] == [(v, None) for v in (0.5, 0.6, 0.7, 0.8, 0.9)]
+    assert len(calls) > 5
+    for i in range(5, len(calls)):
+        v, warm = calls[i]
+        fastest = max(u for u, _w in calls[:i] if u <= 0.84)  # the fastest refuted speed searched before
+        assert warm == f"ce@{fastest}", (v, warm)

@@ -447,12 +447,13 @@ _MODELS: dict = {}
 REFUTE_CPU_TIME = 2.0
 
 
-def refute_speed(robot, task, b, m0, starts, v, kin=None):
+def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
 
     Module-level so that any executor can run it in another process; builds
     (and keeps) the robot's ``KinematicModel`` there.  A speed the planner cannot plan gives
-    a row with no counterexample and the planner's message as status.
+    a row with no counterexample and the planner's message as status.  ``warm``: a verified
+    counterexample at a neighbouring speed, the start of the first attempt (:func:`refute.refutation_bound`).
     """
     if kin is None:
         # keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes
@@ -467,7 +468,7 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None):
     a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b, robot)
     overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
     return refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
-                                   bounds=overrides, max_cpu_time=REFUTE_CPU_TIME).rows[0]
+                                   bounds=overrides, max_cpu_time=REFUTE_CPU_TIME, warm=warm).rows[0]
 
 
 class Refuter:
@@ -529,8 +530,11 @@ class Refuter:
         with self._lock:
             return sorted(self._speeds)
 
-    def result(self, v):
-        """The search at speed ``v``: the executor's result, or a run here if the executor failed."""
+    def result(self, v, warm=None):
+        """The search at speed ``v``: the executor's result, or a run here if the executor failed.
+
+        ``warm`` (a verified counterexample at a neighbouring speed) starts a search not yet queued.
+        """
         with self._lock:
             self._speeds.add(v)
         if v not in self._rows:
@@ -541,7 +545,7 @@ class Refuter:
                 with self._lock:
                     future = self._futures.get(v)
                     if future is None or future.cancelled():
-                        future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+                        future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v, warm=warm)
                 try:
                     row = future.result()
                 except Exception as exc:
@@ -555,7 +559,7 @@ class Refuter:
                     self._stop_executor()
                     self._executor = None
                     self._kin = None
-            self._rows[v] = row if row is not None else refute_speed(*self._args, v, kin=self._kin)
+            self._rows[v] = row if row is not None else refute_speed(*self._args, v, kin=self._kin, warm=warm)
         return self._rows[v]
 
     def close(self) -> None:
@@ -577,7 +581,8 @@ def refutation_search(refuter: Refuter, v_top, tol):
 
     The coarse scan submitted to ``refuter`` (0.1 m/s from 0.3 m/s, or the
     caller's speeds) below ``v_top``, then bisection between the fastest
-    refuted and the slowest non-refuted speed above it, to ``tol``.  Each
+    refuted and the slowest non-refuted speed above it, to ``tol``, each
+    step warm-started from the fastest refuted speed's counterexample.  Each
     speed is searched against its own plan's readings and ``a_max`` (the
     bounds its certificate would use); a failed search proves nothing (the
     NLP is non-convex).
@@ -599,4 +604,4 @@ def refutation_search(refuter: Refuter, v_top, tol):
         if v_no - v_ok <= tol:
             return v_ok, [rows[v] for v in ordered]
         mid = round(0.5 * (v_ok + v_no), 6)
-        rows[mid] = refuter.result(mid)
+        rows[mid] = refuter.result(mid, warm=refute.verified_counterexample(rows[v_ok]))

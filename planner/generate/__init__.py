@@ -22,7 +22,7 @@ transcription and its solve), :mod:`.check` (the independent check),
 """
 
 from .check import CRITERION_TOL, LIMIT_RTOL
-from .crossing import generate_crossing
+from .crossing import GenerationOptions, generate_crossing
 from .types import (
     CheckFailed,
     GeneratedTrajectory,
@@ -40,6 +40,7 @@ __all__ = [
     "GeneratedTrajectory",
     "GenerationError",
     "GenerationLimits",
+    "GenerationOptions",
     "LimitExceeded",
     "NotConverged",
     "Objective",

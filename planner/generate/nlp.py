@@ -38,16 +38,19 @@ A guess or solution is passed around as the tuple ``(X, V, A, J, Q, h_A, h_B)``
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
-from ..ipopt import solve_with_ipopt
+from ..ipopt import ParametricSolver
 from ..sampling import align_to_samples
 from .types import NotConverged, Objective, Samples
 
-__all__ = ["NlpSolution", "initial_guess", "sample", "solve_nlp"]
+__all__ = ["CrossingNlp", "CrossingSite", "CrossingSolver", "IpoptSettings", "NlpSolution", "Transcription",
+           "initial_guess", "sample", "solve_nlp"]
 
 #: Each leg of the initial guess lasts this many ``length / v_sing``: a quintic
 #: from rest to ``v_sing`` has mean speed ``v_sing / 2``.
@@ -126,190 +129,318 @@ class NlpSolution:
     ng: int
 
 
-def solve_nlp(kin, dyn, task, point, q_point, t_dir, m0, v_sing, lim, *, objective, duration, NA, NB, xi,
-              guess, margin, torque, max_iter, max_cpu_time, print_level) -> NlpSolution:
-    """Build and solve the NLP of the module docstring; NotConverged unless IPOPT reports success.
+@dataclass(frozen=True, eq=False)
+class CrossingSite:
+    """Where the motion crosses: the point (m), its joints (rad), the uncontrolled direction there (unit),
+    the start mode (+1 or -1) and the planning geometry ``xi`` (SI)."""
 
-    Decision variables are scaled to O(1) (lengths by ``|goal - start|``,
-    speeds by ``v_sing``, times by their ratio); every constraint row is
-    divided by its natural scale (limit, force scale, ...).
+    point: np.ndarray
+    q_point: np.ndarray
+    t_dir: np.ndarray
+    m0: int
+    xi: np.ndarray
+
+    def key(self) -> tuple:
+        """Hashable value of the site (the arrays' bytes)."""
+        return (*(np.asarray(a, float).tobytes() for a in (self.point, self.q_point, self.t_dir, self.xi)), self.m0)
+
+
+@dataclass(frozen=True)
+class Transcription:
+    """The NLP's shape: ``NA``, ``NB`` intervals before and after the crossing node, the objective, and
+    whether the actuator torque limits are imposed."""
+
+    NA: int
+    NB: int
+    objective: Objective
+    torque: bool
+
+
+@dataclass(frozen=True)
+class IpoptSettings:
+    """IPOPT's caps and verbosity for the crossing NLP: iterations, CPU time (s), print level (0 silent)."""
+
+    max_iter: int = 3000
+    max_cpu_time: float = 60.0
+    print_level: int = 0
+
+    def options(self) -> dict:
+        """IPOPT options of a solve (tolerances of this module and these caps)."""
+        return {"print_level": self.print_level, "max_iter": self.max_iter, "max_cpu_time": self.max_cpu_time,
+                "tol": _IPOPT_TOL, "constr_viol_tol": _IPOPT_CONSTR_VIOL_TOL, "acceptable_iter": 0}
+
+
+@dataclass(frozen=True, eq=False)
+class CrossingNlp:
+    """What one crossing NLP is built from: the models, the task, the site, the limits, its shape and IPOPT's
+    settings (everything but the speed, the back-off and the duration, which are its parameters).
 
     Parameters
     ----------
     kin, dyn : KinematicModel, LumpedDynamics
     task : CrossingTask
-    point, q_point : ndarray, shape (n,)
-        Crossing point (m) and the joints there (rad).
-    t_dir : ndarray, shape (n,)
-        Uncontrolled direction at the crossing point (unit).
-    m0 : int
-        Assembly mode before the crossing (+1 or -1).
-    v_sing : float
-        Speed at the crossing, m/s.
+    site : CrossingSite
     lim : dict
         :meth:`GenerationLimits.resolved` arrays.
-    objective : Objective
-    duration : float or None
-        Motion time for ``Objective.JERK``, s.
-    NA, NB : int
-        Intervals before and after the crossing node.
-    xi : ndarray, shape (m,)
-        Planning geometry.
-    guess : tuple
-        ``(X, V, A, J, Q, h_A, h_B)``, SI.
-    margin : float
-        Relative back-off of every limit at the nodes.
-    torque : bool
-        Impose the actuator torque limits.
-    max_iter, max_cpu_time, print_level
-        IPOPT settings.
+    shape : Transcription
+    ipopt : IpoptSettings
     """
-    n = kin.n
-    N = NA + NB
-    ks = NA
+
+    kin: object
+    dyn: object
+    task: object
+    site: CrossingSite
+    lim: dict
+    shape: Transcription
+    ipopt: IpoptSettings
+
+    def key(self) -> tuple:
+        """Hashable value of these data: equal keys build the same solver."""
+        lim = tuple((k, None if v is None else np.asarray(v, float).tobytes()) for k, v in sorted(self.lim.items()))
+        ends = tuple(np.asarray(a, float).tobytes() for a in (self.task.start, self.task.goal))
+        return (self.kin.robot, self.dyn.model, ends, self.site.key(), lim, self.shape, self.ipopt)
+
+    def solver(self) -> CrossingSolver:
+        """The :class:`CrossingSolver` of these data, built on first use and kept (:data:`_SOLVERS`)."""
+        key = self.key()
+        with _SOLVERS_LOCK:
+            solver = _SOLVERS.get(key)
+            if solver is None:
+                while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:
+                    _SOLVERS.popitem(last=False)
+                solver = _SOLVERS[key] = CrossingSolver(self)
+            _SOLVERS.move_to_end(key)
+        return solver
+
+
+class CrossingSolver:
+    """The crossing NLP of one :class:`CrossingNlp`, built once.
+
+    The speed at the crossing ``v_sing``, the back-off ``1 - margin`` and the
+    scaled duration are CasADi parameters: with the variables scaled by
+    ``|goal - start|`` and ``v_sing`` (module docstring), the interval maps,
+    bounds and fixed nodes do not depend on the speed, so one ``nlpsol``
+    serves every speed of a speed search and every margin re-solve.  Each
+    converged solution is kept (by speed) as the starting point of the
+    nearest speed asked next, in scaled units.
+
+    Only the primal point is carried over.  IPOPT uses given multipliers
+    only with ``warm_start_init_point``, an option fixed when the solver is
+    built, and with it a cold start (no multipliers yet) is far slower: on
+    the benchmark task 60 iterations and 10 CPU-s instead of 24 and 1.2;
+    with the multipliers a warm solve takes 5-13 iterations instead of
+    12-22, about 0.05 CPU-s less, which does not pay for a second solver.
+
+    Parameters
+    ----------
+    nlp : CrossingNlp
+    """
+
+    def __init__(self, nlp: CrossingNlp):
+        task, site, shape = nlp.task, nlp.site, nlp.shape
+        self.n, self.shape = nlp.kin.n, shape
+        self.L = float(np.linalg.norm(task.goal - task.start))
+        z, p, obj, g, self._lbg, self._ubg = _transcribe(nlp.kin, nlp.dyn, self.L, site, nlp.lim, shape)
+        self._lbx, self._ubx = _variable_bounds(nlp.kin.robot, task, site, self.L, shape)
+        self._solver = ParametricSolver("crossing", z, p, obj, g, ipopt=nlp.ipopt.options())
+        self._solutions: dict[float, np.ndarray] = {}
+        self._lock = threading.Lock()  # one solve at a time: plans may come from two threads (a CasADi solver is not shared)
+        # nodes fixed by bounds, restored exactly after a solve (undo the rounding of the scaling)
+        self._fixed = ((0, task.start), (shape.NA, site.point), (shape.NA + shape.NB, task.goal)), site.q_point
+
+    def has_solutions(self) -> bool:
+        """A converged solution is kept (a warm start for any speed)."""
+        return bool(self._solutions)
+
+    def solve(self, v_sing: float, margin: float, duration: float | None, guess: tuple | None) -> NlpSolution:
+        """Solve at ``v_sing`` (m/s) with the back-off ``margin`` from ``guess`` (SI tuple of the module
+        docstring) or, when None, from the kept solution of the nearest speed; NotConverged unless success."""
+        Vs = float(v_sing)
+        T0 = self.L / Vs
+        dur = 0.0 if duration is None else float(duration) / T0
+        with self._lock:
+            if guess is None:
+                z0 = self._solutions[min(self._solutions, key=lambda v: abs(v - Vs))]
+            else:
+                z0 = _scaled(guess, self.L, Vs)
+            run = self._solver.solve(p=[Vs, 1.0 - margin, dur], z0=np.clip(z0, self._lbx, self._ubx),
+                                     lbx=self._lbx, ubx=self._ubx, lbg=self._lbg, ubg=self._ubg)
+            if run.status != _SUCCESS:
+                raise NotConverged(run.status)
+            zs = np.asarray(run.solution["x"], dtype=float).reshape(-1)
+            self._solutions[Vs] = zs
+        X, V, A, J, Q, hA, hB = _unscaled(zs, self.n, self.shape, self.L, Vs)
+        nodes, Q[self.shape.NA] = self._fixed
+        for k, x in nodes:
+            X[k] = x
+        return NlpSolution(X, V, A, J, Q, hA, hB, run.status, int(run.stats.get("iter_count", -1)), run.elapsed_s,
+                           self._solver.n_variables, self._solver.n_constraints)
+
+
+#: Crossing solvers built in this process, by the value of what they are built from; most recently used last.
+_SOLVERS: OrderedDict = OrderedDict()
+_SOLVERS_LOCK = threading.Lock()
+#: How many :data:`_SOLVERS` are kept (a speed search plans one task with one objective at a time).
+_SOLVER_CACHE_SIZE = 4
+
+
+def solve_nlp(nlp: CrossingNlp, *, v_sing: float, margin: float, duration: float | None,
+              guess: tuple | None) -> NlpSolution:
+    """Solve the NLP of the module docstring at ``v_sing`` (m/s); NotConverged unless IPOPT reports success.
+
+    ``guess`` is the SI tuple of the module docstring, or None to start from
+    the solution of the nearest speed already solved on the same solver
+    (:meth:`CrossingNlp.solver`; one must exist).  ``margin`` is the relative
+    back-off of every limit at the nodes, ``duration`` the motion time (s)
+    of ``Objective.JERK`` (None for ``Objective.TIME``).
+    """
+    return nlp.solver().solve(v_sing, margin, duration, guess)
+
+
+def _scaled(guess: tuple, L: float, Vs: float) -> np.ndarray:
+    """The SI guess tuple as the scaled decision vector (lengths by L, speeds by Vs, times by L / Vs)."""
     X0, V0, A0, J0, Q0, hA0, hB0 = guess
-    # Scales: length L, speed v_sing, time T0 = L / v_sing.
-    L = float(np.linalg.norm(task.goal - task.start))
-    Vs = float(v_sing)
+    T0 = L / Vs
+    As, Js = Vs / T0, Vs / T0**2
+    return np.concatenate([_vec(X0.T / L), _vec(V0.T / Vs), _vec(A0.T / As), _vec(J0.T / Js), _vec(Q0.T),
+                           [hA0 / T0, hB0 / T0]])
+
+
+def _unscaled(zs: np.ndarray, n: int, shape: Transcription, L: float, Vs: float) -> tuple:
+    """The scaled decision vector as the SI tuple ``(X, V, A, J, Q, h_A, h_B)``."""
+    N = shape.NA + shape.NB
+    T0 = L / Vs
+    sizes = [n * (N + 1)] * 3 + [n * N, n * (N + 1)]
+    X, V, A, J, Q = (part.reshape((n, -1), order="F").T for part in np.split(zs[:-2], np.cumsum(sizes)[:-1]))
+    return X * L, V * Vs, A * (Vs / T0), J * (Vs / T0**2), Q.copy(), float(zs[-2] * T0), float(zs[-1] * T0)
+
+
+def _vec(a) -> np.ndarray:
+    """CasADi's ``vec`` (column-major) of an array."""
+    return np.asarray(a, dtype=float).reshape(-1, order="F")
+
+
+def _variable_bounds(robot, task, site: CrossingSite, L: float, shape: Transcription):
+    """Bounds of the scaled decision vector: workspace and joint boxes, rest at both ends, the fixed nodes
+    (start, crossing point and its joints, goal) and the interval lengths; independent of the speed."""
+    n, NA, NB = robot.n, shape.NA, shape.NB
+    N, inf = NA + NB, np.inf
+    xlo = np.repeat((robot.x_lo_array / L)[:, None], N + 1, axis=1)
+    xhi = np.repeat((robot.x_hi_array / L)[:, None], N + 1, axis=1)
+    for k, p in ((0, task.start), (NA, site.point), (N, task.goal)):
+        xlo[:, k] = xhi[:, k] = p / L
+    vlo, vhi = np.full((n, N + 1), -inf), np.full((n, N + 1), inf)
+    for k in (0, N):
+        vlo[:, k] = vhi[:, k] = 0.0
+    qlo = np.repeat(robot.q_lo_array[:, None], N + 1, axis=1)
+    qhi = np.repeat(robot.q_hi_array[:, None], N + 1, axis=1)
+    qlo[:, NA] = qhi[:, NA] = site.q_point
+    h_lo, h_hi = _H_MIN_REL / max(NA, NB), _H_MAX_SCALED / min(NA, NB)
+    free = np.full(n * N, inf)
+    lbx = np.concatenate([_vec(xlo), _vec(vlo), _vec(vlo), -free, _vec(qlo), [h_lo, h_lo]])
+    ubx = np.concatenate([_vec(xhi), _vec(vhi), _vec(vhi), free, _vec(qhi), [h_hi, h_hi]])
+    return lbx, ubx
+
+
+def _transcribe(kin, dyn, L: float, site: CrossingSite, lim: dict, shape: Transcription):
+    """The scaled NLP of the module docstring: ``(z, p, obj, g, lbg, ubg)`` with ``p = (v_sing, back, dur)``.
+
+    ``back = 1 - margin`` divides every limit row (so ``lbg``, ``ubg`` do not
+    depend on it) and ``dur`` is the motion time of ``Objective.JERK`` over
+    ``L / v_sing``.  Every constraint row is divided by its natural scale.
+    """
+    n, NA, NB = kin.n, shape.NA, shape.NB
+    N, ks = NA + NB, NA
+    Vs, back, dur = ca.SX.sym("v_sing"), ca.SX.sym("back"), ca.SX.sym("duration")
     T0 = L / Vs
     As, Js = Vs / T0, Vs / T0**2
     Fs = dyn.model.total_mass * As  # force scale, N
-    robot = kin.robot
-    back = 1.0 - margin
-
-    xs = ca.SX.sym("x", n, N + 1)
-    vs = ca.SX.sym("v", n, N + 1)
-    as_ = ca.SX.sym("a", n, N + 1)
-    js = ca.SX.sym("j", n, N)
-    qv = ca.SX.sym("q", n, N + 1)
-    hs = ca.SX.sym("h", 2)
+    xs, vs, as_ = ca.SX.sym("x", n, N + 1), ca.SX.sym("v", n, N + 1), ca.SX.sym("a", n, N + 1)
+    js, qv, hs = ca.SX.sym("j", n, N), ca.SX.sym("q", n, N + 1), ca.SX.sym("h", 2)
     Xe, Ve, Ae, Je = L * xs, Vs * vs, As * as_, Js * js
-    hA, hB = T0 * hs[0], T0 * hs[1]
-    xi_dm = ca.DM(xi)
-
-    # --- interval maps (exact cubic), scaled per state
-    g_list, lb, ub = [], [], []
-
-    def add(expr, lo, hi):
-        expr = ca.vec(expr)
-        g_list.append(expr)
-        k = expr.numel()
-        lb.append(np.broadcast_to(np.asarray(lo, float), (k,)).copy() if np.ndim(lo) == 0 else np.asarray(lo, float))
-        ub.append(np.broadcast_to(np.asarray(hi, float), (k,)).copy() if np.ndim(hi) == 0 else np.asarray(hi, float))
-
-    for sl, h in ((slice(0, NA), hA), (slice(NA, N), hB)):
-        i0, i1 = sl.start, sl.stop
-        x0, v0, a0, j0 = Xe[:, i0:i1], Ve[:, i0:i1], Ae[:, i0:i1], Je[:, i0:i1]
-        add((Xe[:, i0 + 1:i1 + 1] - (x0 + h * v0 + h**2 / 2 * a0 + h**3 / 6 * j0)) / L, 0.0, 0.0)
-        add((Ve[:, i0 + 1:i1 + 1] - (v0 + h * a0 + h**2 / 2 * j0)) / Vs, 0.0, 0.0)
-        add((Ae[:, i0 + 1:i1 + 1] - (a0 + h * j0)) / As, 0.0, 0.0)
+    xi_dm = ca.DM(site.xi)
+    rows = _Rows()
+    # --- interval maps (exact cubic): in scaled units they do not depend on the speed
+    for i0, i1, h in ((0, NA, hs[0]), (NA, N, hs[1])):
+        x0, v0, a0, j0 = xs[:, i0:i1], vs[:, i0:i1], as_[:, i0:i1], js[:, i0:i1]
+        rows.add(xs[:, i0 + 1:i1 + 1] - (x0 + h * v0 + h**2 / 2 * a0 + h**3 / 6 * j0), 0.0, 0.0)
+        rows.add(vs[:, i0 + 1:i1 + 1] - (v0 + h * a0 + h**2 / 2 * j0), 0.0, 0.0)
+        rows.add(as_[:, i0 + 1:i1 + 1] - (a0 + h * j0), 0.0, 0.0)
         # no jump to another IK branch: |q_{k+1} - q_k| <= h qd_max
         dq = qv[:, i0 + 1:i1 + 1] - qv[:, i0:i1]
         qdm = ca.repmat(ca.DM(lim["qd_max"]), 1, i1 - i0)
-        add(dq / qdm - h, -np.inf, 0.0)
-        add(-dq / qdm - h, -np.inf, 0.0)
+        rows.add(dq / qdm - T0 * h, -np.inf, 0.0)
+        rows.add(-dq / qdm - T0 * h, -np.inf, 0.0)
+    _node_rows(rows, kin, dyn, site, lim, shape, (Xe, Ve, Ae, Je, qv), back, xi_dm)
+    # --- the crossing
+    rows.add(ca.sumsqr(vs[:, ks]) - 1.0, 0.0, 0.0)  # |v| = v_sing (scaled)
+    w_x, _w_q = dyn.reduced_wrench_fun(Xe[:, ks], qv[:, ks], Ve[:, ks], Ae[:, ks], xi_dm)
+    rows.add(ca.dot(ca.DM(site.t_dir), w_x) / Fs, 0.0, 0.0)  # the criterion
+    rows.add(js[:, ks - 1] - js[:, ks], 0.0, 0.0)  # continuous jerk at the singular instant
+    T_total = NA * hs[0] + NB * hs[1]  # in units of T0
+    if shape.objective is Objective.TIME:
+        obj = T_total
+    else:
+        rows.add(T_total - dur, 0.0, 0.0)
+        obj = (hs[0] * ca.sumsqr(js[:, :NA]) + hs[1] * ca.sumsqr(js[:, NA:])) / N
+    z = ca.vertcat(ca.vec(xs), ca.vec(vs), ca.vec(as_), ca.vec(js), ca.vec(qv), hs)
+    g, lbg, ubg = rows.stacked()
+    return z, ca.vertcat(Vs, back, dur), obj, g, lbg, ubg
 
-    # --- node constraints (mapped over the nodes)
+
+def _node_rows(rows, kin, dyn, site: CrossingSite, lim: dict, shape: Transcription, states, back, xi_dm) -> None:
+    """Rows at every node: loop closure, modes, no Type 1 singularity, the limits (each over ``back``)."""
+    Xe, Ve, Ae, Je, qv = states
+    n, N, ks, m0 = kin.n, shape.NA + shape.NB, shape.NA, site.m0
     xsym, qsym, vsym, asym = kin.sx_x, kin.sx_q, ca.SX.sym("v", n), ca.SX.sym("a", n)
-    jq_row = np.linalg.norm(kin.jac_q_batch(point[None], q_point[None], xi)[0], axis=1)
+    jq_point = kin.jac_q_batch(site.point[None], site.q_point[None], site.xi)[0]
+    jq_row = np.linalg.norm(jq_point, axis=1)
     fscale = ca.DM(np.where(jq_row > 0, jq_row, 1.0))
     jx, jq = kin.sx_jx, kin.sx_jq
-    had_x = 1
-    had_q = 1
+    had_x = had_q = 1
     for i in range(n):
         had_x = had_x * ca.norm_2(jx[i, :])
         had_q = had_q * ca.norm_2(jq[i, :])
-    mode_n = robot.mode_sign * kin.sx_det / had_x
-    detq_n = ca.det(jq) / had_q
     qd_e, qdd_e = dyn.rates_fun(xsym, qsym, vsym, asym, xi_dm)
-    rows = [ca.substitute(kin.sx_f, kin.sx_xi, xi_dm) / fscale, mode_n, detq_n,
+    node = [kin.sx_f / fscale, kin.robot.mode_sign * kin.sx_det / had_x, ca.det(jq) / had_q,
             qd_e / ca.DM(lim["qd_max"]), qdd_e / ca.DM(lim["qdd_max"])]
-    node_f = ca.Function("node", [xsym, qsym, vsym, asym], [ca.substitute(r, kin.sx_xi, xi_dm) for r in rows])
+    node_f = ca.Function("node", [xsym, qsym, vsym, asym], [ca.substitute(r, kin.sx_xi, xi_dm) for r in node])
     F, MODE, DETQ, QD, QDD = node_f.map(N + 1)(Xe, qv, Ve, Ae)
-    add(F, 0.0, 0.0)
-    before = np.arange(1, ks)
-    after = np.arange(ks + 1, N)
-    add(m0 * MODE[:, before.tolist()], 0.0, np.inf)
-    add(-m0 * MODE[:, after.tolist()], 0.0, np.inf)
-    sq = float(np.sign(np.linalg.det(kin.jac_q_batch(point[None], q_point[None], xi)[0])))
-    add(sq * DETQ, 0.0, np.inf)
-    add(QD, -back, back)
-    add(QDD, -back, back)
+    rows.add(F, 0.0, 0.0)
+    rows.add(m0 * MODE[:, list(range(1, ks))], 0.0, np.inf)
+    rows.add(-m0 * MODE[:, list(range(ks + 1, N))], 0.0, np.inf)
+    rows.add(float(np.sign(np.linalg.det(jq_point))) * DETQ, 0.0, np.inf)
+    rows.add(QD / back, -1.0, 1.0)
+    rows.add(QDD / back, -1.0, 1.0)
     if lim["a_max"] is not None:
-        add(Ae / ca.repmat(ca.DM(lim["a_max"]), 1, N + 1), -back, back)
+        rows.add(Ae / ca.repmat(ca.DM(lim["a_max"]), 1, N + 1) / back, -1.0, 1.0)
     if lim["jerk_max"] is not None:
-        add(Je / ca.repmat(ca.DM(lim["jerk_max"]), 1, N), -back, back)
-    tmax = ca.DM(dyn.model.tau_max)
-    if torque:
+        rows.add(Je / ca.repmat(ca.DM(lim["jerk_max"]), 1, N) / back, -1.0, 1.0)
+    if shape.torque:
+        tmax = ca.DM(dyn.model.tau_max)
         regular = [k for k in range(N + 1) if k != ks]
         tau_f = ca.Function("tau", [xsym, qsym, vsym, asym], [dyn.torque_fun(xsym, qsym, vsym, asym, xi_dm) / tmax])
-        TAU = tau_f.map(len(regular))(Xe[:, regular], qv[:, regular], Ve[:, regular], Ae[:, regular])
-        add(TAU, -back, back)
+        rows.add(tau_f.map(len(regular))(Xe[:, regular], qv[:, regular], Ve[:, regular], Ae[:, regular]) / back,
+                 -1.0, 1.0)
         tau_s, _lam = dyn.singular_torque_fun(Xe[:, ks], qv[:, ks], Ve[:, ks], Ae[:, ks], Je[:, ks], xi_dm,
-                                              ca.DM(t_dir))
-        add(tau_s / tmax, -back, back)
+                                              ca.DM(site.t_dir))
+        rows.add(tau_s / tmax / back, -1.0, 1.0)
 
-    # --- the crossing
-    add(ca.sumsqr(vs[:, ks]) - 1.0, 0.0, 0.0)  # |v| = v_sing (scaled)
-    w_x, _w_q = dyn.reduced_wrench_fun(Xe[:, ks], qv[:, ks], Ve[:, ks], Ae[:, ks], xi_dm)
-    add(ca.dot(ca.DM(t_dir), w_x) / Fs, 0.0, 0.0)  # the criterion
-    add(js[:, ks - 1] - js[:, ks], 0.0, 0.0)  # continuous jerk at the singular instant
 
-    T_total = NA * hA + NB * hB
-    if objective is Objective.TIME:
-        obj = T_total / T0
-    else:
-        add(T_total / T0 - duration / T0, 0.0, 0.0)
-        obj = (hA * ca.sumsqr(js[:, :NA]) + hB * ca.sumsqr(js[:, NA:])) / T0 / N
+class _Rows:
+    """Constraint rows and their bounds, stacked in the order added."""
 
-    # --- bounds
-    inf = np.inf
-    xlo = np.repeat((robot.x_lo_array / L)[:, None], N + 1, axis=1)
-    xhi = np.repeat((robot.x_hi_array / L)[:, None], N + 1, axis=1)
-    for k, p in ((0, task.start), (ks, point), (N, task.goal)):
-        xlo[:, k] = xhi[:, k] = p / L
-    vlo, vhi = np.full((n, N + 1), -inf), np.full((n, N + 1), inf)
-    alo, ahi = np.full((n, N + 1), -inf), np.full((n, N + 1), inf)
-    for k in (0, N):
-        vlo[:, k] = vhi[:, k] = 0.0
-        alo[:, k] = ahi[:, k] = 0.0
-    qlo = np.repeat(robot.q_lo_array[:, None], N + 1, axis=1)
-    qhi = np.repeat(robot.q_hi_array[:, None], N + 1, axis=1)
-    qlo[:, ks] = qhi[:, ks] = q_point
-    h_lo, h_hi = _H_MIN_REL * T0 / max(NA, NB) / T0, _H_MAX_SCALED / min(NA, NB)
+    def __init__(self):
+        self._g, self._lb, self._ub = [], [], []
 
-    def F_(a):
-        return np.asarray(a, dtype=float).reshape(-1, order="F")
+    def add(self, expr, lo: float, hi: float) -> None:
+        expr = ca.vec(expr)
+        self._g.append(expr)
+        self._lb.append(np.full(expr.numel(), lo))
+        self._ub.append(np.full(expr.numel(), hi))
 
-    z = ca.vertcat(ca.vec(xs), ca.vec(vs), ca.vec(as_), ca.vec(js), ca.vec(qv), hs)
-    lbx = np.concatenate([F_(xlo), F_(vlo), F_(alo), np.full(n * N, -inf), F_(qlo), [h_lo, h_lo]])
-    ubx = np.concatenate([F_(xhi), F_(vhi), F_(ahi), np.full(n * N, inf), F_(qhi), [h_hi, h_hi]])
-    z0 = np.concatenate([F_(X0.T / L), F_(V0.T / Vs), F_(A0.T / As), F_(J0.T / Js), F_(Q0.T), [hA0 / T0, hB0 / T0]])
-    z0 = np.clip(z0, lbx, ubx)
-    g = ca.vertcat(*g_list)
-    lbg, ubg = np.concatenate(lb), np.concatenate(ub)
-    run = solve_with_ipopt("crossing", z, obj, g, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg,
-                           ipopt={"print_level": print_level, "max_iter": max_iter, "max_cpu_time": max_cpu_time,
-                                  "tol": _IPOPT_TOL, "constr_viol_tol": _IPOPT_CONSTR_VIOL_TOL, "acceptable_iter": 0})
-    sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
-    if status != _SUCCESS:
-        raise NotConverged(status)
-    zs = np.asarray(sol["x"], dtype=float).reshape(-1)
-    o = 0
-
-    def take(rows, cols, scale):
-        nonlocal o
-        out = zs[o:o + rows * cols].reshape((rows, cols), order="F").T * scale
-        o += rows * cols
-        return out
-
-    X, V, A = take(n, N + 1, L), take(n, N + 1, Vs), take(n, N + 1, As)
-    J, Q = take(n, N, Js), take(n, N + 1, 1.0)
-    hAv, hBv = zs[o] * T0, zs[o + 1] * T0
-    # fixed variables, exactly (undo the rounding of the scaling)
-    X[0], X[ks], X[N], Q[ks] = task.start, point, task.goal, q_point
-    return NlpSolution(X, V, A, J, Q, float(hAv), float(hBv), status, int(stats.get("iter_count", -1)), elapsed,
-                       int(z.numel()), int(g.numel()))
+    def stacked(self):
+        return ca.vertcat(*self._g), np.concatenate(self._lb), np.concatenate(self._ub)
 
 
 # ------------------------------------------------------------------ sampling

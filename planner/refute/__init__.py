@@ -37,7 +37,7 @@ from .problem import (
     ipopt_outcome,
 )
 from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, Verification
-from .search import crossing_floor, refutation_bound
+from .search import crossing_floor, refutation_bound, verified_counterexample
 from .verify import BRANCH_TOL, STATE_TOL, verify_bounce, verify_counterexample, verify_crossing
 
 __all__ = [
@@ -58,6 +58,7 @@ __all__ = [
     "SpeedRefutation",
     "Verification",
     "crossing_floor",
+    "verified_counterexample",
     "fk_branch_guess",
     "fk_crossing_guess",
     "ipopt_outcome",

@@ -272,8 +272,34 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     return solver
 
 
+def _mapped_start(warm: Counterexample, qm: np.ndarray, ts: float):
+    """A neighbouring recording's counterexample carried to the readings ``qm``: ``(X, V, U, Q)``.
+
+    The two recordings follow one path at different speeds, so samples are
+    matched by the arc length of the joints along each (the
+    counterexample's own joints stand for its readings: they lie within
+    ``eps_q`` of them); velocities are rescaled by the local rate of that
+    match and the accelerations are their differences.
+    """
+    def arc(Q):
+        return np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(Q, axis=0), axis=1))])
+
+    so, sn = arc(warm.q), arc(qm)
+    so = so + 1e-15 * np.arange(so.size)  # strictly increasing over rests, for np.interp
+    j = np.interp(sn, so, np.arange(so.size, dtype=float))
+    rate = np.gradient(j) * ts / warm.t_s  # old samples per new sample, in time
+
+    def at(a):
+        idx = np.arange(a.shape[0], dtype=float)
+        return np.stack([np.interp(j, idx, a[:, c]) for c in range(a.shape[1])], axis=1)
+
+    X, V, Q = at(warm.x), at(warm.v) * rate[:, None], at(warm.q)
+    U = np.diff(V, axis=0) / ts
+    return X, V, U, Q
+
+
 def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, kind: CounterexampleKind, *,
-                     max_iter: int, max_cpu_time: float, print_level: int):
+                     max_iter: int, max_cpu_time: float, print_level: int, warm: Counterexample | None = None):
     """Solve the NLP of ``kind`` from ``xi_start``; returns (Counterexample or None, status, iters, time, nv, ng)."""
     K0, n, m = rb.n_samples, kin.n, kin.m
     ts, eps, amax = rb.t_s, rb.eps_q, rb.a_max
@@ -287,13 +313,20 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     qm = np.vstack([rb.q_meas, np.repeat(rb.q_meas[-1:], K - K0, axis=0)])
 
     # Initial guess: the FK of the samples with the starting geometry, in mode
-    # m0 (bounce), or in m0 then -m0 (crossing).
-    if kind is CounterexampleKind.BOUNCE:
+    # m0 (bounce), or in m0 then -m0 (crossing); or a neighbour's counterexample
+    # carried to these readings (xi_start is then its geometry).
+    Dq0 = np.zeros((K, n))
+    if warm is not None:
+        X0, V0, U0, Q0 = _mapped_start(warm, qm, ts)
+        U0 = np.clip(U0, -amax, amax)
+        Dq0 = (Q0 - qm) / eps[None, :]
+    elif kind is CounterexampleKind.BOUNCE:
         X0, _solved = fk_branch_guess(kin, qm, xi_start, rb.m0)
     else:
         X0, _k = fk_crossing_guess(kin, qm, xi_start, rb.m0)
-    V0 = np.gradient(X0, ts, axis=0)
-    U0 = np.clip(np.diff(V0, axis=0) / ts, -amax, amax)
+    if warm is None:
+        V0 = np.gradient(X0, ts, axis=0)
+        U0 = np.clip(np.diff(V0, axis=0) / ts, -amax, amax)
     # Scales: f in "eps_q-equivalents" (row norm of J_q times eps_q), the
     # dynamics in units of one full-acceleration step; IPOPT then sees O(1) rows.
     jq = kin.jac_q_batch(X0, qm, xi_start)
@@ -327,7 +360,7 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     s0 = np.divide(xi_start - xc, xh, out=np.zeros(m), where=xh > 0)
     X0c = np.clip(X0.T, x_lo, x_hi)
     z0 = np.concatenate([np.clip(s0, -sb, sb), vecF(X0c), vecF(np.clip(V0.T, -vb, vb)),
-                         vecF(U0.T / amax[:, None]), np.zeros(n * K)])
+                         vecF(U0.T / amax[:, None]), vecF(np.clip(Dq0.T, -db, db))])
     run = solver.solve(p=p, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
     iters = int(stats.get("iter_count", -1))
@@ -345,11 +378,17 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
 
 def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *, xi_start=None,
            max_iter: int = MAX_ITER, max_cpu_time: float = MAX_CPU_TIME, print_level: int = 0,
-           dense: int = DENSE_POINTS) -> BounceSearch:
+           dense: int = DENSE_POINTS, warm: Counterexample | None = None) -> BounceSearch:
     """Search one counterexample of ``kind`` from one starting geometry, and verify it.
 
     :func:`search_bounce` and :func:`search_crossing` are this function with
     ``kind`` fixed; their docstrings describe the NLP.
+
+    ``warm``, a counterexample of a neighbouring recording (e.g. at the
+    next speed of a bisection), replaces ``xi_start`` and the FK guess:
+    the NLP starts from it, carried to these readings sample by sample
+    (matched by the joints' arc length along each recording).  Only the
+    start changes: the candidate is verified as any other.
 
     Raises
     ------
@@ -370,11 +409,16 @@ def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: Counte
     if rb.q_meas.shape[1] != kin.n or rb.xi_lo.shape != (kin.m,):
         raise InputError(f"recording has {rb.q_meas.shape[1]} joints and {rb.xi_lo.size} parameters; "
                          f"{kin.robot.name} needs {kin.n} and {kin.m}")
-    xs = 0.5 * (rb.xi_lo + rb.xi_hi) if xi_start is None else V.vector("xi_start", xi_start, kin.m, broadcast=True)
+    if warm is not None:
+        if xi_start is not None or not isinstance(warm, Counterexample) or warm.q.shape[1:] != (kin.n,):
+            raise InputError("warm must be a Counterexample of this robot, given instead of xi_start")
+        xs = np.clip(warm.xi, rb.xi_lo, rb.xi_hi)
+    else:
+        xs = 0.5 * (rb.xi_lo + rb.xi_hi) if xi_start is None else V.vector("xi_start", xi_start, kin.m, broadcast=True)
     if np.any(xs < rb.xi_lo) or np.any(xs > rb.xi_hi):
         raise InputError(f"xi_start = {xs.tolist()} lies outside the calibration box")
     ce, status, iters, elapsed, nv, ng = _build_and_solve(
-        kin, rb, xs, kind, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level)
+        kin, rb, xs, kind, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level, warm=warm)
     if ce is None:
         return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs, kind=kind)
     ver = verify_counterexample(kin, ce, rb, kind, dense=dense)

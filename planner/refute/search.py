@@ -18,26 +18,30 @@ from crosscert.robots.errors import InputError
 from crosscert.robots.kinematics import KinematicModel
 
 from .nlp import MAX_CPU_TIME, MAX_ITER, search_counterexample
-from .problem import CounterexampleKind, RecordingBounds
+from .problem import Counterexample, CounterexampleKind, RecordingBounds
 from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, deciding_attempt
 from .verify import DENSE_POINTS
 
-__all__ = ["crossing_floor", "refutation_bound"]
+__all__ = ["crossing_floor", "refutation_bound", "verified_counterexample"]
 
 
 def _search_recording(kin, make_recording, value, kind, *, m0, xi_starts, bounds, max_iter, max_cpu_time,
-                      dense) -> dict:
+                      dense, warm=None) -> dict:
     """Search the recording ``make_recording(value)`` from each start until one is verified.
 
-    Returns the fields the row records share (:class:`SpeedRefutation`,
+    ``warm``, a verified counterexample of a neighbouring recording, takes
+    the place of the first start (:func:`search_counterexample`).  Returns
+    the fields the row records share (:class:`SpeedRefutation`,
     :class:`RecordingRefutation`), the parameter excepted.
     """
     q_meas, t_s = make_recording(value)
     rb = RecordingBounds.for_model(kin, q_meas, t_s, m0, **(bounds or {}))
     starts = [None] if not xi_starts else list(xi_starts)
+    plan = [(xs, None) for xs in starts] if warm is None else [(None, warm)] + [(xs, None) for xs in starts[1:]]
     attempts: list[BounceSearch] = []
-    for xs in starts:
-        att = search_counterexample(kin, rb, kind, xi_start=xs, max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense)
+    for xs, ce in plan:
+        att = search_counterexample(kin, rb, kind, xi_start=xs, max_iter=max_iter, max_cpu_time=max_cpu_time,
+                                    dense=dense, warm=ce)
         attempts.append(att)
         if att.verified:
             break
@@ -54,6 +58,11 @@ def _search_recording(kin, make_recording, value, kind, *, m0, xi_starts, bounds
     }
 
 
+def verified_counterexample(row) -> Counterexample | None:
+    """The verified counterexample of a row (:class:`SpeedRefutation`, :class:`RecordingRefutation`), or None."""
+    return next((a.counterexample for a in row.attempts if a.verified), None)
+
+
 def _check(kin, make_recording, what: str) -> None:
     if not isinstance(kin, KinematicModel):
         raise InputError(f"kin must be a KinematicModel, got {type(kin).__name__}")
@@ -64,7 +73,8 @@ def _check(kin, make_recording, what: str) -> None:
 def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tuple], speeds: Sequence[float], *,
                      m0: int = 1, xi_starts: Sequence | None = None, bounds: dict | None = None,
                      max_iter: int = MAX_ITER, max_cpu_time: float = MAX_CPU_TIME, dense: int = DENSE_POINTS,
-                     progress: Callable[[SpeedRefutation], None] | None = None) -> RefutationBound:
+                     progress: Callable[[SpeedRefutation], None] | None = None,
+                     warm: Counterexample | None = None) -> RefutationBound:
     """Counterexample search at several speeds; the largest refuted speed bounds certification from below.
 
     Parameters
@@ -88,6 +98,10 @@ def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tupl
         Passed to :func:`search_bounce` (per attempt; ``max_cpu_time`` in s).
     progress : callable, optional
         Called with each :class:`SpeedRefutation` as it completes.
+    warm : Counterexample, optional
+        A verified counterexample at a neighbouring speed: every speed's
+        first attempt starts from it (:func:`search_counterexample`) instead
+        of the first of ``xi_starts``.
 
     Returns
     -------
@@ -106,7 +120,7 @@ def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tupl
     for speed in speeds:
         row = SpeedRefutation(speed=float(speed), **_search_recording(
             kin, make_recording, speed, CounterexampleKind.BOUNCE, m0=m0, xi_starts=xi_starts, bounds=bounds,
-            max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense))
+            max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense, warm=warm))
         rows.append(row)
         if progress is not None:
             progress(row)
