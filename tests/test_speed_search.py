@@ -143,7 +143,7 @@ def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(mo
         row.attempts = (_Attempt(v),) if row.verified else ()
         return row
 
-    monkeypatch.setattr(pipeline_mod, "refute_speed", fake)
+    monkeypatch.setattr(crossing_mod, "refute_speed", fake)
     ref = Refuter(DEXTAR, None, None, 1, [], None, None)
     ref.submit([0.5, 0.6, 0.7, 0.8, 0.9])
     bound, _rows = refutation_search(ref, 0.99, 0.01)
