@@ -180,9 +180,13 @@ class _Path:
 
     def __init__(self, tapes, numeric, robot, free, x, u_plan, U0, slope_steps, remainder):
         self.tapes, self.numeric, self.free, self.remainder = tapes, numeric, free, remainder
-        self.x, self.u_plan, self.U0 = x, u_plan, U0
+        # u_plan: (lo, hi) enclosure of the planned joints plus their planning offsets (the sum is
+        # rounded outward); its float midpoint centres boxes and serves the termination rule only
+        self.u_lo, self.u_hi = u_plan
+        self.u_plan = I.midpoint(*u_plan)
+        self.x, self.U0 = x, U0
         self.lo, self.hi = robot.xi_lo_array, robot.xi_hi_array
-        self.K, self.n = u_plan.shape
+        self.K, self.n = self.u_plan.shape
         self.r = self.K // 2  # reference sample of the constant part
         self.off = np.array([i in _offsets(robot) for i in range(self.n)])
         self.slope_steps = slope_steps  # (K-1, n, p) boxes: G_k - G_{k-1} over the whole [xi], or None
@@ -278,7 +282,7 @@ class _Path:
         bad = (np.any(Ucl > Uch, axis=(1, 2)) | np.any(Ul > Uh, axis=(1, 2))
                | ~np.all(np.isfinite(MV[0]) & np.isfinite(MV[1]), axis=(1, 2)))
         # D_k(c) = u_k(c) - u_plan,k
-        Pl, Ph = I.sub(Ucl, Uch, self.u_plan, self.u_plan)
+        Pl, Ph = I.sub(Ucl, Uch, self.u_lo, self.u_hi)
         # offset joints: D_k - D_r, and D_r; the constant c = D_r + m
         dGr = I.sub(Gl, Gh, Gl[:, r:r + 1], Gh[:, r:r + 1])
         dl, dh = I.add(*I.sub(Pl, Ph, Pl[:, r:r + 1], Ph[:, r:r + 1]), *mv(*dGr))
@@ -342,7 +346,10 @@ class _Path:
 
 
 def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
-    """Steps 2 and the slope changes along the path: a :class:`_Path`, or the reason (str) why not proved."""
+    """Steps 2 and the slope changes along the path: a :class:`_Path`, or the reason (str) why not proved.
+
+    ``u_plan``: ``(lo, hi)`` enclosure of the planned joints plus offsets ``(K, n)``."""
+    u_bounds, u_plan = u_plan, I.midpoint(*u_plan)
     K, n = u_plan.shape
     X = (x, x)
     lo, hi = robot.xi_lo_array, robot.xi_hi_array
@@ -368,10 +375,15 @@ def _setup_path(tapes, numeric, robot, free, x, u_plan, remainder):
         oks &= ~np.any(Us[0] > Us[1], axis=1)
         Gs = root_gradient(tapes, Xs, Us, Ps, free)
         Tl, Th = slope_change(tapes, Xs, dX, Us, Ps, Gs)
-        # a segment whose root box was not proved gives no information
-        bad = ~oks[:, None, None] | np.isnan(Tl) | np.isnan(Th)
+        # the segment proofs are what carry the plan's branch from sample to sample (one root per
+        # geometry all along the path): without every one of them the branch is not proved
+        if not oks.all():
+            k = int(np.nonzero(~oks)[0][0])
+            return (f"the inverse kinematics between path points {k} and {k + 1} could not be proved unique "
+                    "for every geometry of [xi] (Krawczyk): the branch the executions follow is not proved")
+        bad = np.isnan(Tl) | np.isnan(Th)
         steps = (np.where(bad, -np.inf, Tl), np.where(bad, np.inf, Th))
-    return _Path(tapes, numeric, robot, free, x, u_plan, U0, steps, remainder)
+    return _Path(tapes, numeric, robot, free, x, u_bounds, U0, steps, remainder)
 
 
 def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, max_boxes: int = 16,
@@ -424,7 +436,8 @@ def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, 
     with I.quiet_fp():
         for x, q in zip(xs, qs):
             x, q = np.asarray(x, float), np.asarray(q, float)
-            u_plan = q + np.array([xi_plan[offs[i]] if i in offs else 0.0 for i in range(n)])
+            off = np.array([xi_plan[offs[i]] if i in offs else 0.0 for i in range(n)])
+            u_plan = I.add(q, q, off, off)  # outward: the deviation D_k is taken from this enclosure
             path = _setup_path(tapes, numeric, robot, free, x, u_plan, remainder)
             if isinstance(path, str):
                 return ClassProof(False, path, time_s=time.perf_counter() - t0)
@@ -507,6 +520,9 @@ def _branch_and_bound(path: _Path, tol: float, max_boxes: int, i: int):
         blo, bhi = np.concatenate([sl, right_lo]), np.concatenate([left_hi, sh])
         Uparent = (np.concatenate([L["U"][0][take]] * 2), np.concatenate([L["U"][1][take]] * 2))
         L = {k: (v[0][keep], v[1][keep]) if k == "U" else v[keep] for k, v in L.items()}
+    if not all(np.all(np.isfinite(L[k])) for k in ("e", "d", "c_lo", "c_hi")):
+        # a NaN would vanish in max() below: no bound is claimed from a leaf that is not finite
+        return "a bound over a sub-box of [xi] is not finite (the enclosures diverged): not proved"
     return {"e": float(L["e"].max()), "d": float(L["d"].max()), "c_lo": float(L["c_lo"].min()),
             "c_hi": float(L["c_hi"].max()), "boxes": boxes, "converged": bool(open_.size == 0), "found": best}
 
@@ -571,7 +587,7 @@ def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error
     for i, j in _offsets(robot).items():
         cl, ch = I.add(xi_plan[j], xi_plan[j], proof.c_lo[i], proof.c_hi[i])
         lo[j], hi[j] = min(float(cl), lo[j]), max(float(ch), hi[j])
-    fast = float(eps_q + tracking_error)
+    fast = float(I.add(eps_q, eps_q, tracking_error, tracking_error)[1])  # rounded up
     reading = float(I.add(fast, fast, proof.drift, proof.drift)[1])
     derivation = {
         "constant_range_rad": [[float(a), float(b)] for a, b in zip(proof.c_lo, proof.c_hi)],

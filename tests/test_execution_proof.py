@@ -9,10 +9,11 @@ import pytest
 
 from crosscert.planner import execution_class, plan_crossing
 from crosscert.planner.execution import cartesian_class, effective_deviation, in_class
+from crosscert.planner import execution_proof
 from crosscert.planner.execution_proof import describe, offset_split, prove_cartesian_class, proved_class
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR, KinematicModel, get_entry
-from crosscert.verifier.implicit import ImplicitTapes, inflate_roots
+from crosscert.verifier.implicit import ImplicitTapes, inflate_roots, strictly_inside
 
 import problems
 
@@ -193,3 +194,51 @@ def test_a_joint_without_offset_has_an_exact_zero_constant(plan, kin):
         assert _violation(pr, effective_deviation(kin2, plan.x, plan.q, plan.xi_plan, xi), off) <= 0.0
     # the offset of joint 2 moves it by up to 4 mrad: e covers it
     assert pr.drift > 4e-3
+
+
+def test_a_krawczyk_image_touching_the_box_is_not_a_proof():
+    """Existence and uniqueness need the image in the box's interior: one shared edge refuses the proof."""
+    outer = (np.zeros((1, 2)), np.ones((1, 2)))
+    assert strictly_inside((np.full((1, 2), 0.1), np.full((1, 2), 0.9)), outer).all()
+    assert not strictly_inside((np.array([[0.0, 0.1]]), np.full((1, 2), 0.9)), outer).any()
+    assert not strictly_inside((np.full((1, 2), 0.1), np.array([[0.9, 1.0]])), outer).any()
+    assert not strictly_inside((np.full((1, 2), np.nan), np.full((1, 2), 0.9)), outer).any()
+
+
+def test_a_bound_that_is_not_finite_is_not_a_proof(plan, monkeypatch):
+    """A NaN leaf bound would vanish in the maximum over the leaves: the proof is refused instead."""
+    real = execution_proof._Path.evaluate
+
+    def nan_drift(self, *args, **kwargs):
+        ev = real(self, *args, **kwargs)
+        ev["e"] = np.full_like(ev["e"], np.nan)
+        return ev
+
+    monkeypatch.setattr(execution_proof._Path, "evaluate", nan_drift)
+    pr = prove_cartesian_class(DEXTAR, plan.x, plan.q, plan.xi_plan)
+    assert not pr.proved and "not finite" in pr.reason
+
+
+def test_the_planned_joints_enter_as_an_outward_enclosure(plan, monkeypatch):
+    """The deviation is taken from an enclosure of planned joints + planning offsets that brackets the exact sum."""
+    seen = []
+    real = execution_proof._setup_path
+
+    def spy(tapes, numeric, robot, free, x, u_plan, remainder):
+        seen.append(u_plan)
+        return real(tapes, numeric, robot, free, x, u_plan, remainder)
+
+    monkeypatch.setattr(execution_proof, "_setup_path", spy)
+    offs = execution_proof._offsets(DEXTAR)
+    xi = plan.xi_plan.copy()
+    xi[list(offs.values())] = 1e-3  # planning offsets whose sums with the joints are not floats
+    assert prove_cartesian_class(DEXTAR, plan.x, plan.q, xi).proved
+    lo, hi = seen[0]
+    off = [xi[offs[i]] if i in offs else 0.0 for i in range(DEXTAR.n)]
+    inexact = 0
+    for k in range(plan.q.shape[0]):
+        for i in range(DEXTAR.n):
+            exact = Fraction(float(plan.q[k, i])) + Fraction(float(off[i]))
+            assert Fraction(float(lo[k, i])) <= exact <= Fraction(float(hi[k, i]))
+            inexact += Fraction(float(plan.q[k, i]) + float(off[i])) != exact
+    assert inexact > 0  # the case the enclosure is for occurs on this plan
