@@ -286,3 +286,32 @@ def test_outward_steps_equal_nextafter():
                 got = np.float64(step(v))
                 want = np.nextafter(np.float64(v), toward)
                 assert got.tobytes() == want.tobytes() or (math.isnan(got) and math.isnan(want)), (v, got, want)
+
+
+# ---------------------------------------------------------------------------
+# containment of exact results (not a comparison with the numpy core: a slip
+# made in both backends fails here)
+# ---------------------------------------------------------------------------
+
+_EXACT = {"add": lambda a, b: a + b, "sub": lambda a, b: a - b, "mul": lambda a, b: a * b,
+          "div": lambda a, b: a / b}
+
+
+@pytest.mark.parametrize("name", sorted(_EXACT))
+def test_compiled_ops_contain_the_exact_result_of_point_operands(name):
+    """``[x, x] op [y, y]`` from the compiled scalar op holds the exact rational ``x op y``, and its
+    bounds are distinct floats whenever that value is not a float: removing the outward step of one
+    operation fails this test (the rounded-to-nearest result misses the exact value)."""
+    rng = np.random.default_rng(20261202)
+    x = rng.uniform(-4.0, 4.0, 400) * 10.0 ** rng.integers(-6, 6, 400)
+    y = rng.uniform(-4.0, 4.0, 400) * 10.0 ** rng.integers(-6, 6, 400)
+    f, exact_of = getattr(ops, name), _EXACT[name]
+    inexact = 0
+    for a, b in zip(x.tolist(), y.tolist()):
+        lo, hi = f(a, a, b, b)
+        exact = exact_of(Fraction(a), Fraction(b))
+        assert Fraction(lo) <= exact <= Fraction(hi), (name, a, b, lo, hi)
+        if Fraction(exact_of(a, b)) != exact:
+            inexact += 1
+            assert lo < hi, (name, a, b, lo, hi)
+    assert inexact > 100  # the rounding matters on most of these operands
