@@ -1,6 +1,8 @@
 """The command line, through main(argv): verdicts, exit codes, bad input."""
 
 import json
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -262,12 +264,28 @@ CERTIFY_NARROW = ["certify", "--v-low", "0.9", "--v-high", "1.3", "--tol", "0.1"
                   "--no-progress"]
 
 
-def test_certify_names_the_gap_and_times_the_bounce(tmp_path, capsys):
+def test_certify_names_the_gap_and_times_the_bounce(tmp_path, capsys, monkeypatch):
     """The printed gap is the JSON's gap_mps (a difference) with the ratio named beside it; the bounce search's
-    time is its own run time, not the wait left after the other phases; certified_at_step is null or a step."""
+    time is its own run time, not the wait left after the other phases; certified_at_step is null or a step.
+    The figure draws what certified v_min: the window passes' tubes when they decided, named in the title."""
     import re
 
+    planning = sys.modules["crosscert.planner.cli.planning"]
+    drawn = []
+    for name in ("plot_run", "plot_certificate"):
+        real = getattr(planning, name)
+        monkeypatch.setattr(planning, name, lambda *a, _real=real, _name=name, **k: (drawn.append((_name, a, k)),
+                                                                                     _real(*a, **k))[1])
     assert main([*CERTIFY_NARROW, "--out", str(tmp_path / "c")]) == 0
+    report = json.loads((tmp_path / "c" / "certificate.json").read_text())
+    assert len(drawn) == 1 and Path(drawn[0][1][0]).stat().st_size > 10_000
+    name, args, kwargs = drawn[0]
+    if report["window"] is not None:
+        assert name == "plot_certificate" and "certified by window reasoning" in kwargs["title"]
+        assert {h.final_mode for h in args[3].hypotheses} == {1, -1}
+        assert any(h.status.value == "refuted" for h in args[3].hypotheses)
+    else:
+        assert name == "plot_run" and "certified by the forward pass" in kwargs["title"]
     out = capsys.readouterr().out
     report = json.loads((tmp_path / "c" / "certificate.json").read_text())
     assert report["execution"]["proved"] is True and report["execution"]["proof"]["boxes_explored"] > 0

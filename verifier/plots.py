@@ -9,7 +9,7 @@ import numpy as np
 
 from .files import atomic_write
 
-__all__ = ["plot_run"]
+__all__ = ["plot_run", "plot_certificate"]
 
 
 #: Velocity axis limit, m/s: boxes wider than this (before the first samples
@@ -117,6 +117,123 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
     if k_sing is not None:
         ax[0, 1].legend(loc="best", fontsize=8)
         ax[1, 0].legend(loc="best", fontsize=8)
+    fig.suptitle(title + (f"\n{bounds}" if bounds else ""))
+    fig.tight_layout()
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")
+    plt.close(fig)
+
+
+#: Colours of the final-mode hypotheses of window reasoning.
+_HYPOTHESIS_COLOR = {1: "tab:blue", -1: "tab:red"}
+
+
+def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_sing=None, title="", bounds=""):
+    """Write the figure of a certified run: what certified it, drawn as such.
+
+    The window passes' tubes of each final-mode hypothesis that survived
+    (hull over its surviving geometry sub-boxes), the refuted hypothesis
+    named with its reason, and the forward pass drawn beside them only as
+    "forward pass" (its boxes are not what certified the run).
+
+    Parameters
+    ----------
+    path : str or Path
+        Output PNG, written by :func:`verifier.files.atomic_write`.
+    t_s : float
+        Sampling period, s.
+    forward : dict
+        The forward pass: ``x_lo, x_hi, xd_lo, xd_hi`` ``(K, n)`` (m, m/s) and ``mode`` ``(K,)``.
+    window : verifier.window.WindowResult
+        The window passes on the same readings.
+    x_plan, xd_plan : array (K, n), optional
+        Planned pose (m) and velocity (m/s), drawn on top.
+    k_sing : int, optional
+        Sample of the singular instant.
+    title, bounds : str
+        Figure title and the bounds the run assumed (printed under it).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    fl, fh, fvl, fvh = (np.asarray(forward[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
+    K, n = fl.shape
+    t = np.arange(K) * t_s
+    alive = [h for h in window.hypotheses if h.x_lo is not None]
+    fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
+    step = max(1, K // 300)
+    # pose: the forward pass in grey, each surviving hypothesis' tube in its colour
+    a = ax[0, 0]
+    # the forward pass last, dotted, so that it shows where a tube coincides with it
+    layers = [(f"window tube, final mode {h.final_mode:+d}", _HYPOTHESIS_COLOR.get(h.final_mode, "k"), "-", h.x_lo, h.x_hi)
+              for h in alive] + [("forward pass", "0.35", ":", fl, fh)]
+    for label, color, ls, lo, hi in layers:
+        for k in range(0, K, step):
+            if np.all(np.isfinite([lo[k, 0], hi[k, 0], lo[k, -1], hi[k, -1]])):
+                a.add_patch(Rectangle((lo[k, 0] * 1e3, lo[k, -1] * 1e3), (hi[k, 0] - lo[k, 0]) * 1e3,
+                                      (hi[k, -1] - lo[k, -1]) * 1e3, fill=False, lw=0.5, ec=color, ls=ls))
+        a.plot([], [], color=color, lw=1, ls=ls, label=label)
+    if x_plan is not None:
+        a.plot(x_plan[:, 0] * 1e3, x_plan[:, -1] * 1e3, "k-", lw=0.8, label="planned pose")
+    ref = [(h.x_lo, h.x_hi) for h in alive] or [(fl, fh)]
+    fin = np.concatenate([np.isfinite(lo).all(1) & np.isfinite(hi).all(1) for lo, hi in ref])
+    lo_all, hi_all = np.concatenate([lo for lo, _ in ref]), np.concatenate([hi for _, hi in ref])
+    if fin.any():
+        a.set_xlim(lo_all[fin, 0].min() * 1e3 - 5, hi_all[fin, 0].max() * 1e3 + 5)
+        a.set_ylim(lo_all[fin, -1].min() * 1e3 - 5, hi_all[fin, -1].max() * 1e3 + 5)
+    a.set_xlabel("x1 (mm)")
+    a.set_ylabel(f"x{n} (mm)")
+    a.set_title(f"pose boxes, every {step} sample(s)")
+    a.legend(loc="best", fontsize=8)
+    # velocity of the last coordinate
+    a = ax[0, 1]
+    cut = False
+    for h in alive:
+        lo, hi, c = _clip(h.xd_lo[:, -1], h.xd_hi[:, -1], VELOCITY_CLIP)
+        cut |= c
+        a.fill_between(t, lo, hi, color=_HYPOTHESIS_COLOR.get(h.final_mode, "k"), alpha=0.45,
+                       label=f"window tube, final mode {h.final_mode:+d}")
+    lo, hi, c = _clip(fvl[:, -1], fvh[:, -1], VELOCITY_CLIP)
+    cut |= c
+    a.plot(t, lo, color="0.35", ls=":", lw=1, label="forward pass")
+    a.plot(t, hi, color="0.35", ls=":", lw=1)
+    if xd_plan is not None:
+        a.plot(t, xd_plan[:, -1], "k-", lw=0.8, label="planned velocity")
+    a.set_ylabel(f"velocity of x{n} (m/s)")
+    a.set_xlabel("t (s)")
+    a.set_title(f"velocity (clipped at ±{VELOCITY_CLIP:g} m/s)" if cut else "velocity")
+    # widths: what each reasoning leaves
+    a = ax[1, 0]
+    a.semilogy(t, np.maximum((fh - fl).max(axis=1), 1e-9) * 1e3, color="0.6", label="pose, forward pass")
+    a.semilogy(t, np.maximum((fvh - fvl).max(axis=1), 1e-9), color="0.6", ls="--", label="velocity, forward pass")
+    for h in alive:
+        color = _HYPOTHESIS_COLOR.get(h.final_mode, "k")
+        a.semilogy(t, np.maximum((h.x_hi - h.x_lo).max(axis=1), 1e-9) * 1e3, color=color,
+                   label=f"pose, final mode {h.final_mode:+d}")
+        a.semilogy(t, np.maximum((h.xd_hi - h.xd_lo).max(axis=1), 1e-9), color=color, ls="--",
+                   label=f"velocity, final mode {h.final_mode:+d}")
+    a.set_xlabel("t (s)")
+    a.set_ylabel("largest box side (mm solid, m/s dashed)")
+    a.set_title("box widths")
+    for a in (ax[0, 1], ax[1, 0]):
+        if k_sing is not None:
+            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
+        a.legend(loc="best", fontsize=8)
+    # the reasoning, hypothesis by hypothesis
+    a = ax[1, 1]
+    a.axis("off")
+    lines = [f"verdict: {window.verdict.value} (forward pass alone: {window.forward_verdict.value})", ""]
+    for h in window.hypotheses:
+        if h.status.value == "refuted":
+            lines.append(f"final mode {h.final_mode:+d}: REFUTED ({h.refutation.value}) after {h.passes} pass(es)")
+        else:
+            lines.append(f"final mode {h.final_mode:+d}: consistent, {h.geometries_alive} geometry sub-box(es) "
+                         f"alive after {h.passes} pass(es)")
+    lines += ["", "A hypothesis is refuted when no admissible motion ends in", "its final mode: the run's mode is the other one."]
+    a.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", fontsize=9, family="monospace", transform=a.transAxes)
+    a.set_title("window reasoning")
     fig.suptitle(title + (f"\n{bounds}" if bounds else ""))
     fig.tight_layout()
     atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from crosscert.verifier.files import atomic_write
-from crosscert.verifier.plots import plot_run
+from crosscert.verifier.plots import plot_certificate, plot_run
 from crosscert.verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
@@ -65,12 +66,21 @@ def certify(a) -> int:
     if cert.enclosures is not None:
         e, p = cert.enclosures, cert.trajectory
         png = out / f"certificate_{robot.name}_{cert.v_min:.3f}.png"
-        plot_run(png, p.t_s, {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode},
-                 p.x, p.xd, p.k_sing, title=f"{robot.name}: certified crossing at v_min = {cert.v_min:.3f} m/s",
-                 bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} rad, a_max = "
-                         f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
-                         f"t_s = {cert.bounds.t_s:.3g} s, "
-                         f"{cert.execution.kind.value} executions"), truth="planned")
+        forward = {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode}
+        if cert.window is not None:  # the window passes certified: draw them, the forward pass only beside them
+            figure = partial(plot_certificate, png, p.t_s, forward, cert.window,
+                             title=f"{robot.name}: crossing at v_min = {cert.v_min:.3f} m/s certified by window reasoning")
+        else:
+            figure = partial(plot_run, png, p.t_s, forward,
+                             title=f"{robot.name}: crossing at v_min = {cert.v_min:.3f} m/s certified by the forward pass",
+                             truth="planned")
+        units = {u.value for u in robot.joint_units}
+        joint_unit = units.pop() if len(units) == 1 else "rad or m (per joint)"
+        figure(p.x, p.xd, p.k_sing,
+               bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
+                       f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
+                       f"t_s = {cert.bounds.t_s:.3g} s, "
+                       f"{cert.execution.kind.value} executions"))
         files.append(png)
     js = out / "certificate.json"
     atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
