@@ -25,6 +25,7 @@ from crosscert.verifier.settings import Verdict
 
 from .acceleration import AccelerationAssumption, robot_a_max_assumption
 from .certify.crossing import CrossingCertificate, certify_crossing
+from .progress import suffixed
 
 __all__ = ["ComparisonOutcome", "AtRobotAMax", "certify_at_robot_a_max"]
 
@@ -113,7 +114,8 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
     scan = np.arange(known, top, 0.1) if refute and known is not None else None
     bounds = replace(cert.bounds, a_max=ref.values)
     other = certify_crossing(robot, task, bounds, v_low=start, v_high=v_high, tol=tol, monte_carlo_runs=0,
-                             refute=refute, refute_speeds=scan, executor=executor, seed=seed, progress=progress,
+                             refute=refute, refute_speeds=scan, executor=executor, seed=seed,
+                             progress=suffixed(progress, " at the robot's a_max"),
                              kin=kin, imodel=imodel, bounce=False)
     bound = other.refutation_bound
     if known is not None and (bound is None or bound < known):

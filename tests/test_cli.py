@@ -364,3 +364,51 @@ def test_an_interrupt_swallowed_by_a_c_callback_is_sent_again(tmp_path):
     waited = time.perf_counter() - t0
     assert proc.returncode == 130 and proc.stderr == "crosscert: interrupted\n", (proc.stdout, proc.stderr)
     assert waited < 10.0, waited
+
+
+def test_progress_names_each_phase_with_its_total_and_says_when_it_compiles(monkeypatch):
+    """The certify bar: one named phase after another with its size; numba's compile events show as
+    'compiling kernels' and hand the name back; a phase that counts nothing still redraws its time."""
+    from numba.core import event
+
+    from crosscert.planner.cli import setup
+    from crosscert.planner.progress import Phase, enter
+
+    bars = []
+
+    class FakeBar:
+        def __init__(self, total=None, desc="", unit="", **_):
+            self.total, self.desc, self.unit, self.n, self.refreshed, self.closed = total, desc, unit, 0, 0, False
+            bars.append(self)
+
+        def update(self, k):
+            self.n += k
+
+        def set_description_str(self, d, refresh=True):
+            self.desc = d
+
+        def refresh(self):
+            self.refreshed += 1
+
+        def close(self):
+            self.closed = True
+
+    monkeypatch.setattr("tqdm.tqdm", FakeBar)
+    bar = setup.PhaseBar("certify")
+    try:
+        enter(bar, Phase.SEARCH, 9, unit="speed")
+        bar(1)
+        assert (bars[-1].desc, bars[-1].total, bars[-1].unit, bars[-1].n) == ("certify: speed search", 9, "speed", 1)
+        assert bars[0].closed  # the previous phase's bar is closed
+        with event.trigger_event("numba:compile", data={}):
+            assert bars[-1].desc == f"certify: {setup.COMPILING}"
+        assert bars[-1].desc == "certify: speed search"
+        enter(bar, Phase.REFUTATION, unit="search")
+        import time as _time
+
+        _time.sleep(1.2)
+        assert bars[-1].refreshed >= 1  # the elapsed time moves although nothing is counted
+    finally:
+        bar.close()
+    bar.close()  # twice is harmless
+    assert all(b.closed for b in bars)

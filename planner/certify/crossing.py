@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import importlib.metadata as md
 import logging
+import math
 import time
 import threading
 from concurrent.futures import CancelledError, Executor, Future, ThreadPoolExecutor
@@ -35,6 +36,7 @@ from ..acceleration import AccelerationAssumption, derived_a_max
 from ..plan import plan_crossing, speed_ceiling
 from ..simulate import random_geometry
 from ..task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
+from ..progress import Phase, enter
 from ..worker import SubprocessExecutor
 from .plan import search_v_min
 
@@ -249,8 +251,9 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         or here, afterwards; also the bounces of the task at ``v_min`` (:mod:`planner.bounce`).
     seed : int
         Seed of the Monte Carlo executions and of the counterexample starts.
-    progress : callable, optional
-        ``progress(k)`` after each tracked sample of every batch.
+    progress : planner.progress.Progress or callable, optional
+        Told each phase as it begins (speed search, Monte Carlo, counterexample searches, bounce
+        search) with its size, then called once per unit done; a plain callable is only called.
     kin, imodel : optional
         The robot's kinematic and interval models (built when absent).
     """
@@ -275,8 +278,12 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
             t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
         mc = _confirm(job, run, monte_carlo_runs, seed, progress)
         t1 = clock.lap("monte_carlo", t1)
+        if refuter is not None:
+            enter(progress, Phase.REFUTATION, unit="search")
         ref_bound, ref = _refutation(refuter, ref_job, top, job.bracket.tol)
         t1 = clock.lap("refutation", t1)
+        if bounces is not None:
+            enter(progress, Phase.BOUNCE, unit="search")
         gap, ran = _bounce_gap(job, bounces, starts)
         clock.lap("bounce", t1)
         if gap is not None:  # its own run time: the tracker's side here plus the crossing searches
@@ -338,10 +345,17 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
 
 def _search(job: _Job, refuter, progress):
     """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above)."""
-    observe = None if refuter is None else (
-        lambda t: refuter.drop_from(t.v_sing) if t.verdict is Verdict.MODE_CHANGED else None)
     br = job.bracket
-    return search_v_min(job.kin, job.imodel, job.task, job.b, br.v_low, br.v_high, tol=br.tol, progress=progress,
+    # the bisection asks v_high, then halves the bracket down to tol, then maybe v_low itself
+    enter(progress, Phase.SEARCH, 2 + max(0, math.ceil(math.log2((br.v_high - br.v_low) / br.tol))), unit="speed")
+
+    def observe(t):
+        if refuter is not None and t.verdict is Verdict.MODE_CHANGED:
+            refuter.drop_from(t.v_sing)
+        if progress is not None:
+            progress(1)
+
+    return search_v_min(job.kin, job.imodel, job.task, job.b, br.v_low, br.v_high, tol=br.tol,
                         observe=observe, parallel=job.threads)
 
 
@@ -398,6 +412,7 @@ def _confirm(job: _Job, run, runs: int, seed, progress):
     """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs)."""
     if run is None or not runs:
         return None
+    enter(progress, Phase.MONTE_CARLO, len(run.plan.q), unit="sample")
     return monte_carlo_confirmation(job.kin, job.imodel, run.plan, job.b, runs=runs, seed=seed, progress=progress,
                                     execution=run.execution, parallel=job.threads)
 

@@ -18,7 +18,7 @@ from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
 from ..task import Method, PlanningBounds
-from .setup import progress_bar, task_setup
+from .setup import phase_bar, task_setup
 
 __all__ = ["plan", "certify"]
 
@@ -43,7 +43,7 @@ def certify(a) -> int:
                             method=a.method, dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
                             execution=a.execution)
     out = Path(a.out)
-    bar, cb = progress_bar(None, not a.no_progress, "certify")
+    bar = cb = phase_bar(not a.no_progress, "certify")
     # one worker process for both certifications' counterexample searches: the second reuses the
     # first's imports and NLP solvers (planner.refute builds one per sample count)
     pool = None if a.no_refute else SubprocessExecutor()

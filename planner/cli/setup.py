@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import threading
 
 import numpy as np
 
@@ -79,3 +80,89 @@ def progress_bar(total, enabled: bool, desc: str):
 
     bar = tqdm(total=total, desc=desc, unit="step", file=sys.stderr, leave=False)
     return bar, (lambda k: bar.update(1))
+
+
+#: What the bar says while numba compiles (the first run after an install; loads from the cache are quick).
+COMPILING = "compiling kernels (once after install)"
+
+
+class PhaseBar:
+    """One tqdm bar per named phase on stderr, with its total and elapsed time (:class:`planner.progress.Progress`).
+
+    A thread redraws the bar every half second, so a phase that counts nothing for a while (a wait
+    for the counterexample searches) still shows its time going; while numba compiles a kernel (a
+    cache miss: the first run after an install) the bar says so instead of the phase.
+    """
+
+    def __init__(self, desc: str):
+        from numba.core import event
+        from tqdm import tqdm
+
+        self._tqdm, self._event, self._desc = tqdm, event, desc
+        self._lock = threading.RLock()
+        self._bar = None
+        self._name = desc
+        self._compiling = 0
+        self._stop = threading.Event()
+        self._listener = _compile_listener(self)
+        event.register("numba:compile", self._listener)
+        self._ticker = threading.Thread(target=self._tick, name="crosscert-progress", daemon=True)
+        self._ticker.start()
+        self.phase(desc)
+
+    def phase(self, name: str, total: int | None = None, unit: str = "step") -> None:
+        with self._lock:
+            if self._bar is not None:
+                self._bar.close()
+            self._name = name
+            self._bar = self._tqdm(total=total, desc=self._label(), unit=unit, file=sys.stderr, leave=False)
+
+    def __call__(self, done=1) -> None:
+        with self._lock:
+            if self._bar is not None:
+                self._bar.update(1)
+
+    def _label(self) -> str:
+        return f"{self._desc}: {COMPILING}" if self._compiling else f"{self._desc}: {self._name}"
+
+    def compiling(self, started: bool) -> None:
+        with self._lock:
+            self._compiling += 1 if started else -1
+            if self._bar is not None and self._compiling <= 1:
+                self._bar.set_description_str(self._label(), refresh=False)
+
+    def _tick(self) -> None:
+        while not self._stop.wait(0.5):
+            with self._lock:
+                if self._bar is not None:
+                    self._bar.refresh()
+
+    def close(self) -> None:
+        """End the display (again: nothing)."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._event.unregister("numba:compile", self._listener)
+        with self._lock:
+            if self._bar is not None:
+                self._bar.close()
+                self._bar = None
+
+
+def _compile_listener(bar: PhaseBar):
+    """numba's compile events (start and end of a compilation, not of a cache load) to :meth:`PhaseBar.compiling`."""
+    from numba.core import event
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            bar.compiling(True)
+
+        def on_end(self, ev):
+            bar.compiling(False)
+
+    return Listener()
+
+
+def phase_bar(enabled: bool, desc: str):
+    """A :class:`PhaseBar` (None when progress is off)."""
+    return PhaseBar(desc) if enabled else None

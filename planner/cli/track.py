@@ -18,7 +18,8 @@ from crosscert.verifier.tracker import initial_box_from_mode, verdict_of
 from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
 from crosscert.verifier.window import FixedLagWindow, Reasoning, track_window
 
-from .setup import progress_bar, tracker_setup
+from ..progress import Phase, enter
+from .setup import phase_bar, tracker_setup
 
 __all__ = ["check", "monitor", "Monitor"]
 
@@ -62,7 +63,8 @@ def check(a) -> int:
     t0 = time.perf_counter()
     run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False)
     readings = [] if a.reasoning == Reasoning.WINDOW.value else None
-    bar, cb = progress_bar(None, not a.no_progress and not a.json, "tracking")
+    bar = cb = phase_bar(not a.no_progress and not a.json, "check")
+    enter(bar, Phase.FORWARD, unit="sample")
     try:
         with open_trajectory(a.trajectory) as (src, name):
             reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
@@ -77,10 +79,13 @@ def check(a) -> int:
                         readings = None  # too long for the window: the forward verdict stands
                 if cb is not None:
                     cb(1)
-    finally:
+    except BaseException:
         if bar is not None:
             bar.close()
+        raise
     if run.samples < 2:
+        if bar is not None:
+            bar.close()
         raise TrajectoryFileError(f"{name}: at least two samples are needed, got {run.samples}")
     out = {k: v for k, v in run.summary().items() if k not in _MONITOR_ONLY}
     out["reasoning"] = a.reasoning
@@ -91,13 +96,20 @@ def check(a) -> int:
             print(f"crosscert: note: window reasoning skipped: the recording is longer than {WINDOW_MAX_SAMPLES} "
                   "samples; the verdict is the forward tracker's", file=sys.stderr)
         else:
-            win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
-                               x0=run.x0_used, backend=a.backend)
+            enter(bar, Phase.WINDOW, unit="pass")
+            try:
+                win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
+                                   x0=run.x0_used, backend=a.backend)
+            finally:
+                if bar is not None:
+                    bar.close()
             out["window"] = win.summary()
             out["verdict"] = win.verdict.value
             if win.verdict in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
                 out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
                                      else -out["initial_mode"])
+    if bar is not None:
+        bar.close()  # idempotent
     out["elapsed_s"] = time.perf_counter() - t0
     if a.json:
         print(json.dumps(out))
