@@ -35,7 +35,8 @@ class Progress(Protocol):
     """What a phase-aware display provides."""
 
     def phase(self, name: str, total: int | None = None, unit: str = "step") -> None:
-        """A new phase begins: ``total`` units (None: not known in advance) of ``unit``."""
+        """A new phase begins: ``total`` units (None: not known in advance) of ``unit`` (empty: a wait
+        that counts nothing)."""
 
     def __call__(self, done=1) -> None:
         """One more unit of the current phase is done (the argument is ignored)."""

@@ -279,11 +279,11 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         mc = _confirm(job, run, monte_carlo_runs, seed, progress)
         t1 = clock.lap("monte_carlo", t1)
         if refuter is not None:
-            enter(progress, Phase.REFUTATION, unit="search")
+            enter(progress, Phase.REFUTATION, unit="")
         ref_bound, ref = _refutation(refuter, ref_job, top, job.bracket.tol)
         t1 = clock.lap("refutation", t1)
         if bounces is not None:
-            enter(progress, Phase.BOUNCE, unit="search")
+            enter(progress, Phase.BOUNCE, unit="")
         gap, ran = _bounce_gap(job, bounces, starts)
         clock.lap("bounce", t1)
         if gap is not None:  # its own run time: the tracker's side here plus the crossing searches

@@ -108,14 +108,18 @@ class PhaseBar:
         event.register("numba:compile", self._listener)
         self._ticker = threading.Thread(target=self._tick, name="crosscert-progress", daemon=True)
         self._ticker.start()
-        self.phase(desc)
+        self.phase("starting", unit="")
 
     def phase(self, name: str, total: int | None = None, unit: str = "step") -> None:
+        """A new bar for phase ``name`` (``unit`` empty: a wait, drawn as its name and elapsed time)."""
         with self._lock:
             if self._bar is not None:
                 self._bar.close()
             self._name = name
-            self._bar = self._tqdm(total=total, desc=self._label(), unit=unit, file=sys.stderr, leave=False)
+            # a phase that counts nothing (a wait) shows its name and elapsed time only
+            fmt = "{desc} [{elapsed}]" if total is None and not unit else None
+            self._bar = self._tqdm(total=total, desc=self._label(), unit=unit or "step", file=sys.stderr, leave=False,
+                                   bar_format=fmt)
 
     def __call__(self, done=1) -> None:
         with self._lock:

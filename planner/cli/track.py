@@ -96,7 +96,7 @@ def check(a) -> int:
             print(f"crosscert: note: window reasoning skipped: the recording is longer than {WINDOW_MAX_SAMPLES} "
                   "samples; the verdict is the forward tracker's", file=sys.stderr)
         else:
-            enter(bar, Phase.WINDOW, unit="pass")
+            enter(bar, Phase.WINDOW, unit="")
             try:
                 win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
                                    x0=run.x0_used, backend=a.backend)
