@@ -34,7 +34,7 @@ class SweepRow:
     verdict: Verdict
     max_width_pose: float  # m_x, m
     max_width_velocity: float  # m_xd, m/s
-    certified_at_step: int
+    certified_at_step: int | None  # first sample of the certified final mode; None when not certified
     k_sing: int
     contained: bool  # true pose and velocity inside every box (simulation only)
 
@@ -102,7 +102,8 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
                 and np.all(rec["xd_lo"][b, 1:N] <= r.xd_true[1:]) and np.all(r.xd_true[1:] <= rec["xd_hi"][b, 1:N])
             ) if ok else False
             rows.append(SweepRow(float(r.v_sing), str(vm), res.verdict[b], float(res.max_width_pose[b]),
-                                 float(res.max_width_velocity[b]), int(res.certified_at_step[b]), int(r.k_sing), inside))
+                                 float(res.max_width_velocity[b]), (None if res.certified_at_step[b] < 0 else int(res.certified_at_step[b])),
+                                 int(r.k_sing), inside))
             if record_speed is not None and abs(r.v_sing - record_speed) < 1e-12:
                 figures[str(vm)] = (r, {k: v[b, :N] for k, v in rec.items()})
     return rows, figures

@@ -70,3 +70,16 @@ def test_options_are_enums_and_bad_ones_list_the_choices():
         PlanningBounds(method="fast").for_robot(robots.DEXTAR)
     with pytest.raises(InputError, match="'cartesian', 'joint'"):
         PlanningBounds(execution="loose").for_robot(robots.DEXTAR)
+
+
+def test_a_sweep_row_not_certified_has_no_certified_step(kin, bench):
+    """SweepRow.certified_at_step is None where the tracker certified no final mode (not a -1 sentinel)."""
+    from crosscert.planner.sweep import SweepRow, sweep
+    from crosscert.verifier.settings import VelocityModel, Verdict
+
+    rows, _ = sweep(kin.robot, kin, bench, [0.3, 1.458], models=(VelocityModel.SOUND,))
+    by_speed = {r.v_sing: r for r in rows}
+    slow, fast = by_speed[0.3], by_speed[1.458]
+    assert slow.verdict is not Verdict.MODE_CHANGED and slow.certified_at_step is None, slow
+    assert fast.verdict is Verdict.MODE_CHANGED and isinstance(fast.certified_at_step, int), fast
+    assert fast.certified_at_step > fast.k_sing and isinstance(rows[0], SweepRow)
