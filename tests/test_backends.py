@@ -205,3 +205,23 @@ def test_drivers_have_their_own_cache_entries():
 
     names = {d.py_func.__qualname__ for d in (kernels.run_serial, kernels.run_parallel, kernels.run_hypotheses_parallel)}
     assert len(names) == 3
+
+
+def test_scratch_follows_the_configuration(imodel, settings):
+    """The compiled step sizes its per-state scratch from the configuration
+    (split pieces, baselines): a state stepped under another configuration
+    gets new scratch, never the old one (the kernels do not check bounds)."""
+    import dataclasses
+
+    run = run_of(CATALOGUE["crossing_1458"])
+    q = np.array(run.q_meas[:3])
+    x0 = initial_box_from_mode(imodel, q[0], int(run.mode_true[0]), settings)
+    small = configure(imodel, dataclasses.replace(settings, split_boxes=2))
+    big = configure(imodel, settings)
+    from crosscert.verifier.step import init_state, step
+
+    st = init_state(small, x0)
+    step(small, st, q[:1])
+    pieces = st.kernel_args["scratch"].pieces.shape
+    step(big, st, q[1:2])
+    assert st.kernel_args["config"] is big and st.kernel_args["scratch"].pieces.shape[1] > pieces[1]

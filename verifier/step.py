@@ -485,7 +485,10 @@ class CompiledStep:
         once per state: the state's arrays as tuples, the per-thread scratch
         and the empty record and prior."""
         a = st.kernel_args
-        if not a:
+        if not a or a["config"] is not config or a["rows"].x is not st.x or a["scen"].mode is not st.mode:
+            # first call, another configuration (the scratch is sized from it), or
+            # a state copied with other arrays (dataclasses.replace)
+            a = st.kernel_args = {"config": config}
             from .compiled import step as kernels
             from .compiled.contractors import scratch_arrays
 

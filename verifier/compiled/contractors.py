@@ -18,7 +18,7 @@ import numpy as np
 
 from . import ops
 from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
-from .ops import jit
+from .ops import cached_jit, jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
@@ -389,7 +389,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     return 0
 
 
-@jit
+@cached_jit
 def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode):
     """Enclose every solution of ``f(x, q, xi) = 0`` in ``X_search`` (boxes
     ``(1, 2, n)``, ``(1, 2, n)``, ``(1, 2, m)``; branch and prune of

@@ -29,10 +29,17 @@ MAX = float(np.finfo(np.float64).max)
 TWO_PI = 2.0 * math.pi
 _TRIG_ULPS = float(TRIG_ULPS)
 
-jit = njit(cache=True, nogil=True)
+#: The decorator of every kernel called from other kernels.  Not cached on its
+#: own: numba caches the machine code of a top-level kernel (the step drivers,
+#: the first sample's branch and prune) with everything it calls, and caching
+#: each callee too would generate the machine code of its whole call tree once
+#: more per callee at the first run (most of the compilation time).
+jit = njit(nogil=True)
+#: What the top-level kernels, called from Python, are compiled with.
+cached_jit = njit(cache=True, nogil=True)
 #: IEEE division as numpy's (x / 0 is inf or NaN): numba's default raises
 #: ZeroDivisionError, which an empty divisor such as [0.3, 0] reached.
-_ieee_jit = njit(cache=True, nogil=True, error_model="numpy")
+_ieee_jit = njit(nogil=True, error_model="numpy")
 
 
 @intrinsic
