@@ -101,9 +101,9 @@ def sweep(robot, kin, crossing, speeds, models=(VelocityModel.PAPER, VelocityMod
                 np.all(rec["x_lo"][b, :N] <= r.x_true) and np.all(r.x_true <= rec["x_hi"][b, :N])
                 and np.all(rec["xd_lo"][b, 1:N] <= r.xd_true[1:]) and np.all(r.xd_true[1:] <= rec["xd_hi"][b, 1:N])
             ) if ok else False
+            step = int(res.certified_at_step[b])
             rows.append(SweepRow(float(r.v_sing), str(vm), res.verdict[b], float(res.max_width_pose[b]),
-                                 float(res.max_width_velocity[b]), (None if res.certified_at_step[b] < 0 else int(res.certified_at_step[b])),
-                                 int(r.k_sing), inside))
+                                 float(res.max_width_velocity[b]), None if step < 0 else step, int(r.k_sing), inside))
             if record_speed is not None and abs(r.v_sing - record_speed) < 1e-12:
                 figures[str(vm)] = (r, {k: v[b, :N] for k, v in rec.items()})
     return rows, figures
