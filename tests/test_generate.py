@@ -298,6 +298,6 @@ def test_speeds_share_one_nlp_and_every_warm_solution_is_checked(task, dyn, monk
     def failing_check(*args, **kwargs):
         raise CheckFailed("test", "the check of this test fails every plan")
 
-    monkeypatch.setattr(crossing_mod, "verify", failing_check)
+    monkeypatch.setattr(crossing_mod, "check_plan", failing_check)
     with pytest.raises(CheckFailed, match="fails every plan"):
         generate_crossing(kin, DEXTAR_DYNAMICS, task, 1.25, LIMITS)
