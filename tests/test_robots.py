@@ -9,18 +9,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from crosscert.robots import (
-    DEXTAR,
-    ROBOTS,
-    KinematicModel,
-    Robot,
-    available_robots,
-    benchmark_crossing,
-    elbows_out_ik,
-    get_robot,
-    singular_y,
-)
-from crosscert.robots.dextar import distal_joints, mode_by_cross_product
+from crosscert.robots import DEXTAR, ROBOTS, KinematicModel, Robot, available_robots, get_robot
+from crosscert.robots.dextar import benchmark_crossing, distal_joints, elbows_out_ik, mode_by_cross_product, singular_y
 from crosscert.robots.errors import InputError, ModelError, SimulationError, UnknownRobotError
 
 
