@@ -25,6 +25,16 @@ def _clip(lo, hi, limit):
     return np.clip(lo, -limit, limit), np.clip(hi, -limit, limit), cut
 
 
+def _pose_boxes(ax, lo, hi, step, color_of, ls="-"):
+    """Outline every ``step``-th box ``[lo_k, hi_k]`` in the (x1, x_n) plane, mm, in colour ``color_of(k)``."""
+    from matplotlib.patches import Rectangle
+
+    for k in range(0, lo.shape[0], step):
+        if np.all(np.isfinite([lo[k, 0], hi[k, 0], lo[k, -1], hi[k, -1]])):
+            ax.add_patch(Rectangle((lo[k, 0] * 1e3, lo[k, -1] * 1e3), (hi[k, 0] - lo[k, 0]) * 1e3,
+                                   (hi[k, -1] - lo[k, -1]) * 1e3, fill=False, lw=0.5, ec=color_of(k), ls=ls))
+
+
 def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="", bounds="", truth="true"):
     """Write a 2x2 figure: pose boxes in the plane, velocity enclosure of the last
     coordinate and its integral, the displacement enclosure ``[Δ]`` (Fig. 4),
@@ -53,7 +63,6 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
 
     xl, xh, vl, vh = (np.asarray(boxes[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = xl.shape
@@ -61,11 +70,7 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
     a = ax[0, 0]
     step = max(1, K // 400)
-    for k in range(0, K, step):
-        if np.all(np.isfinite([xl[k, 0], xh[k, 0], xl[k, -1], xh[k, -1]])):
-            color = {1: "tab:blue", -1: "tab:red"}.get(int(boxes["mode"][k]), "0.6")
-            a.add_patch(Rectangle((xl[k, 0] * 1e3, xl[k, -1] * 1e3), (xh[k, 0] - xl[k, 0]) * 1e3,
-                                  (xh[k, -1] - xl[k, -1]) * 1e3, fill=False, lw=0.5, ec=color))
+    _pose_boxes(a, xl, xh, step, lambda k: {1: "tab:blue", -1: "tab:red"}.get(int(boxes["mode"][k]), "0.6"))
     for label, color in (("mode +1", "tab:blue"), ("mode -1", "tab:red"), ("undecided", "0.6")):
         a.plot([], [], color=color, lw=1, label=f"pose box, {label}")
     if x_true is not None:
@@ -156,7 +161,6 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.patches import Rectangle
 
     fl, fh, fvl, fvh = (np.asarray(forward[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = fl.shape
@@ -170,10 +174,7 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     layers = [(f"window tube, final mode {h.final_mode:+d}", _HYPOTHESIS_COLOR.get(h.final_mode, "k"), "-", h.x_lo, h.x_hi)
               for h in alive] + [("forward pass", "0.35", ":", fl, fh)]
     for label, color, ls, lo, hi in layers:
-        for k in range(0, K, step):
-            if np.all(np.isfinite([lo[k, 0], hi[k, 0], lo[k, -1], hi[k, -1]])):
-                a.add_patch(Rectangle((lo[k, 0] * 1e3, lo[k, -1] * 1e3), (hi[k, 0] - lo[k, 0]) * 1e3,
-                                      (hi[k, -1] - lo[k, -1]) * 1e3, fill=False, lw=0.5, ec=color, ls=ls))
+        _pose_boxes(a, lo, hi, step, lambda k, c=color: c, ls)
         a.plot([], [], color=color, lw=1, ls=ls, label=label)
     if x_plan is not None:
         a.plot(x_plan[:, 0] * 1e3, x_plan[:, -1] * 1e3, "k-", lw=0.8, label="planned pose")
