@@ -17,7 +17,7 @@ registry, one recording is simulated with the centre of the calibration box:
 
 Two measurements, compiled backend, BLAS on one thread:
 
-1. ``latency``: the online :class:`verifier.step.Tracker` fed one reading at
+1. ``latency``: the online :class:`verifier.tracker.Tracker` fed one reading at
    a time, ``perf_counter_ns`` around each ``update``; mean, p50, p99, max
    over samples 1..K-1 (us), over ``--runs`` runs (kernels loaded first);
 2. ``batch``: ``track_batch`` of ``--batch`` copies of the recording with

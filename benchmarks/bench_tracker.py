@@ -13,7 +13,7 @@ It prints numbers only; nothing here asserts on timing.  ``--backend``
 chooses ``compiled`` (numba kernels), ``numpy`` (the reference) or ``both``
 (default).  Five parts:
 
-1. ``latency``: one scenario fed to the online ``verifier.step.Tracker``
+1. ``latency``: one scenario fed to the online ``verifier.tracker.Tracker``
    one reading at a time, ``time.perf_counter_ns`` around each ``update``:
    mean, p50, p99 and max per sample (us), with and without sample 0, the
    real-time factor at 1 kHz (``1 ms / mean``; > 1 keeps up with the

@@ -209,7 +209,7 @@ def _speed_lag(im, s) -> None:
     cases = [("6.42 s recording, 1.458 m/s", rec), ("1.1 m/s crossing", simulate(1.1, False, 0).q_meas),
              ("1.2 m/s bounce", simulate(1.2, True, 0).q_meas)]
     _lag_latency(im, s, cases[1][1][:60], 20)  # warm-up
-    from crosscert.verifier.step import Tracker
+    from crosscert.verifier.tracker import Tracker
 
     for name, q in cases:
         tr, t = Tracker(im, s, initial_box_from_mode(im, q[0], 1, s)), np.empty(len(q))

@@ -24,8 +24,8 @@ import logging
 
 from .model import IntervalModel
 from .settings import TrackerSettings, VelocityModel, Verdict
-from .step import Backend, Tracker
-from .tracker import BatchResult, SampleStream, TrackResult, initial_box_from_mode, track, track_batch
+from .step import Backend
+from .tracker import BatchResult, SampleStream, Tracker, TrackResult, initial_box_from_mode, track, track_batch
 from .trajectory import Trajectory
 from .trajfile import read_trajectory, write_trajectory
 from .validation import validate

@@ -609,14 +609,3 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None)
         if any(a.shape != (B, Kc, 2, config.model.n) for a in prior):
             raise InputError(f"prior boxes must have shape ({B}, {Kc}, 2, {config.model.n})")
     config.impl.advance(config, state, _kernel_array(q), record, prior)
-
-
-def __getattr__(name):
-    # The online tracker moved to verifier.tracker (which imports this module);
-    # a transitional alias resolved on first use, so that code still importing
-    # it from here keeps working.  Import it from verifier.tracker.
-    if name == "Tracker":
-        import importlib
-
-        return importlib.import_module(".tracker", __package__).Tracker
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -44,8 +44,8 @@ from crosscert.robots.errors import InputError
 
 from . import interval as I
 from .settings import TrackerSettings, Verdict
-from .step import Backend, Tracker, advance, configure, init_state, partition_xi, pose_solutions
-from .tracker import initial_box_from_mode, verdict_of
+from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
+from .tracker import Tracker, initial_box_from_mode, verdict_of
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
            "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES"]

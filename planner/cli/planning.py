@@ -43,6 +43,8 @@ def certify(a) -> int:
                             method=a.method, dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
                             execution=a.execution)
     out = Path(a.out)
+    units = {u.value for u in robot.joint_units}
+    joint_unit = units.pop() if len(units) == 1 else "rad or m (per joint)"
     bar = cb = phase_bar(not a.no_progress, "certify")
     # one worker process for both certifications' counterexample searches: the second reuses the
     # first's imports and NLP solvers (planner.refute builds one per sample count)
@@ -74,8 +76,6 @@ def certify(a) -> int:
             figure = partial(plot_run, png, p.t_s, forward,
                              title=f"{robot.name}: crossing at v_min = {cert.v_min:.3f} m/s certified by the forward pass",
                              truth="planned")
-        units = {u.value for u in robot.joint_units}
-        joint_unit = units.pop() if len(units) == 1 else "rad or m (per joint)"
         figure(p.x, p.xd, p.k_sing,
                bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
                        f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
@@ -119,7 +119,7 @@ def certify(a) -> int:
               f"{len(mc.wrong_verdicts)} wrong verdicts")
     phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
     if cert.execution is not None:
-        print(describe_execution(cert.execution))
+        print(describe_execution(cert.execution, joint_unit))
     print("a_max used: " + ("none (no certificate)" if cert.a_max_used is None else cert.a_max_used.describe()))
     _print_at_robot_a_max(cert, a.no_refute)
     extra = cert.at_robot_a_max

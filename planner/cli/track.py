@@ -12,7 +12,8 @@ import numpy as np
 
 from crosscert.robots.errors import CrosscertError, TrajectoryFileError
 from crosscert.verifier.plots import plot_run
-from crosscert.verifier.step import Backend, Event, Tracker
+from crosscert.verifier.step import Backend, Event
+from crosscert.verifier.tracker import Tracker
 from crosscert.verifier.settings import Verdict
 from crosscert.verifier.tracker import initial_box_from_mode, verdict_of
 from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
@@ -178,7 +179,7 @@ class Monitor:
 
     Samples wait in ``pending`` until the sampling period is known (at the
     second sample, or the first with ``--t-s``); then the compiled
-    :class:`~verifier.step.Tracker` starts from ``--x0`` or from the first
+    :class:`~verifier.tracker.Tracker` starts from ``--x0`` or from the first
     sample's box of ``--initial-mode``, and every later sample is tracked as
     soon as it is fed.
 
