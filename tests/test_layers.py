@@ -193,3 +193,14 @@ def test_the_owner_check_sees_a_revalidation():
             "V.positive('t_s', x)\nvector('a_max', v, n, positive=True)\nif t_s > t_min: pass\n"
             "vector('a_max', v, n)\n")
     assert [b for _, b in _revalidations(ast.parse(code))] == ["eps_q", "t_s", "a_max", "t_s", "a_max"]
+
+
+def test_the_layers_import_only_under_the_crosscert_namespace(tmp_path):
+    """From outside the checkout: ``crosscert.verifier`` imports, a bare ``verifier`` (or robots, planner) does not."""
+    import subprocess
+    import sys
+
+    code = ("import importlib.util, crosscert.verifier, crosscert.planner, crosscert.robots\n"
+            "assert [importlib.util.find_spec(m) for m in ('verifier', 'planner', 'robots')] == [None] * 3\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr

@@ -6,9 +6,10 @@ and the compiled kernels) read the validated settings through this one
 vectors as fields of a record array ``axis`` ``(n,)`` (``axis["eps_q"]`` in
 numpy, ``axis[i].eps_q`` in compiled code), the velocity baselines as a
 record array ``baseline`` ``(J,)``.  Derived intervals are rounded outward
-here, once.  :func:`pack_constants` is the only place that reads the
-settings' assumption fields (``t_s``, ``eps_q``, ``a_max``, ``v_max``, the
-drift model, ...).
+here, once.  :func:`pack_constants` is the only place of the tracker that
+reads the assumptions (``t_s``, ``eps_q``, ``a_max``, ``v_max``, ``xd0``, the
+drift model): from the settings' one
+:class:`~robots.assumptions.Assumptions` value, their owner.
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ def _difference_error(a, j: int, two_eps):
 
 def pack_constants(s, n: int) -> StepConstants:
     """The constants of validated settings ``s`` (vectors ``(n,)``), rounded outward."""
-    a = s  # the assumptions (t_s, eps_q, a_max, v_max, xd0, qdd_bound, drift model): their one source
+    a = s.assumptions  # t_s, eps_q, a_max, v_max, xd0 and the drift model: their one owner (robots.assumptions)
     ts = a.t_s
     A = (-a.a_max, a.a_max)
     with I.quiet_fp():
@@ -105,7 +106,7 @@ def pack_constants(s, n: int) -> StepConstants:
         h = np.array([np.stack(I.mul(float(j), float(j), ts, ts)) for j in s.baselines]).reshape(-1, 2)
     axis = np.zeros(n, AXIS_DTYPE)
     for name, v in (("eps_q", a.eps_q), ("a_max", a.a_max), ("v_max", a.v_max), ("xd0", a.xd0),
-                    ("qdd_bound", np.inf if a.qdd_bound is None else a.qdd_bound),
+                    ("qdd_bound", np.inf if s.qdd_bound is None else s.qdd_bound),
                     ("half_ts2_a_lo", half_ts2_A[0]), ("half_ts2_a_hi", half_ts2_A[1]),
                     ("ts_a_lo", ts_A[0]), ("ts_a_hi", ts_A[1]), ("quant_lo", quant[0]), ("quant_hi", quant[1])):
         axis[name] = v
@@ -118,6 +119,6 @@ def pack_constants(s, n: int) -> StepConstants:
         split_max_width=float(s.split_max_width), velocity_model=int(vmodel), max_iter=int(s.max_iter),
         split_boxes=int(s.split_boxes),
         hypotheses=int(np.prod(s.xi_splits)) if s.xi_splits is not None else 1,
-        keep_xi=bool(s.keep_xi), has_qdd_bound=a.qdd_bound is not None, axis=axis, baseline=baseline,
+        keep_xi=bool(s.keep_xi), has_qdd_bound=s.qdd_bound is not None, axis=axis, baseline=baseline,
         diff_err=np.ascontiguousarray(diff, dtype=np.float64),
         depth=int(max(s.baselines)) if vmodel == SOUND else 1)
