@@ -14,6 +14,15 @@ stays light::
 from __future__ import annotations
 
 import importlib
+from pathlib import Path as _Path
+
+# In a source checkout the three layers are this folder's siblings (pyproject.toml's package-dir
+# installs them inside it).  Python run from the checkout finds this folder first, before the
+# installed package: let `crosscert.verifier` and the others resolve to the siblings then.
+_HERE = _Path(__file__).resolve().parent
+if not (_HERE / "verifier").is_dir() and all((_HERE.parent / p / "__init__.py").is_file()
+                                              for p in ("robots", "verifier", "planner")):
+    __path__.append(str(_HERE.parent))
 
 #: name -> defining module (relative to this package), read on first access.
 _API = {

@@ -204,3 +204,13 @@ def test_the_layers_import_only_under_the_crosscert_namespace(tmp_path):
             "assert [importlib.util.find_spec(m) for m in ('verifier', 'planner', 'robots')] == [None] * 3\n")
     done = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+
+
+def test_the_namespace_imports_from_the_checkout_root_too():
+    """Run from the checkout, where its ``crosscert/`` folder shadows the installed package: the layers still import."""
+    import subprocess
+    import sys
+
+    code = "import crosscert.verifier, crosscert.planner.cli, crosscert.robots; print(crosscert.planner.cli.__name__)"
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "crosscert.planner.cli", done.stderr
