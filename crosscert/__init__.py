@@ -34,7 +34,7 @@ _API = {
     "PlanningBounds": "planner.task",
     "plan_crossing": "planner.plan",
     # checking a recording
-    "Tracker": "verifier.step",
+    "Tracker": "verifier.tracker",
     "TrackerSettings": "verifier.settings",
     "Verdict": "verifier.settings",
     "track": "verifier.tracker",

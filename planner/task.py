@@ -178,6 +178,10 @@ class PlanningBounds:
     reasoning: Reasoning = Reasoning.WINDOW
     #: Name of the robot whose defaults :meth:`for_robot` filled in (``None``: not yet bound).
     robot_name: str | None = field(default=None, init=False, compare=False)
+    #: The robot itself and these bounds before its defaults were filled in: binding to another robot
+    #: (a variant of the same name included) starts again from what the caller gave.
+    _robot: object = field(default=None, init=False, compare=False, repr=False)
+    _unbound: object = field(default=None, init=False, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise once; the bounds by the assumptions' rules
@@ -203,19 +207,22 @@ class PlanningBounds:
         """These bounds with the robot's defaults where none was given (``eps_q``, ``t_s``, ``xi_splits``) and
         ``a_max`` as one bound per pose axis.  Checked at construction: nothing is checked again here but
         what needs the robot (one ``a_max`` per axis in its unit)."""
-        if self.robot_name == robot.name:
+        if self._robot is robot:
             return self
-        out = copy.copy(self)
+        given = self._unbound if self._unbound is not None else self
+        out = copy.copy(given)
         set_ = object.__setattr__
         set_(out, "robot_name", robot.name)
-        if self.eps_q is None:
+        set_(out, "_robot", robot)
+        set_(out, "_unbound", given)
+        if given.eps_q is None:
             set_(out, "eps_q", robot.eps_q)
-        if self.t_s is None:
+        if given.t_s is None:
             set_(out, "t_s", robot.t_s)
-        if self.xi_splits is None:
+        if given.xi_splits is None:
             set_(out, "xi_splits", getattr(robot, "xi_splits", None))
-        if self.a_max is not None:
-            set_(out, "a_max", _per_axis_a_max(self.a_max, robot))
+        if given.a_max is not None:
+            set_(out, "a_max", _per_axis_a_max(given.a_max, robot))
         return out
 
 

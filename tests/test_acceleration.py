@@ -166,3 +166,19 @@ def test_check_refuses_one_a_max_for_axes_of_different_units(tmp_path, capsys):
     assert main(["check", str(csv), "--robot", "3rpr", "--initial-mode", "1", "--a-max", "80"]) == 2
     err = _one_line_error(capsys)
     assert "axes are in m, m, rad: omit --a-max to use the robot's per-axis a_max (80, 80, 200)" in err, err
+
+
+def test_bounds_bound_to_one_robot_take_another_variants_defaults():
+    """for_robot on bounds already bound to a robot of the same name but other defaults: the variant's defaults."""
+    from dataclasses import replace
+
+    from crosscert.planner.task import PlanningBounds
+    from crosscert.robots import DEXTAR
+
+    variant = replace(DEXTAR, eps_q=2 * DEXTAR.eps_q, t_s=2 * DEXTAR.t_s)
+    b = PlanningBounds().for_robot(DEXTAR)
+    assert (b.eps_q, b.t_s) == (DEXTAR.eps_q, DEXTAR.t_s) and b.for_robot(DEXTAR) is b
+    v = b.for_robot(variant)
+    assert (v.eps_q, v.t_s) == (variant.eps_q, variant.t_s) and v.robot_name == DEXTAR.name
+    given = PlanningBounds(eps_q=1e-4).for_robot(DEXTAR).for_robot(variant)
+    assert given.eps_q == 1e-4 and given.t_s == variant.t_s

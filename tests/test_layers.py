@@ -214,3 +214,12 @@ def test_the_namespace_imports_from_the_checkout_root_too():
     code = "import crosscert.verifier, crosscert.planner.cli, crosscert.robots; print(crosscert.planner.cli.__name__)"
     done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "crosscert.planner.cli", done.stderr
+
+
+def test_every_name_of_the_top_level_api_resolves():
+    """``import crosscert`` promises each name of ``__all__``: each one loads, from its defining module."""
+    import crosscert
+
+    for name in crosscert.__all__:
+        value = getattr(crosscert, name)
+        assert getattr(value, "__name__", name) == name, name

@@ -20,7 +20,7 @@ def _drop_stale_cache() -> None:
     A read-only install cannot be edited, so failing to write is harmless.
     """
     here = Path(__file__).resolve().parent
-    sources = sorted(here.glob("*.py")) + [here.parent / "interval.py", here.parent / "tape.py"]
+    sources = sorted(here.glob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
     digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()[:20]
     cache = here / "__pycache__"
     stamp = cache / "kernels.stamp"
