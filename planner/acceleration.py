@@ -118,7 +118,7 @@ def robot_a_max_assumption(robot) -> AccelerationAssumption:
 
 
 def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
-    """The acceleration bounds a certificate of ``plan`` assumes, per axis, under the resolved bounds ``b``.
+    """The acceleration bounds a certificate of ``plan`` assumes, per axis, under ``b`` (bound to the robot: ``PlanningBounds.for_robot``).
 
     Parameters
     ----------

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import casadi as ca
 
-__all__ = ["IpoptRun", "ParametricSolver", "solve_with_ipopt", "STRICT_BOUNDS"]
+__all__ = ["IpoptRun", "ParametricSolver", "STRICT_BOUNDS"]
 
 #: Options of every solve: bounds are never relaxed (``bound_relax_factor = 0``)
 #: and the solution honours them exactly; adaptive barrier update; no banner.
@@ -59,21 +59,3 @@ class ParametricSolver:
         elapsed = time.perf_counter() - t0
         stats = self._solver.stats()
         return IpoptRun(sol, stats, str(stats.get("return_status", "unknown")), elapsed)
-
-
-def solve_with_ipopt(name: str, z, obj, g, *, z0, lbx, ubx, lbg, ubg, ipopt: dict) -> IpoptRun:
-    """Minimise ``obj(z)`` subject to ``lbg <= g(z) <= ubg`` and ``lbx <= z <= ubx`` from ``z0``.
-
-    Parameters
-    ----------
-    name : str
-        Name of the CasADi solver (shows in its messages).
-    z, obj, g : casadi.SX
-        Variables, objective and constraints.
-    z0, lbx, ubx, lbg, ubg : array_like
-        Start and bounds.
-    ipopt : dict
-        IPOPT options of this problem (tolerances, caps), on top of :data:`STRICT_BOUNDS`.
-    """
-    none = type(z).sym("p", 0)  # no parameters: a solver for this one problem
-    return ParametricSolver(name, z, none, obj, g, ipopt=ipopt).solve(p=[], z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)

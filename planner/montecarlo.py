@@ -148,7 +148,7 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
                      progress=None, parallel: bool = True) -> MonteCarloResult:
     """Executions ``start .. stop - 1`` of a Monte Carlo confirmation (module-level: any executor can run it).
 
-    ``b`` are resolved bounds; ``models`` the robot's ``(KinematicModel,
+    ``b`` are bounds bound to the robot (``PlanningBounds.for_robot``); ``models`` the robot's ``(KinematicModel,
     IntervalModel)``, built (once per process) when absent.
     """
     if models is None:

@@ -8,7 +8,7 @@ assembly-mode change to be certified from its encoders, and prove it.
 * :func:`minimal_v_sing` — bisection search of the smallest certified speed;
 
 Plans come from :mod:`planner.plan`, the Monte Carlo confirmation from
-:mod:`planner.montecarlo`, the whole pipeline from :mod:`planner.certify.crossing`.
+:mod:`planner.montecarlo`, the whole certification of a task from :mod:`planner.certify.crossing`.
 
 What a certificate guarantees
 -----------------------------
@@ -262,7 +262,7 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
     speed may have been missed.
 
     ``observe(trial)`` (optional) is called with each :class:`SpeedTrial` as
-    it completes (the pipeline passes certified speeds to the counterexample
+    it completes (:func:`~planner.certify.crossing.certify_crossing` passes certified speeds to the counterexample
     searches running meanwhile); ``progress(k)`` after each tracked sample;
     ``parallel`` as for :func:`certify_speed`.
     """

@@ -21,7 +21,7 @@ from ..certify.crossing import V_LOW
 #: Peak acceleration of planned ramps: the PlanningBounds default, m/s^2.
 PLAN_A_PEAK = PlanningBounds.a_peak
 
-__all__ = ["build_parser", "robot_of", "ACC_UNIT", "VEL_UNIT", "UsageError", "TABLE2_SPEEDS", "number", "numbers",
+__all__ = ["build_parser", "robot_of", "UsageError", "TABLE2_SPEEDS", "number", "numbers",
            "count"]
 
 #: Table II speeds of the paper, m/s, and two slower ones.
@@ -80,8 +80,6 @@ def _version() -> str:
 
 
 #: Units of the per-axis acceleration and velocity bounds of a pose (positions in m, angles in rad).
-ACC_UNIT = "m/s^2 (rad/s^2 on angles)"
-VEL_UNIT = "m/s (rad/s on angles)"
 
 
 def robot_of(argv) -> str:

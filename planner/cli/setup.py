@@ -17,7 +17,8 @@ from crosscert.verifier.trajfile import parse_number
 from ..simulate import random_geometry
 from ..task import CrossingTask, benchmark_task
 
-__all__ = ["floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar"]
+__all__ = ["floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
+           "phase_bar", "COMPILING"]
 
 
 def floats_option(text: str, count: int | None, what: str) -> list[float]:

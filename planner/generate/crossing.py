@@ -171,7 +171,7 @@ def generate_crossing(kin: KinematicModel, dynamics, task: CrossingTask, v_sing:
 
     The NLP of a (robot, task, crossing point, limits, objective) is built
     once per process with the speed as a parameter and solved from the
-    solution of the nearest speed already generated (primal and multipliers);
+    solution of the nearest speed already generated (its primal point);
     every solution passes the independent check (:mod:`.check`).
 
     Parameters
@@ -328,7 +328,7 @@ def _solve_and_check(run: _Run, duration, guess, margin: float) -> tuple:
             if attempt == _MARGIN_RETRIES or exc.ratio > _RETRY_RATIO_MAX:
                 raise
             margin = 1.0 - (1.0 - margin) / exc.ratio * (1.0 - _RETRY_EXTRA)
-            guess = None  # this speed's solution, with its multipliers
+            guess = None  # from this speed's own solution (primal point)
 
 
 def _t_s(run: _Run) -> float:
