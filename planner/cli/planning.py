@@ -45,17 +45,17 @@ def certify(a) -> int:
     out = Path(a.out)
     units = {u.value for u in robot.joint_units}
     joint_unit = units.pop() if len(units) == 1 else "rad or m (per joint)"
-    bar = cb = phase_bar(not a.no_progress, "certify")
+    bar = phase_bar(not a.no_progress, "certify")
     # one worker process for both certifications' counterexample searches: the second reuses the
     # first's imports and NLP solvers (planner.refute builds one per sample count)
     pool = None if a.no_refute else SubprocessExecutor()
     try:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                 monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
-                                progress=cb, kin=kin, executor=pool)
+                                progress=bar, kin=kin, executor=pool)
         # what the assumption buys: the same search under the robot's physical a_max
         cert = certify_at_robot_a_max(robot, task, cert, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
-                                      refute=not a.no_refute, seed=a.seed, progress=cb, kin=kin, executor=pool)
+                                      refute=not a.no_refute, seed=a.seed, progress=bar, kin=kin, executor=pool)
     finally:
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)

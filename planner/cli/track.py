@@ -51,6 +51,46 @@ def _print_warnings(reader) -> None:
     reader._printed = len(reader.warnings)
 
 
+def _tracked(a, robot, model, run, bar):
+    """The recording through ``run`` (the forward pass), then the window passes when they may decide:
+    ``(summary, file name)``; ``bar`` (a :class:`PhaseBar` or None) is told each phase."""
+    readings = [] if a.reasoning == Reasoning.WINDOW.value else None
+    enter(bar, Phase.FORWARD, unit="sample")
+    with open_trajectory(a.trajectory) as (src, name):
+        reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
+                                  q_range=(robot.q_lo_array, robot.q_hi_array))
+        for line, values in reader:
+            t, q = reader.columns(values)[:2]
+            _print_warnings(reader)
+            run.feed(line, t, q, reader.t_s)
+            if readings is not None:
+                readings.append(q)
+                if len(readings) > WINDOW_MAX_SAMPLES:
+                    readings = None  # too long for the window: the forward verdict stands
+            if bar is not None:
+                bar(1)
+    if run.samples < 2:
+        raise TrajectoryFileError(f"{name}: at least two samples are needed, got {run.samples}")
+    out = {k: v for k, v in run.summary().items() if k not in _MONITOR_ONLY}
+    out["reasoning"] = a.reasoning
+    out["forward_verdict"] = out["verdict"]
+    out["window"] = None
+    if a.reasoning == Reasoning.WINDOW.value and out["verdict"] == Verdict.UNKNOWN.value:
+        if readings is None:
+            print(f"crosscert: note: window reasoning skipped: the recording is longer than {WINDOW_MAX_SAMPLES} "
+                  "samples; the verdict is the forward tracker's", file=sys.stderr)
+        else:
+            enter(bar, Phase.WINDOW, unit="")
+            win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
+                               x0=run.x0_used, backend=a.backend)
+            out["window"] = win.summary()
+            out["verdict"] = win.verdict.value
+            if win.verdict in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
+                out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
+                                     else -out["initial_mode"])
+    return out, name
+
+
 def check(a) -> int:
     """``crosscert check``: track a recording while it is read and print the verdict; returns the exit code.
 
@@ -63,54 +103,12 @@ def check(a) -> int:
     robot, model, make_settings, x0 = tracker_setup(a)
     t0 = time.perf_counter()
     run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False)
-    readings = [] if a.reasoning == Reasoning.WINDOW.value else None
-    bar = cb = phase_bar(not a.no_progress and not a.json, "check")
-    enter(bar, Phase.FORWARD, unit="sample")
+    bar = phase_bar(not a.no_progress and not a.json, "check")
     try:
-        with open_trajectory(a.trajectory) as (src, name):
-            reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
-                                      q_range=(robot.q_lo_array, robot.q_hi_array))
-            for line, values in reader:
-                t, q = reader.columns(values)[:2]
-                _print_warnings(reader)
-                run.feed(line, t, q, reader.t_s)
-                if readings is not None:
-                    readings.append(q)
-                    if len(readings) > WINDOW_MAX_SAMPLES:
-                        readings = None  # too long for the window: the forward verdict stands
-                if cb is not None:
-                    cb(1)
-    except BaseException:
+        out, name = _tracked(a, robot, model, run, bar)
+    finally:
         if bar is not None:
             bar.close()
-        raise
-    if run.samples < 2:
-        if bar is not None:
-            bar.close()
-        raise TrajectoryFileError(f"{name}: at least two samples are needed, got {run.samples}")
-    out = {k: v for k, v in run.summary().items() if k not in _MONITOR_ONLY}
-    out["reasoning"] = a.reasoning
-    out["forward_verdict"] = out["verdict"]
-    out["window"] = None
-    if a.reasoning == Reasoning.WINDOW.value and out["verdict"] == Verdict.UNKNOWN.value:
-        if readings is None:
-            print(f"crosscert: note: window reasoning skipped: the recording is longer than {WINDOW_MAX_SAMPLES} "
-                  "samples; the verdict is the forward tracker's", file=sys.stderr)
-        else:
-            enter(bar, Phase.WINDOW, unit="")
-            try:
-                win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
-                                   x0=run.x0_used, backend=a.backend)
-            finally:
-                if bar is not None:
-                    bar.close()
-            out["window"] = win.summary()
-            out["verdict"] = win.verdict.value
-            if win.verdict in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
-                out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
-                                     else -out["initial_mode"])
-    if bar is not None:
-        bar.close()  # idempotent
     out["elapsed_s"] = time.perf_counter() - t0
     if a.json:
         print(json.dumps(out))
