@@ -497,9 +497,9 @@ class CompiledStep:
             B, n = st.batch, model.n
             a.update(
                 run=run,
-                rows=kernels.Rows(st.x, st.xd, st.xi, st.q, st.past_x, st.past_q, st.past_r, st.row_bad),
-                scen=kernels.Scenarios(st.init_mode, st.mode, st.streak, st.bad_at, st.max_width_pose,
-                                       st.max_width_velocity, st.x_hull, st.xd_hull, st.qdd_hull),
+                # the kernels' views of the state, field by field under the same names
+                rows=kernels.Rows(*(getattr(st, f) for f in kernels.Rows._fields)),
+                scen=kernels.Scenarios(*(getattr(st, f) for f in kernels.Scenarios._fields)),
                 scratch=scratch_arrays(threads, model.program.n_nodes, n, model.m, c.baseline.shape[0],
                                        c.split_boxes, st.hypotheses),
                 no_record=kernels.Record(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64),

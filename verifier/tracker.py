@@ -369,7 +369,6 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
         x0 = (lo, hi)
     res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress,
                            backend=backend, spread_hypotheses=spread_hypotheses)
-    s = settings.validated(model.n)
     verdict = res.verdict[0]
     if initial_mode is not None and verdict is not Verdict.INCONSISTENT and res.initial_mode[0] != initial_mode:
         # the given mode's box did not certify at step 0 after contraction
@@ -390,7 +389,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
         qdd_bound=rec["qdd_hi"][0],
         steps=res.steps,
         elapsed_s=time.perf_counter() - t0,
-        settings=s,
+        settings=settings,
     )
 
 
