@@ -173,8 +173,7 @@ def test_compiled_newton_contains_the_exact_root():
                    np.concatenate([a.value for a in arrs]).astype(np.float64),
                    np.concatenate([a.out_nodes for a in arrs]).astype(np.int64), meta,
                    int(max(len(a.code) for a in arrs)))
-    S = K.scratch_alloc(prog.n_nodes, 2, 1)
-    sc = K.thread_scratch(S, 0)
+    sc = K.Scratch(*(a[0] for a in K.scratch_arrays(1, prog.n_nodes, 2, 1, 0, 0, 1)))  # thread 0's
     rng = np.random.default_rng(7)
     tight = 0
     for _ in range(30):

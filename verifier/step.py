@@ -532,12 +532,15 @@ class CompiledStep:
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
         from .compiled.contractors import pose_solutions as kernel
+        from .compiled.contractors import scratch_arrays
 
         box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)])[None])  # noqa: E731
         out = np.empty((max_boxes, 2, model.n))
         modes = np.empty(max_boxes, np.int64)
+        scratch = scratch_arrays(1, model.program.n_nodes, model.n, model.m, 0, 0, 1)
+        work = np.empty((max_boxes + 4, 2, model.n))  # the kernel's stack, current box and widths
         count = kernel(model.program, box(Q), box(XI), box(X_search), float(tol), float(small), int(max_boxes),
-                       int(sweeps), out, modes)
+                       int(sweeps), out, modes, scratch, work)
         if count < 0:
             return None
         return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]

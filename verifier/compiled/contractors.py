@@ -390,7 +390,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
 
 
 @cached_jit
-def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode):
+def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, out_mode, S, work):
     """Enclose every solution of ``f(x, q, xi) = 0`` in ``X_search`` (boxes
     ``(1, 2, n)``, ``(1, 2, n)``, ``(1, 2, m)``; branch and prune of
     :func:`verifier.contractors.pose_solutions`, same order: depth first,
@@ -398,19 +398,22 @@ def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, ou
 
     Writes the solution boxes to ``out`` ``(max_boxes, 2, n)`` and their
     modes to ``out_mode``; returns their number, or -1 when the budget of
-    ``max_boxes`` boxes ran out.  Allocates its stack and scratch once per call.
+    ``max_boxes`` boxes ran out.  Allocates nothing: ``S`` is one thread's
+    scratch (:func:`scratch_arrays` with one thread) and ``work``
+    ``(max_boxes + 4, 2, n)`` holds the stack (rows ``0 .. max_boxes + 1``),
+    the current box (row ``max_boxes + 2``) and its widths before a sweep
+    (row ``max_boxes + 3``, lower bounds).
     """
     n = X_search.shape[2]
     m = XI.shape[2]
-    S = scratch_alloc(prog.n_nodes, n, m)
     sc = thread_scratch(S, 0)
-    stack = np.empty((max_boxes + 2, 2, n))
+    stack = work
     copy_box(X_search, 0, stack, 0, n)
     top = 1
     found = 0
     seen = 0
-    X = np.empty((1, 2, n))
-    w0 = np.empty(n)
+    X = work[max_boxes + 2:max_boxes + 3]
+    w0 = work[max_boxes + 3, 0]
     while top > 0:
         seen += 1
         if seen > max_boxes:
@@ -452,13 +455,3 @@ def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, ou
         stack[top + 1, 0, d] = mid
         top += 2
     return found
-
-
-@jit
-def scratch_alloc(n_nodes, n, m):
-    """One thread's scratch (no baselines, no split pieces), allocated in compiled code."""
-    cap = 2
-    return Scratch(np.empty((1, n_nodes)), np.empty((1, n_nodes)), np.empty((1, 5 * n + m)),
-                   np.empty((1, 5 * n + m)), np.empty((1, workspace_size(n))),
-                   np.empty((1, TB_DQ + 1, 2, max(n, m))), np.empty((1, 2 * cap, 2, n)),
-                   np.empty((1, 1 + 2 * cap), np.int64), np.empty((1, 1), np.int64), np.empty((1, 1, 2, n)))

@@ -33,13 +33,15 @@ _TRIG_ULPS = float(TRIG_ULPS)
 #: own: numba caches the machine code of a top-level kernel (the step drivers,
 #: the first sample's branch and prune) with everything it calls, and caching
 #: each callee too would generate the machine code of its whole call tree once
-#: more per callee at the first run (most of the compilation time).
-jit = njit(nogil=True)
-#: What the top-level kernels, called from Python, are compiled with.
-cached_jit = njit(cache=True, nogil=True)
-#: IEEE division as numpy's (x / 0 is inf or NaN): numba's default raises
-#: ZeroDivisionError, which an empty divisor such as [0.3, 0] reached.
-_ieee_jit = njit(nogil=True, error_model="numpy")
+#: more per callee at the first run (most of the compilation time).  Without
+#: numba's runtime (``_nrt=False``): the kernels never allocate, and with the
+#: runtime every array passed to a callee costs an atomic reference-count
+#: increment and decrement, a third of the tracker's time (benchmarks/README.md).
+jit = njit(nogil=True, _nrt=False)
+#: The top-level kernels called from Python (the step drivers are built in
+#: :mod:`verifier.compiled.step` with the same flags): the caller allocates.
+cached_jit = njit(cache=True, nogil=True, _nrt=False)
+_ieee_jit = njit(nogil=True, error_model="numpy", _nrt=False)
 
 
 @intrinsic
@@ -135,6 +137,27 @@ def _corner_up(a, b):
 def mul(al, ah, bl, bh):
     """``[a] * [b]`` with ``0 * inf = 0``.
 
+    Bounds all nonzero (the common case): the four corner products are finite
+    or infinite, never NaN, and only their extremes are rounded; a rounded
+    extreme that lands on 0 (underflow) takes the general path, which settles
+    the sign of a zero bound as the reference does.
+    """
+    if al != 0.0 and ah != 0.0 and bl != 0.0 and bh != 0.0 and al == al and ah == ah and bl == bl and bh == bh:
+        p1 = al * bl
+        p2 = al * bh
+        p3 = ah * bl
+        p4 = ah * bh
+        lo = dn(min(min(p1, p2), min(p3, p4)))
+        hi = up(max(max(p1, p2), max(p3, p4)))
+        if lo != 0.0 and hi != 0.0:
+            return lo, hi
+    return _mul_general(al, ah, bl, bh)
+
+
+@jit
+def _mul_general(al, ah, bl, bh):
+    """:func:`mul` for any bounds.
+
     The reference rounds each of the four corner products outward and takes
     the extremes; ``nextafter`` is monotone, so rounding only the extreme
     products gives the same floats with two steps instead of eight.  Products
@@ -195,7 +218,28 @@ def _nan_inf(v, repl):
 
 @_ieee_jit
 def div(al, ah, bl, bh):
-    """``[a] / [b]``: hull of ``{x / y : y != 0}`` (see :func:`verifier.interval.div`)."""
+    """``[a] / [b]``: hull of ``{x / y : y != 0}`` (see :func:`verifier.interval.div`).
+
+    Divisor finite and of one sign, dividend bounds nonzero (the common case):
+    the four corner quotients are never NaN and only their extremes are
+    rounded; a rounded extreme on 0 takes the general path, as in :func:`mul`.
+    """
+    if (bl > 0.0 or bh < 0.0) and bl == bl and bh == bh and math.isfinite(bl) and math.isfinite(bh) \
+            and al != 0.0 and ah != 0.0 and al == al and ah == ah:
+        q1 = al / bl
+        q2 = al / bh
+        q3 = ah / bl
+        q4 = ah / bh
+        lo = dn(min(min(q1, q2), min(q3, q4)))
+        hi = up(max(max(q1, q2), max(q3, q4)))
+        if lo != 0.0 and hi != 0.0:
+            return lo, hi
+    return _div_general(al, ah, bl, bh)
+
+
+@_ieee_jit
+def _div_general(al, ah, bl, bh):
+    """:func:`div` for any bounds."""
     if bl <= 0.0 and bh >= 0.0:
         a_nonneg = al >= 0.0
         a_nonpos = ah <= 0.0

@@ -411,7 +411,7 @@ def _make_driver(parallel: bool):
     # names the serial driver would load the parallel one from the cache (and
     # wake the thread pool at every call) or the reverse
     run.__name__ = run.__qualname__ = "run_parallel" if parallel else "run_serial"
-    return njit(cache=True, nogil=True, parallel=parallel)(run)
+    return njit(cache=True, nogil=True, parallel=parallel, _nrt=False)(run)
 
 
 def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
@@ -437,4 +437,4 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
 run_serial = _make_driver(False)
 #: Scenarios spread over numba's threads, thread slot ``t`` running scenarios ``t, t + T, ...``.
 run_parallel = _make_driver(True)
-run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True)(run_hypotheses_parallel)
+run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True, _nrt=False)(run_hypotheses_parallel)
