@@ -221,17 +221,29 @@ def div(al, ah, bl, bh):
     """``[a] / [b]``: hull of ``{x / y : y != 0}`` (see :func:`verifier.interval.div`).
 
     Divisor finite and of one sign, dividend bounds nonzero (the common case):
-    the four corner quotients are never NaN and only their extremes are
-    rounded; a rounded extreme on 0 takes the general path, as in :func:`mul`.
+    the quotient is monotone in each operand, so the signs name the two
+    corners where it is least and greatest; round to nearest is monotone
+    too, so those two quotients, rounded outward, are the extremes of the
+    reference's four (two divisions instead of four).  A bound rounded to 0
+    (underflow) takes the general path, as in :func:`mul`.
     """
-    if (bl > 0.0 or bh < 0.0) and bl == bl and bh == bh and math.isfinite(bl) and math.isfinite(bh) \
-            and al != 0.0 and ah != 0.0 and al == al and ah == ah:
-        q1 = al / bl
-        q2 = al / bh
-        q3 = ah / bl
-        q4 = ah / bh
-        lo = dn(min(min(q1, q2), min(q3, q4)))
-        hi = up(max(max(q1, q2), max(q3, q4)))
+    if (bl > 0.0 or bh < 0.0) and math.isfinite(bl) and math.isfinite(bh) and al != 0.0 and ah != 0.0 \
+            and al == al and ah == ah:
+        if bl > 0.0:
+            if al > 0.0:
+                lo, hi = al / bh, ah / bl
+            elif ah < 0.0:
+                lo, hi = al / bl, ah / bh
+            else:
+                lo, hi = al / bl, ah / bl
+        elif al > 0.0:
+            lo, hi = ah / bh, al / bl
+        elif ah < 0.0:
+            lo, hi = ah / bl, al / bh
+        else:
+            lo, hi = ah / bh, al / bh
+        lo = dn(lo)
+        hi = up(hi)
         if lo != 0.0 and hi != 0.0:
             return lo, hi
     return _div_general(al, ah, bl, bh)
@@ -373,7 +385,7 @@ def sqrt(al, ah):
 @jit
 def _spacing(r):
     # ulp of a finite non-negative r: the gap to the next float (exact)
-    return np.nextafter(r, INF) - r
+    return up(r) - r
 
 
 @jit
