@@ -315,3 +315,35 @@ def test_compiled_ops_contain_the_exact_result_of_point_operands(name):
             inexact += 1
             assert lo < hi, (name, a, b, lo, hi)
     assert inexact > 100  # the rounding matters on most of these operands
+
+
+def _signed_interval(rng, cls, n):
+    """``n`` intervals of sign class ``cls`` (+1 positive, -1 negative, 0 straddling 0), nonzero bounds of
+    magnitudes over the whole exponent range (their products and quotients underflow and overflow)."""
+    a, b = (10.0 ** rng.uniform(-320.0, 308.0, n) for _ in range(2))
+    if cls == 0:
+        return -a, b
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    return (lo, hi) if cls > 0 else (-hi, -lo)
+
+
+@pytest.mark.parametrize("name", ["mul", "div"])
+def test_mul_div_every_sign_class_bitwise_and_containing(name):
+    """``mul`` and ``div`` on intervals of every pair of sign classes: their straight-line path (nonzero
+    bounds: the corners named by the signs) and the general path it falls back to (a bound rounded to
+    0) give the numpy core's floats bit for bit, and the bounds hold every exact finite corner."""
+    rng = np.random.default_rng(20261203)
+    exact_of = _EXACT[name]
+    for ca in (1, -1, 0):
+        for cb in (1, -1, 0):
+            if name == "div" and cb == 0:
+                continue  # a divisor straddling 0 is the general path's (half-lines)
+            args = (*_signed_interval(rng, ca, 300), *_signed_interval(rng, cb, 300))
+            want = getattr(I, name)(*args)
+            _check_both(name, want, args)
+            for al, ah, bl, bh, lo, hi in zip(*(v.tolist() for v in (*args, *want))):
+                for x in (al, ah):
+                    for y in (bl, bh):
+                        exact = exact_of(Fraction(x), Fraction(y))
+                        assert math.isinf(lo) or Fraction(lo) <= exact, (name, x, y, lo)
+                        assert math.isinf(hi) or exact <= Fraction(hi), (name, x, y, hi)
