@@ -182,9 +182,11 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
 
 
 @jit
-def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``; returns its mode.
-    The box ``qdd[iqdd]`` receives the joint-acceleration bound used; with
+def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``; its mode lands
+    in ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+    in row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is the step's
+    work: results are written, not returned, which parallel regions need); with
     ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
     hold the truth at this sample are intersected with the prediction."""
     X = rows.x
@@ -313,7 +315,8 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqdd):
         past_q[r, slot, 0, i] = Q[r, 0, i]
         past_q[r, slot, 1, i] = Q[r, 1, i]
         past_r[r, slot, i] = q[b, kk, i]
-    return mode
+        qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
+    modes[iqdd] = mode
 
 
 @jit
@@ -376,15 +379,6 @@ def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
 
 
 @jit
-def _one_row(prog, c, rows, p, r, k, q, b, kk, sc, use_prior, prior, modes, row_qdd):
-    # one hypothesis of one sample; its mode lands in modes[p], its |qdd| bound in row_qdd[p, 0]
-    n = q.shape[2]
-    modes[p] = _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, row_qdd, p)
-    for i in range(n):
-        row_qdd[p, 0, i] = max(abs(row_qdd[p, 0, i]), abs(row_qdd[p, 1, i]))
-
-
-@jit
 def scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior):
     """Advance scenario ``b`` over the readings ``q[b]`` ``(Kc, n)``, samples
     ``k0 .. k0 + Kc - 1``, its hypotheses one after the other."""
@@ -394,7 +388,7 @@ def scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior
         for p in range(P):
             r = b * P + p
             if rows.row_bad[r] < 0:
-                _one_row(prog, c, rows, p, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd)
+                _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
         _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
@@ -429,7 +423,7 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
                 for p in range(t, P, T):
                     r = b * P + p
                     if rows.row_bad[r] < 0:
-                        _one_row(prog, c, rows, p, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd)
+                        _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
