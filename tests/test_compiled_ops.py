@@ -331,7 +331,8 @@ def _signed_interval(rng, cls, n):
 def test_mul_div_every_sign_class_bitwise_and_containing(name):
     """``mul`` and ``div`` on intervals of every pair of sign classes: their straight-line path (nonzero
     bounds: the corners named by the signs) and the general path it falls back to (a bound rounded to
-    0) give the numpy core's floats bit for bit, and the bounds hold every exact finite corner."""
+    0) give the numpy core's floats bit for bit, and the bounds hold every exact finite corner; empty
+    (inverted) operands give the reference's floats too."""
     rng = np.random.default_rng(20261203)
     exact_of = _EXACT[name]
     for ca in (1, -1, 0):
@@ -347,3 +348,8 @@ def test_mul_div_every_sign_class_bitwise_and_containing(name):
                         exact = exact_of(Fraction(x), Fraction(y))
                         assert math.isinf(lo) or Fraction(lo) <= exact, (name, x, y, lo)
                         assert math.isinf(hi) or exact <= Fraction(hi), (name, x, y, hi)
+            # empty (inverted) operands, as a kernel meets them before its emptiness test: the reference's floats
+            a_lo, a_hi = _signed_interval(rng, ca, 300)
+            b_lo, b_hi = _signed_interval(rng, cb, 300)
+            for args in ((a_hi, a_lo, b_lo, b_hi), (a_lo, a_hi, b_hi, b_lo), (a_hi * 0 + INF, a_lo * 0 - INF, b_lo, b_hi)):
+                _check_both(name, getattr(I, name)(*args), args)

@@ -220,15 +220,16 @@ def _nan_inf(v, repl):
 def div(al, ah, bl, bh):
     """``[a] / [b]``: hull of ``{x / y : y != 0}`` (see :func:`verifier.interval.div`).
 
-    Divisor finite and of one sign, dividend bounds nonzero (the common case):
+    Ordered operands, divisor finite and of one sign, dividend bounds nonzero
+    (the common case):
     the quotient is monotone in each operand, so the signs name the two
     corners where it is least and greatest; round to nearest is monotone
     too, so those two quotients, rounded outward, are the extremes of the
     reference's four (two divisions instead of four).  A bound rounded to 0
     (underflow) takes the general path, as in :func:`mul`.
     """
-    if (bl > 0.0 or bh < 0.0) and math.isfinite(bl) and math.isfinite(bh) and al != 0.0 and ah != 0.0 \
-            and al == al and ah == ah:
+    if (bl > 0.0 or bh < 0.0) and bl <= bh and math.isfinite(bl) and math.isfinite(bh) and al <= ah \
+            and al != 0.0 and ah != 0.0:  # ordered (not empty, not NaN) operands only
         if bl > 0.0:
             if al > 0.0:
                 lo, hi = al / bh, ah / bl
