@@ -132,8 +132,8 @@ def test_early_stop_is_reported(settings, monkeypatch):
     real = W._run
 
     def emptied(config, q, x0, xi_rows, prior):
-        x, xd, md, bad = real(config, q, x0, xi_rows, prior)
-        return (x, xd, md, np.zeros_like(bad)) if prior is not None else (x, xd, md, bad)
+        x, xd, md, bad, xi = real(config, q, x0, xi_rows, prior)
+        return (x, xd, md, np.zeros_like(bad) if prior is not None else bad, xi)
 
     run = simulate(1.0, False, 0)
     honest = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)

@@ -197,13 +197,15 @@ def _reverse(x, xd):
 
 
 def _run(config, q, x0, xi_rows, prior):
-    """One pass over readings ``q`` ``(K, n)`` for rows ``R``: tubes ``(R, K, 2, n)``, modes ``(R, K)``, death ``(R,)``."""
+    """One pass over readings ``q`` ``(K, n)`` for rows ``R``: tubes ``(R, K, 2, n)``, modes ``(R, K)``, death
+    ``(R,)`` and the rows' calibration sub-boxes ``(lo, hi)`` ``(R, m)`` at the end of the pass (contracted by
+    every sample's loop closure when ``config`` keeps them, ``keep_xi``; meaningless for a dead row)."""
     lo, hi = xi_rows
     R, (K, n) = lo.shape[0], q.shape
     st = init_state(config, x0, batch=R, xi_box=(lo, hi))
     rec = (np.empty((R, K, 2, n)), np.empty((R, K, 2, n)), np.empty((R, K), np.int64), np.empty((R, K, n)))
     advance(config, st, np.broadcast_to(q, (R, K, n)), rec, prior)
-    return rec[0], rec[1], rec[2], st.bad_at.copy()
+    return rec[0], rec[1], rec[2], st.bad_at.copy(), (st.xi[:, 0].copy(), st.xi[:, 1].copy())
 
 
 def _hull(x, xd):
@@ -353,9 +355,12 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     x0 = tuple(np.broadcast_to(np.asarray(v, dtype=np.float64), (P, n)).copy() for v in x0)
     flat = replace(s, xi_splits=None)
     cfg_f = configure(model, flat, backend, parallel=parallel)
-    cfg_b = configure(model, replace(flat, xd0=None), backend, parallel=parallel)  # final velocity: from the tubes
+    # the window's passes carry each row's calibration sub-box from sample to sample (keep_xi), and the
+    # rows keep it from pass to pass: the true geometry satisfies every sample's loop closure
+    cfg_wf = configure(model, replace(flat, keep_xi=True), backend, parallel=parallel)
+    cfg_b = configure(model, replace(flat, xd0=None, keep_xi=True), backend, parallel=parallel)  # final velocity: from the tubes
 
-    fx, fxd, fmode, fbad = _run(cfg_f, q, x0, xi_rows, None)
+    fx, fxd, fmode, fbad, _ = _run(cfg_f, q, x0, xi_rows, None)
     f_alive = fbad < 0
     m0 = _combined_mode(fmode[:, 0], f_alive)
     mf = _combined_mode(fmode[:, K - 1], f_alive)
@@ -379,7 +384,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                 for m in (m0, -m0)]
         if not any(h.refuted for h in hyps):
             full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
-            _decide(hyps, _Passes(q, cfg_f, cfg_b), max_passes, rel_tol, max_geometries, full_w)
+            _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w)
         else:  # refuted by the last reading alone: the other ran no pass
             for h in hyps:
                 h.complete = h.refuted
@@ -456,13 +461,18 @@ class _Hypothesis:
             return np.maximum(self.final[:, 0], end[:, 0]), np.minimum(self.final[:, 1], end[:, 1])
         return self.tx[:, 0, 0], self.tx[:, 0, 1]
 
-    def take(self, x, xd, md, bad):
-        """The tubes of a pass over this hypothesis' rows (forward time); drop the rows it refutes."""
+    def take(self, x, xd, md, bad, xi):
+        """The tubes and contracted calibration sub-boxes ``xi`` (``(lo, hi)`` ``(R, m)``) of a pass over this
+        hypothesis' rows (forward time); drop the rows it refutes."""
         self.passes += 1
         last, first = md[:, -1], md[:, 0]
         other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
         live = (bad < 0) & ~other
         self.tx, self.txd = x, xd
+        # the pass started from these sub-boxes and only contracted them; intersecting is exact and keeps
+        # a row's sub-box inside its parent's whatever the kernel holds
+        self.xlo, self.xhi = np.maximum(self.xlo, xi[0]), np.minimum(self.xhi, xi[1])
+        live &= np.all(self.xlo <= self.xhi, axis=1)  # no geometry of the sub-box fits every sample
         if not live.any():
             self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
         self._keep(live)
@@ -492,12 +502,12 @@ class _Passes:
         """One pass over the rows of hypothesis ``h``, which takes its tubes."""
         x0, xi = h.starts(backward), (h.xlo, h.xhi)
         if backward:
-            x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
+            x, xd, md, bad, xi = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
             x, xd = _reverse(x, xd)
             md = md[:, ::-1]
         else:
-            x, xd, md, bad = _run(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
-        h.take(x, xd, md, bad)
+            x, xd, md, bad, xi = _run(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
+        h.take(x, xd, md, bad, xi)
 
 
 def _round(h, passes, max_passes, rel_tol):
@@ -607,7 +617,8 @@ class FixedLagWindow:
         XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
         lo, hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
         self.xi_rows = (np.ascontiguousarray(lo[0]), np.ascontiguousarray(hi[0]))
-        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None), backend, parallel=False)
+        # keep_xi: within a window the sub-box is contracted by each sample's loop closure in turn
+        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None, keep_xi=True), backend, parallel=False)
         L, n = self.lag + 1, model.n
         # the last L samples newest first, the order of the backward pass: readings (rad), the tracker's
         # pose boxes (m) and its velocity boxes of the reversed motion ([-hi, -lo], m/s), its modes
@@ -683,7 +694,7 @@ class FixedLagWindow:
             rows = np.array([b[1] for b in batch])
             shape = (len(batch),) + self._x.shape
             prior = (np.broadcast_to(self._x, shape), np.broadcast_to(self._xd_rev, shape))
-            _, _, md, bad = _run(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
+            _, _, md, bad, _ = _run(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
                                  (self.xi_rows[0][rows], self.xi_rows[1][rows]), prior)
             live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != hyp))
             for m in (1, -1):
