@@ -68,6 +68,26 @@ def test_window_is_sound_on_adversarial_runs(results):
         _check_sound(sc, res)
 
 
+def _true_geometry_kept(sc, res):
+    """Under the true final mode, one surviving geometry sub-box holds the true geometry ``sc.xi``; returns
+    whether that hypothesis ran window passes (its sub-boxes were contracted by them)."""
+    true = {h.final_mode: h for h in res.hypotheses}.get(int(sc.mode[-1]))
+    if true is None:  # no initial mode certified: the window tested no hypothesis
+        return False
+    inside = np.all((true.xi_lo <= sc.xi) & (sc.xi <= true.xi_hi), axis=1)
+    assert inside.any(), (sc.name, res.summary(), sc.xi, true.xi_lo, true.xi_hi)
+    return true.passes > 0
+
+
+def test_window_keeps_the_true_geometry(results):
+    """The rows' calibration sub-boxes are contracted by every sample of every pass (``keep_xi``) and kept
+    from pass to pass: the true geometry (at a corner of ``[xi]`` in most runs) must stay in one of the
+    true hypothesis' surviving sub-boxes.  Removal check: shrinking the sub-boxes a pass returns by one ulp
+    on each side (``_Hypothesis.take``) loses the corner geometries, and this test fails."""
+    passed = sum(_true_geometry_kept(sc, res) for sc, res in results)
+    assert passed >= 3, passed  # not vacuous: the window passes ran under the true hypothesis
+
+
 def _cut(sc, k):
     """The run ``sc`` ending at sample ``k``."""
     return replace(sc, name=f"{sc.name}[:{k + 1}]", t=sc.t[:k + 1], x=sc.x[:k + 1], xd=sc.xd[:k + 1],
@@ -209,6 +229,9 @@ def test_backends_agree(runs, settings):
     assert a.verdict is b.verdict and a.hypotheses == b.hypotheses
     for name in ("x_lo", "x_hi", "xd_lo", "xd_hi"):
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-12, err_msg=name)
+    for ha, hb in zip(a.hypotheses, b.hypotheses):  # the contracted geometry sub-boxes too
+        for name in ("xi_lo", "xi_hi"):
+            np.testing.assert_array_equal(getattr(ha, name), getattr(hb, name), err_msg=name)
 
 
 def test_bad_arguments_are_refused(runs, settings):

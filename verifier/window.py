@@ -122,6 +122,10 @@ class HypothesisResult:
     x_lo, x_hi, xd_lo, xd_hi : ndarray, shape (K, n), or None
         Hull over this hypothesis' surviving geometries of its pose (m) and
         velocity (m/s) tubes; ``None`` when refuted.
+    xi_lo, xi_hi : ndarray, shape (geometries_alive, m), or None
+        The surviving geometry sub-boxes (units of the robot's ``xi``), as
+        contracted by the passes; under this hypothesis one of them holds the
+        true geometry.  ``None`` when refuted.
     """
 
     final_mode: int
@@ -134,6 +138,8 @@ class HypothesisResult:
     x_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
     xd_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
     xd_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
+    xi_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
+    xi_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -360,7 +366,9 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     cfg_wf = configure(model, replace(flat, keep_xi=True), backend, parallel=parallel)
     cfg_b = configure(model, replace(flat, xd0=None, keep_xi=True), backend, parallel=parallel)  # final velocity: from the tubes
 
-    fx, fxd, fmode, fbad, _ = _run(cfg_f, q, x0, xi_rows, None)
+    fx, fxd, fmode, fbad, fxi = _run(cfg_f, q, x0, xi_rows, None)
+    # the rows' sub-boxes after the tracker (contracted only when the settings keep them, keep_xi)
+    xi_rows = (np.maximum(xi_rows[0], fxi[0]), np.minimum(xi_rows[1], fxi[1]))
     f_alive = fbad < 0
     m0 = _combined_mode(fmode[:, 0], f_alive)
     mf = _combined_mode(fmode[:, K - 1], f_alive)
@@ -373,7 +381,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     elif mf != 0:
         # the forward pass decided: the other final mode is refuted by its certified boxes
         results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
-                                    *_hull(fx[f_alive], fxd[f_alive])),
+                                    *_hull(fx[f_alive], fxd[f_alive]), xi_rows[0][f_alive], xi_rows[1][f_alive]),
                    HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
         verdict = forward_verdict
         tubes = [(fx[f_alive], fxd[f_alive])]
@@ -383,7 +391,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         hyps = [_Hypothesis(finals, xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep], m0, m)
                 for m in (m0, -m0)]
         if not any(h.refuted for h in hyps):
-            full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
+            full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
             _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w)
         else:  # refuted by the last reading alone: the other ran no pass
             for h in hyps:
@@ -487,7 +495,7 @@ class _Hypothesis:
         if self.refuted:
             return HypothesisResult(self.m, HypothesisStatus.REFUTED, self.refutation, self.passes, 0)
         return HypothesisResult(self.m, HypothesisStatus.CONSISTENT, self.refutation, self.passes, len(self.xlo),
-                                self.complete, *_hull(self.tx, self.txd))
+                                self.complete, *_hull(self.tx, self.txd), self.xlo, self.xhi)
 
 
 class _Passes:
