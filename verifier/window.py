@@ -43,6 +43,7 @@ import numpy as np
 from crosscert.robots.errors import InputError
 
 from . import interval as I
+from .linalg import point_inverse
 from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import Tracker, initial_box_from_mode, verdict_of
@@ -418,10 +419,38 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                         steps=K, elapsed_s=time.perf_counter() - t0)
 
 
-def _bisect(xi_lo, xi_hi, full_w):
-    """Halve each geometry sub-box ``(R, m)`` along the parameter widest relative to the calibration box
-    (widths ``full_w`` ``(m,)``); the two halves share the float split point, so they cover the parent."""
+def _pose_spread(model, x, q, xi_lo, xi_hi):
+    """How wide each parameter's width alone makes the pose, per geometry sub-box: ``(R, m)``, m.
+
+    For row ``r`` and parameter ``i``: ``|C| w(f(x_r, q, xi_i))`` summed over the pose coordinates, ``f`` the
+    loop closure evaluated at the midpoint of the pose box ``x`` ``(R, 2, n)`` and of the sub-box except
+    parameter ``i``, which keeps its width, and ``C`` the inverse of ``J_x`` there (the first-order pose
+    error of that parameter's uncertainty).  A heuristic for where to split: it decides no box.
+    """
+    R, m = xi_lo.shape
+    n = model.n
+    xm = np.repeat(I.midpoint(x[:, 0], x[:, 1]), m, axis=0)
+    qm = np.broadcast_to(np.asarray(q, dtype=np.float64), (R * m, n))
+    mid = I.midpoint(xi_lo, xi_hi)
+    lo, hi = np.repeat(mid, m, axis=0), np.repeat(mid, m, axis=0)
+    one = np.tile(np.eye(m, dtype=bool), (R, 1))
+    lo[one], hi[one] = xi_lo.reshape(-1), xi_hi.reshape(-1)
+    F = model.tape_f.evaluate([(xm, xm), (qm, qm), (lo, hi)])[0]
+    J = model.tape_jx.evaluate([(xm, xm), (qm, qm), (np.repeat(mid, m, axis=0),) * 2])[0]
+    C = point_inverse(I.midpoint(*J))
+    w = (F[1] - F[0]).reshape(R * m, n)
+    return np.einsum("rij,rj->r", np.abs(C), w).reshape(R, m)
+
+
+def _bisect(xi_lo, xi_hi, full_w, spread=None):
+    """Halve each geometry sub-box ``(R, m)`` along the parameter whose width spreads the pose most
+    (``spread`` ``(R, m)``, :func:`_pose_spread`), or, where that is not finite or not given, the one widest
+    relative to the calibration box (widths ``full_w`` ``(m,)``); the two halves share the float split
+    point, so they cover the parent."""
     rel = np.where(full_w > 0, (xi_hi - xi_lo) / np.where(full_w > 0, full_w, 1.0), 0.0)
+    if spread is not None:
+        ok = np.all(np.isfinite(spread), axis=1) & np.any(spread > 0, axis=1)
+        rel = np.where(ok[:, None] & (xi_hi > xi_lo), np.where(np.isfinite(spread), spread, 0.0), rel)
     axis = np.argmax(rel, axis=1)
     rows = np.arange(len(axis))
     mid = 0.5 * (xi_lo[rows, axis] + xi_hi[rows, axis])
@@ -485,9 +514,14 @@ class _Hypothesis:
             self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
         self._keep(live)
 
-    def split(self, full_w):
-        """Halve every surviving geometry sub-box; children start from their parent's tubes."""
-        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w)
+    def split(self, full_w, q_first):
+        """Halve every surviving geometry sub-box along the parameter that spreads the pose most at the two
+        ends of the recording (first reading ``q_first``); children start from their parent's tubes."""
+        model = self.finals.model
+        with I.quiet_fp():
+            spread = (_pose_spread(model, self.tx[:, 0], q_first, self.xlo, self.xhi)
+                      + _pose_spread(model, self.tx[:, -1], self.finals.q_last, self.xlo, self.xhi))
+        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w, spread)
         self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
         self._final_boxes()
 
@@ -555,7 +589,7 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w):
                 return
         open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
         for h in open_:
-            h.split(full_w)
+            h.split(full_w, passes.q[0])
 
 
 @dataclass(frozen=True)
