@@ -10,6 +10,11 @@ that the forward tracker cannot certify them.
 Removal checks (each made a test here fail, 2026-12-01): the velocity sign
 flip of the time reversal (``_reverse``), undecided boxes kept in the final
 box of a hypothesis (``m in (mode, 0)``), the velocity prior of the passes.
+2026-12-02 (issue 20), the geometry sub-boxes kept from pass to pass
+(``_Hypothesis.take``): shrunk by one ulp per side, the true geometry test
+fails; shrunk by 10 % of their width per side, the adversarial soundness test
+(pose tube without the truth at sample 0), the true geometry test and the
+test of runs ending at the locus fail.
 """
 
 from __future__ import annotations
