@@ -10,6 +10,11 @@ that the forward tracker cannot certify them.
 Removal checks (each made a test here fail, 2026-12-01): the velocity sign
 flip of the time reversal (``_reverse``), undecided boxes kept in the final
 box of a hypothesis (``m in (mode, 0)``), the velocity prior of the passes.
+2026-12-02 (issue 20), the geometry sub-boxes kept from pass to pass
+(``_Hypothesis.take``): shrunk by one ulp per side, the true geometry test
+fails; shrunk by 10 % of their width per side, the adversarial soundness test
+(pose tube without the truth at sample 0), the true geometry test and the
+test of runs ending at the locus fail.
 """
 
 from __future__ import annotations
@@ -66,6 +71,26 @@ def results(runs, settings):
 def test_window_is_sound_on_adversarial_runs(results):
     for sc, res in results:
         _check_sound(sc, res)
+
+
+def _true_geometry_kept(sc, res):
+    """Under the true final mode, one surviving geometry sub-box holds the true geometry ``sc.xi``; returns
+    whether that hypothesis ran window passes (its sub-boxes were contracted by them)."""
+    true = {h.final_mode: h for h in res.hypotheses}.get(int(sc.mode[-1]))
+    if true is None:  # no initial mode certified: the window tested no hypothesis
+        return False
+    inside = np.all((true.xi_lo <= sc.xi) & (sc.xi <= true.xi_hi), axis=1)
+    assert inside.any(), (sc.name, res.summary(), sc.xi, true.xi_lo, true.xi_hi)
+    return true.passes > 0
+
+
+def test_window_keeps_the_true_geometry(results):
+    """The rows' calibration sub-boxes are contracted by every sample of every pass (``keep_xi``) and kept
+    from pass to pass: the true geometry (at a corner of ``[xi]`` in most runs) must stay in one of the
+    true hypothesis' surviving sub-boxes.  Removal check: shrinking the sub-boxes a pass returns by one ulp
+    on each side (``_Hypothesis.take``) loses the corner geometries, and this test fails."""
+    passed = sum(_true_geometry_kept(sc, res) for sc, res in results)
+    assert passed >= 3, passed  # not vacuous: the window passes ran under the true hypothesis
 
 
 def _cut(sc, k):
@@ -132,8 +157,8 @@ def test_early_stop_is_reported(settings, monkeypatch):
     real = W._run
 
     def emptied(config, q, x0, xi_rows, prior):
-        x, xd, md, bad = real(config, q, x0, xi_rows, prior)
-        return (x, xd, md, np.zeros_like(bad)) if prior is not None else (x, xd, md, bad)
+        x, xd, md, bad, xi = real(config, q, x0, xi_rows, prior)
+        return (x, xd, md, np.zeros_like(bad) if prior is not None else bad, xi)
 
     run = simulate(1.0, False, 0)
     honest = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
@@ -209,6 +234,9 @@ def test_backends_agree(runs, settings):
     assert a.verdict is b.verdict and a.hypotheses == b.hypotheses
     for name in ("x_lo", "x_hi", "xd_lo", "xd_hi"):
         np.testing.assert_allclose(getattr(a, name), getattr(b, name), rtol=0, atol=1e-12, err_msg=name)
+    for ha, hb in zip(a.hypotheses, b.hypotheses):  # the contracted geometry sub-boxes too
+        for name in ("xi_lo", "xi_hi"):
+            np.testing.assert_array_equal(getattr(ha, name), getattr(hb, name), err_msg=name)
 
 
 def test_bad_arguments_are_refused(runs, settings):
@@ -261,3 +289,32 @@ def test_fixed_lag_runs_only_rows_that_can_change_the_answer(runs, settings, mon
         full = results(sc)
         monkeypatch.undo()
         assert lazy == full, sc.name
+
+
+def test_halving_follows_the_pose_spread_and_covers_the_parent():
+    """Sub-boxes are halved along the parameter that spreads the pose most (the joint offsets of the
+    DexTAR's partition first: about 0.7 mm against 0.2-0.5 mm for the lengths at the benchmark's start),
+    through a shared float split point, and along the widest relative width where the spread is not finite."""
+    from problems import simulate
+    from crosscert.verifier.step import partition_xi
+    from crosscert.verifier.window import _bisect, _pose_spread
+
+    im = interval_model()
+    XI = im.xi_box()
+    lo, hi = (v[0] for v in partition_xi((XI[0][None], XI[1][None]), DEXTAR.xi_splits))
+    run = simulate(1.0, False, 0)
+    x = np.repeat(np.stack([run.x_true[0] - 1e-4, run.x_true[0] + 1e-4])[None], len(lo), axis=0)
+    spread = _pose_spread(im, x, run.q_meas[0], lo, hi)
+    assert np.all(np.isfinite(spread)) and np.all(spread > 0)
+    assert set(np.argmax(spread, axis=1)) <= {5, 6}, spread  # the offsets delta1, delta2
+    full_w = XI[1] - XI[0]
+    for sp, axes in ((spread, np.argmax(spread, axis=1)), (np.full_like(spread, np.nan), np.zeros(len(lo), int))):
+        nlo, nhi = _bisect(lo, hi, full_w, sp)
+        R = len(lo)
+        for r in range(R):
+            a = axes[r]
+            left, right = (nlo[r], nhi[r]), (nlo[R + r], nhi[R + r])
+            assert left[1][a] == right[0][a] and lo[r][a] < left[1][a] < hi[r][a]  # one shared split point
+            assert np.array_equal(left[0], lo[r]) and np.array_equal(right[1], hi[r])
+            others = np.arange(len(XI[0])) != a
+            assert np.array_equal(left[1][others], hi[r][others]) and np.array_equal(right[0][others], lo[r][others])

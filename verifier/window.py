@@ -43,6 +43,7 @@ import numpy as np
 from crosscert.robots.errors import InputError
 
 from . import interval as I
+from .linalg import point_inverse
 from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import Tracker, initial_box_from_mode, verdict_of
@@ -122,6 +123,10 @@ class HypothesisResult:
     x_lo, x_hi, xd_lo, xd_hi : ndarray, shape (K, n), or None
         Hull over this hypothesis' surviving geometries of its pose (m) and
         velocity (m/s) tubes; ``None`` when refuted.
+    xi_lo, xi_hi : ndarray, shape (geometries_alive, m), or None
+        The surviving geometry sub-boxes (units of the robot's ``xi``), as
+        contracted by the passes; under this hypothesis one of them holds the
+        true geometry.  ``None`` when refuted.
     """
 
     final_mode: int
@@ -134,6 +139,8 @@ class HypothesisResult:
     x_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
     xd_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
     xd_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
+    xi_lo: np.ndarray | None = field(default=None, repr=False, compare=False)
+    xi_hi: np.ndarray | None = field(default=None, repr=False, compare=False)
 
 
 @dataclass(frozen=True, eq=False)
@@ -197,13 +204,15 @@ def _reverse(x, xd):
 
 
 def _run(config, q, x0, xi_rows, prior):
-    """One pass over readings ``q`` ``(K, n)`` for rows ``R``: tubes ``(R, K, 2, n)``, modes ``(R, K)``, death ``(R,)``."""
+    """One pass over readings ``q`` ``(K, n)`` for rows ``R``: tubes ``(R, K, 2, n)``, modes ``(R, K)``, death
+    ``(R,)`` and the rows' calibration sub-boxes ``(lo, hi)`` ``(R, m)`` at the end of the pass (contracted by
+    every sample's loop closure when ``config`` keeps them, ``keep_xi``; meaningless for a dead row)."""
     lo, hi = xi_rows
     R, (K, n) = lo.shape[0], q.shape
     st = init_state(config, x0, batch=R, xi_box=(lo, hi))
     rec = (np.empty((R, K, 2, n)), np.empty((R, K, 2, n)), np.empty((R, K), np.int64), np.empty((R, K, n)))
     advance(config, st, np.broadcast_to(q, (R, K, n)), rec, prior)
-    return rec[0], rec[1], rec[2], st.bad_at.copy()
+    return rec[0], rec[1], rec[2], st.bad_at.copy(), (st.xi[:, 0].copy(), st.xi[:, 1].copy())
 
 
 def _hull(x, xd):
@@ -353,9 +362,14 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     x0 = tuple(np.broadcast_to(np.asarray(v, dtype=np.float64), (P, n)).copy() for v in x0)
     flat = replace(s, xi_splits=None)
     cfg_f = configure(model, flat, backend, parallel=parallel)
-    cfg_b = configure(model, replace(flat, xd0=None), backend, parallel=parallel)  # final velocity: from the tubes
+    # the window's passes carry each row's calibration sub-box from sample to sample (keep_xi), and the
+    # rows keep it from pass to pass: the true geometry satisfies every sample's loop closure
+    cfg_wf = configure(model, replace(flat, keep_xi=True), backend, parallel=parallel)
+    cfg_b = configure(model, replace(flat, xd0=None, keep_xi=True), backend, parallel=parallel)  # final velocity: from the tubes
 
-    fx, fxd, fmode, fbad = _run(cfg_f, q, x0, xi_rows, None)
+    fx, fxd, fmode, fbad, fxi = _run(cfg_f, q, x0, xi_rows, None)
+    # the rows' sub-boxes after the tracker (contracted only when the settings keep them, keep_xi)
+    xi_rows = (np.maximum(xi_rows[0], fxi[0]), np.minimum(xi_rows[1], fxi[1]))
     f_alive = fbad < 0
     m0 = _combined_mode(fmode[:, 0], f_alive)
     mf = _combined_mode(fmode[:, K - 1], f_alive)
@@ -368,7 +382,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     elif mf != 0:
         # the forward pass decided: the other final mode is refuted by its certified boxes
         results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
-                                    *_hull(fx[f_alive], fxd[f_alive])),
+                                    *_hull(fx[f_alive], fxd[f_alive]), xi_rows[0][f_alive], xi_rows[1][f_alive]),
                    HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
         verdict = forward_verdict
         tubes = [(fx[f_alive], fxd[f_alive])]
@@ -378,8 +392,8 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         hyps = [_Hypothesis(finals, xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep], m0, m)
                 for m in (m0, -m0)]
         if not any(h.refuted for h in hyps):
-            full_w = xi_rows[1].max(0) - xi_rows[0].min(0)
-            _decide(hyps, _Passes(q, cfg_f, cfg_b), max_passes, rel_tol, max_geometries, full_w)
+            full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
+            _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w)
         else:  # refuted by the last reading alone: the other ran no pass
             for h in hyps:
                 h.complete = h.refuted
@@ -405,10 +419,38 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                         steps=K, elapsed_s=time.perf_counter() - t0)
 
 
-def _bisect(xi_lo, xi_hi, full_w):
-    """Halve each geometry sub-box ``(R, m)`` along the parameter widest relative to the calibration box
-    (widths ``full_w`` ``(m,)``); the two halves share the float split point, so they cover the parent."""
+def _pose_spread(model, x, q, xi_lo, xi_hi):
+    """How wide each parameter's width alone makes the pose, per geometry sub-box: ``(R, m)``, m.
+
+    For row ``r`` and parameter ``i``: ``|C| w(f(x_r, q, xi_i))`` summed over the pose coordinates, ``f`` the
+    loop closure evaluated at the midpoint of the pose box ``x`` ``(R, 2, n)`` and of the sub-box except
+    parameter ``i``, which keeps its width, and ``C`` the inverse of ``J_x`` there (the first-order pose
+    error of that parameter's uncertainty).  A heuristic for where to split: it decides no box.
+    """
+    R, m = xi_lo.shape
+    n = model.n
+    xm = np.repeat(I.midpoint(x[:, 0], x[:, 1]), m, axis=0)
+    qm = np.broadcast_to(np.asarray(q, dtype=np.float64), (R * m, n))
+    mid = I.midpoint(xi_lo, xi_hi)
+    lo, hi = np.repeat(mid, m, axis=0), np.repeat(mid, m, axis=0)
+    one = np.tile(np.eye(m, dtype=bool), (R, 1))
+    lo[one], hi[one] = xi_lo.reshape(-1), xi_hi.reshape(-1)
+    F = model.tape_f.evaluate([(xm, xm), (qm, qm), (lo, hi)])[0]
+    J = model.tape_jx.evaluate([(xm, xm), (qm, qm), (np.repeat(mid, m, axis=0),) * 2])[0]
+    C = point_inverse(I.midpoint(*J))
+    w = (F[1] - F[0]).reshape(R * m, n)
+    return np.einsum("rij,rj->r", np.abs(C), w).reshape(R, m)
+
+
+def _bisect(xi_lo, xi_hi, full_w, spread=None):
+    """Halve each geometry sub-box ``(R, m)`` along the parameter whose width spreads the pose most
+    (``spread`` ``(R, m)``, :func:`_pose_spread`), or, where that is not finite or not given, the one widest
+    relative to the calibration box (widths ``full_w`` ``(m,)``); the two halves share the float split
+    point, so they cover the parent."""
     rel = np.where(full_w > 0, (xi_hi - xi_lo) / np.where(full_w > 0, full_w, 1.0), 0.0)
+    if spread is not None:
+        ok = np.all(np.isfinite(spread), axis=1) & np.any(spread > 0, axis=1)
+        rel = np.where(ok[:, None] & (xi_hi > xi_lo), np.where(np.isfinite(spread), spread, 0.0), rel)
     axis = np.argmax(rel, axis=1)
     rows = np.arange(len(axis))
     mid = 0.5 * (xi_lo[rows, axis] + xi_hi[rows, axis])
@@ -456,20 +498,30 @@ class _Hypothesis:
             return np.maximum(self.final[:, 0], end[:, 0]), np.minimum(self.final[:, 1], end[:, 1])
         return self.tx[:, 0, 0], self.tx[:, 0, 1]
 
-    def take(self, x, xd, md, bad):
-        """The tubes of a pass over this hypothesis' rows (forward time); drop the rows it refutes."""
+    def take(self, x, xd, md, bad, xi):
+        """The tubes and contracted calibration sub-boxes ``xi`` (``(lo, hi)`` ``(R, m)``) of a pass over this
+        hypothesis' rows (forward time); drop the rows it refutes."""
         self.passes += 1
         last, first = md[:, -1], md[:, 0]
         other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
         live = (bad < 0) & ~other
         self.tx, self.txd = x, xd
+        # the pass started from these sub-boxes and only contracted them; intersecting is exact and keeps
+        # a row's sub-box inside its parent's whatever the kernel holds
+        self.xlo, self.xhi = np.maximum(self.xlo, xi[0]), np.minimum(self.xhi, xi[1])
+        live &= np.all(self.xlo <= self.xhi, axis=1)  # no geometry of the sub-box fits every sample
         if not live.any():
             self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
         self._keep(live)
 
-    def split(self, full_w):
-        """Halve every surviving geometry sub-box; children start from their parent's tubes."""
-        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w)
+    def split(self, full_w, q_first):
+        """Halve every surviving geometry sub-box along the parameter that spreads the pose most at the two
+        ends of the recording (first reading ``q_first``); children start from their parent's tubes."""
+        model = self.finals.model
+        with I.quiet_fp():
+            spread = (_pose_spread(model, self.tx[:, 0], q_first, self.xlo, self.xhi)
+                      + _pose_spread(model, self.tx[:, -1], self.finals.q_last, self.xlo, self.xhi))
+        self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w, spread)
         self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
         self._final_boxes()
 
@@ -477,7 +529,7 @@ class _Hypothesis:
         if self.refuted:
             return HypothesisResult(self.m, HypothesisStatus.REFUTED, self.refutation, self.passes, 0)
         return HypothesisResult(self.m, HypothesisStatus.CONSISTENT, self.refutation, self.passes, len(self.xlo),
-                                self.complete, *_hull(self.tx, self.txd))
+                                self.complete, *_hull(self.tx, self.txd), self.xlo, self.xhi)
 
 
 class _Passes:
@@ -492,12 +544,12 @@ class _Passes:
         """One pass over the rows of hypothesis ``h``, which takes its tubes."""
         x0, xi = h.starts(backward), (h.xlo, h.xhi)
         if backward:
-            x, xd, md, bad = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
+            x, xd, md, bad, xi = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
             x, xd = _reverse(x, xd)
             md = md[:, ::-1]
         else:
-            x, xd, md, bad = _run(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
-        h.take(x, xd, md, bad)
+            x, xd, md, bad, xi = _run(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
+        h.take(x, xd, md, bad, xi)
 
 
 def _round(h, passes, max_passes, rel_tol):
@@ -537,7 +589,7 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w):
                 return
         open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
         for h in open_:
-            h.split(full_w)
+            h.split(full_w, passes.q[0])
 
 
 @dataclass(frozen=True)
@@ -607,7 +659,8 @@ class FixedLagWindow:
         XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
         lo, hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
         self.xi_rows = (np.ascontiguousarray(lo[0]), np.ascontiguousarray(hi[0]))
-        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None), backend, parallel=False)
+        # keep_xi: within a window the sub-box is contracted by each sample's loop closure in turn
+        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None, keep_xi=True), backend, parallel=False)
         L, n = self.lag + 1, model.n
         # the last L samples newest first, the order of the backward pass: readings (rad), the tracker's
         # pose boxes (m) and its velocity boxes of the reversed motion ([-hi, -lo], m/s), its modes
@@ -683,7 +736,7 @@ class FixedLagWindow:
             rows = np.array([b[1] for b in batch])
             shape = (len(batch),) + self._x.shape
             prior = (np.broadcast_to(self._x, shape), np.broadcast_to(self._xd_rev, shape))
-            _, _, md, bad = _run(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
+            _, _, md, bad, _ = _run(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
                                  (self.xi_rows[0][rows], self.xi_rows[1][rows]), prior)
             live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != hyp))
             for m in (1, -1):
