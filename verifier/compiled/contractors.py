@@ -23,7 +23,8 @@ from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
 # differences of the baselines follow from TB_DQ on
-TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = range(10)
+# numpy integers: one compiled copy of the box helpers for every slot (see verifier.compiled.tape.T_F)
+TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = (np.int64(i) for i in range(10))
 
 
 class Scratch(NamedTuple):

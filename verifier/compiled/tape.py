@@ -25,7 +25,9 @@ __all__ = ["Program", "TAPES", "pack"]
 
 #: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
 TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
-T_F, T_JX, T_JQ, T_VEL, T_JX_XD, T_ACCEL, T_DET = range(len(TAPES))
+# numpy integers, not Python ints: numba compiles a callee once per distinct literal int argument, and
+# these index the tape of every forward / hc4 / output call (one copy of the interpreter instead of seven)
+T_F, T_JX, T_JQ, T_VEL, T_JX_XD, T_ACCEL, T_DET = (np.int64(i) for i in range(len(TAPES)))
 
 _INPUT = OPCODES["OP_INPUT"]
 _CONST = OPCODES["OP_CONST"]
