@@ -27,7 +27,7 @@ from .acceleration import AccelerationAssumption, robot_a_max_assumption
 from .certify.crossing import CrossingCertificate, certify_crossing
 from .progress import suffixed
 
-__all__ = ["ComparisonOutcome", "AtRobotAMax", "certify_at_robot_a_max"]
+__all__ = ["ComparisonOutcome", "AtRobotAMax", "certify_at_robot_a_max", "compares"]
 
 
 class ComparisonOutcome(StrEnum):
@@ -77,6 +77,21 @@ class AtRobotAMax:
                 "v_min_at_lower_end": self.v_min_at_lower_end, "elapsed_s": self.elapsed_s}
 
 
+def _outcome(robot, cert: CrossingCertificate) -> ComparisonOutcome:
+    """What :func:`certify_at_robot_a_max` does with ``cert``: compute, or say why not."""
+    used = cert.a_max_used
+    if used is None or cert.v_min is None:
+        return ComparisonOutcome.NO_CERTIFICATE
+    if used.same_values(robot_a_max_assumption(robot)):
+        return ComparisonOutcome.COINCIDES
+    return ComparisonOutcome.COMPUTED
+
+
+def compares(robot, cert: CrossingCertificate) -> bool:
+    """Whether :func:`certify_at_robot_a_max` runs a second certification for ``cert`` (``COMPUTED``)."""
+    return _outcome(robot, cert) is ComparisonOutcome.COMPUTED
+
+
 def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6, v_high=None, tol=0.01,
                            refute=True, seed=0, executor=None, progress=None, kin=None,
                            imodel=None) -> CrossingCertificate:
@@ -102,10 +117,9 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
     """
     ref = robot_a_max_assumption(robot)
     used = cert.a_max_used
-    if used is None or cert.v_min is None:
-        return replace(cert, at_robot_a_max=AtRobotAMax(ComparisonOutcome.NO_CERTIFICATE, ref))
-    if used.same_values(ref):
-        return replace(cert, at_robot_a_max=AtRobotAMax(ComparisonOutcome.COINCIDES, ref))
+    outcome = _outcome(robot, cert)
+    if outcome is not ComparisonOutcome.COMPUTED:
+        return replace(cert, at_robot_a_max=AtRobotAMax(outcome, ref))
     # the robot's bound covers every execution the default covers: start where the default stopped
     covers = all(r >= u for r, u in zip(ref.values, used.values))
     top = max(t.v_sing for t in cert.trials)  # the fastest speed the default's search tried

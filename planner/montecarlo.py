@@ -10,6 +10,7 @@ verdicts must be zero (they would be bugs).
 
 from __future__ import annotations
 
+import logging
 from concurrent.futures import Executor
 from dataclasses import dataclass
 
@@ -30,6 +31,8 @@ from .simulate import Quantisation, quantise, random_geometry
 from .task import PlannedTrajectory, PlanningBounds
 
 __all__ = ["RunRecord", "MonteCarloResult", "monte_carlo_confirmation", "monte_carlo_runs", "merge_results", "BATCH_RUNS"]
+
+log = logging.getLogger(__name__)
 
 #: Readings cycle through the encoder models run by run.
 _KINDS = (Quantisation.FLOOR, Quantisation.ROUND, Quantisation.UNIFORM)
@@ -104,7 +107,8 @@ BATCH_RUNS = 200
 def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
                              a_max=None, progress=None, execution: ex_.ExecutionClass | None = None,
                              executor: Executor | None = None, batch_runs: int = BATCH_RUNS,
-                             parallel: bool = True) -> MonteCarloResult:
+                             parallel: bool = True, beside: Executor | None = None,
+                             beside_runs: int = 0) -> MonteCarloResult:
     """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
 
     Each execution ``r``: geometry uniform in ``[xi]`` (every 5th at a random
@@ -123,6 +127,10 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
         Run the executions in batches of ``batch_runs`` on it (a process pool,
         a Dask client's ``get_executor()``): for 10^5 executions and more.
         Each worker builds the robot's models once.
+    beside : concurrent.futures.Executor, optional
+        Without ``executor``: run the first ``beside_runs`` executions there (serial kernels), the
+        others here at the same time (a certification's background worker, idle for part of the run).
+        If it fails, those executions run here.
 
     Returns
     -------
@@ -136,8 +144,21 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     cls = execution_class(kin, plan, b) if execution is None else execution
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
     if executor is None:
-        return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress,
+        split = min(runs - 1, max(0, int(beside_runs))) if beside is not None else 0
+        there = None
+        if split > 0:
+            there = beside.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, 0, split, parallel=False)
+        here = monte_carlo_runs(robot, plan, b, s, cls, seed, split, runs, models=(kin, imodel), progress=progress,
                                 parallel=parallel)
+        if there is None:
+            return here
+        try:
+            first = there.result()
+        except Exception as exc:  # the worker failed: those executions run here (the same draws)
+            log.warning("background Monte Carlo executions failed (%r); running them in this process", exc)
+            first = monte_carlo_runs(robot, plan, b, s, cls, seed, 0, split, models=(kin, imodel),
+                                     parallel=parallel)
+        return merge_results([first, here])
     futures = [executor.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, min(runs, start + batch_runs))
                for start in range(0, runs, batch_runs)]
     return merge_results([f.result() for f in futures])

@@ -132,3 +132,53 @@ def test_certify_crossing_with_background_refutation():
     found = [r for r in summary["refutation"] if r["counterexample"]]
     assert found and all(r["outcome"] == "counterexample-found" for r in found)
     assert all(set(r["geometry"]) == set(DEXTAR.param_names) for r in found)
+
+
+class _FailingExecutor(cf.Executor):
+    """An executor whose every call fails, as a dead background worker's do."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        future = cf.Future()
+        future.set_exception(WorkerStopped("the background worker stopped"))
+        return future
+
+
+def test_monte_carlo_beside_a_worker_counts_the_same_executions():
+    """Executions split between a worker and this process: the serial counts, lists and order; and the same
+    when the worker fails (its executions run here)."""
+    from crosscert.planner import monte_carlo_confirmation
+
+    kin, im = kinematics(), interval_model()
+    b = PlanningBounds()
+    plan = plan_crossing(kin, _task(), 1.3, b)
+    cls = execution_class(kin, plan, b)
+    serial = monte_carlo_confirmation(kin, im, plan, b, runs=6, seed=3, execution=cls, parallel=False)
+    with cf.ThreadPoolExecutor(max_workers=1) as pool:
+        split = monte_carlo_confirmation(kin, im, plan, b, runs=6, seed=3, execution=cls, parallel=False,
+                                         beside=pool, beside_runs=2)
+    failed = monte_carlo_confirmation(kin, im, plan, b, runs=6, seed=3, execution=cls, parallel=False,
+                                      beside=_FailingExecutor(), beside_runs=2)
+    assert serial.runs == serial.in_class == 6
+    assert split.summary() == serial.summary() and failed.summary() == serial.summary()
+
+
+def test_the_worker_draws_the_certificate_figure_as_this_process_does(tmp_path):
+    """`crosscert certify` hands the figure to the worker while the second certification runs: its
+    arguments reach the worker, and the file is the one this process draws, byte for byte."""
+    from pathlib import Path
+
+    from crosscert.planner.cli.planning import _figure
+
+    cert = certify_crossing(DEXTAR, _task(), PlanningBounds(), v_low=1.2, v_high=1.3, tol=0.1, monte_carlo_runs=0,
+                            refute=False, kin=kinematics(), imodel=interval_model(), bounce=False)
+    png, (fn, *args, kwargs) = _figure(cert, PlanningBounds(), tmp_path / "here", "rad")
+    png.parent.mkdir()
+    fn(*args, **kwargs)
+    there = tmp_path / "there" / png.name
+    there.parent.mkdir()
+    pool = SubprocessExecutor()
+    try:
+        pool.submit(fn, there, *args[1:], **kwargs).result()
+    finally:
+        pool.shutdown()
+    assert Path(png).stat().st_size > 10_000 and there.read_bytes() == Path(png).read_bytes()

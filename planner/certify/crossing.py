@@ -47,6 +47,9 @@ log = logging.getLogger(__name__)
 
 #: Version of the layout of :meth:`CrossingCertificate.summary` (``certificate.json``).
 CERTIFICATE_SCHEMA = "crosscert-certificate/3"
+#: Share of the Monte Carlo executions run on the background worker beside this process (the same
+#: draws and counts: each execution has its own generator).
+MC_BESIDE_SHARE = 0.2
 #: Slowest crossing speed a certification tries by default, m/s.
 V_LOW = 0.6
 
@@ -276,7 +279,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         if refuter is not None and search.v_min is not None and opts.bounce:
             bounces = _start_bounces(job, search.v_min, refuter, starts)
             t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
-        mc = _confirm(job, run, monte_carlo_runs, seed, progress)
+        mc = _confirm(job, run, monte_carlo_runs, seed, progress, None if refuter is None else refuter.executor)
         t1 = clock.lap("monte_carlo", t1)
         if refuter is not None:
             enter(progress, Phase.REFUTATION, unit="")
@@ -408,13 +411,19 @@ def _bounce_gap(job: _Job, bounces, starts) -> tuple:
     return gap_of(tracked, floor), ran
 
 
-def _confirm(job: _Job, run, runs: int, seed, progress):
-    """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs)."""
+def _confirm(job: _Job, run, runs: int, seed, progress, pool=None):
+    """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs).
+
+    With the background worker ``pool``, a share of the executions (:data:`MC_BESIDE_SHARE`) runs there:
+    it has only the refutation bisection and the bounce floor left, a few seconds of work (0.2 of 50
+    executions balanced the two processes on the benchmark task, benchmarks/README.md).
+    """
     if run is None or not runs:
         return None
     enter(progress, Phase.MONTE_CARLO, len(run.plan.q), unit="sample")
     return monte_carlo_confirmation(job.kin, job.imodel, run.plan, job.b, runs=runs, seed=seed, progress=progress,
-                                    execution=run.execution, parallel=job.threads)
+                                    execution=run.execution, parallel=job.threads, beside=pool,
+                                    beside_runs=round(MC_BESIDE_SHARE * runs))
 
 
 def _certificate(job: _Job, search, run, mc, ref_bound, ref, gap, clock, t0) -> CrossingCertificate:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +11,7 @@ from crosscert.verifier.files import atomic_write
 from crosscert.verifier.plots import plot_certificate, plot_run
 from crosscert.verifier.trajfile import write_trajectory
 
-from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max
+from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max, compares
 from ..certify.crossing import certify_crossing
 from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
@@ -49,13 +48,27 @@ def certify(a) -> int:
     # one worker process for both certifications' counterexample searches: the second reuses the
     # first's imports and NLP solvers (planner.refute builds one per sample count)
     pool = None if a.no_refute else SubprocessExecutor()
+    drawing = None
     try:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                 monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
                                 progress=bar, kin=kin, executor=pool)
+        figure = _figure(cert, bounds, out, joint_unit)
+        if figure is not None and pool is not None and compares(robot, cert):
+            # the figure depends on the first certificate only: the worker draws it while this process
+            # runs the second certification's speed search (the worker is mostly idle then)
+            out.mkdir(parents=True, exist_ok=True)
+            fn, *args, kwargs = figure[1]
+            drawing = pool.submit(fn, Path(args[0]).absolute(), *args[1:], **kwargs)
         # what the assumption buys: the same search under the robot's physical a_max
         cert = certify_at_robot_a_max(robot, task, cert, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                       refute=not a.no_refute, seed=a.seed, progress=bar, kin=kin, executor=pool)
+        files = [] if figure is None else [figure[0]]
+        if drawing is not None:
+            try:
+                drawing.result()
+            except Exception:  # e.g. an argument the worker could not receive: drawn here below
+                drawing = None
     finally:
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
@@ -64,24 +77,9 @@ def certify(a) -> int:
     report = cert.summary()
     report["command_line"] = ["crosscert", *a.argv]
     out.mkdir(parents=True, exist_ok=True)
-    files = []
-    if cert.enclosures is not None:
-        e, p = cert.enclosures, cert.trajectory
-        png = out / f"certificate_{robot.name}_{cert.v_min:.3f}.png"
-        forward = {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode}
-        if cert.window is not None:  # the window passes certified: draw them, the forward pass only beside them
-            figure = partial(plot_certificate, png, p.t_s, forward, cert.window,
-                             title=f"{robot.name}: crossing at v_min = {cert.v_min:.3f} m/s certified by window reasoning")
-        else:
-            figure = partial(plot_run, png, p.t_s, forward,
-                             title=f"{robot.name}: crossing at v_min = {cert.v_min:.3f} m/s certified by the forward pass",
-                             truth="planned")
-        figure(p.x, p.xd, p.k_sing,
-               bounds=(f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
-                       f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
-                       f"t_s = {cert.bounds.t_s:.3g} s, "
-                       f"{cert.execution.kind.value} executions"))
-        files.append(png)
+    if figure is not None and drawing is None:
+        fn, *args, kwargs = figure[1]
+        fn(*args, **kwargs)
     js = out / "certificate.json"
     atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
     files.append(js)
@@ -146,3 +144,29 @@ def _print_at_robot_a_max(cert, no_refute: bool) -> None:
     ref = "not computed" if no_refute else ("none found" if at.refutation_bound is None
                                             else f"{at.refutation_bound:.4f} m/s")
     print(f"at the robot's a_max ({robot_bound}): minimal certified v_sing {vmin}; refutation bound {ref}")
+
+
+def _figure(cert, bounds, out: Path, joint_unit: str):
+    """``(png path, (function, *args, kwargs))`` of the certificate's figure; None without a certificate.
+
+    The call is a module-level function with picklable arguments, so the worker process can draw it.
+    """
+    if cert.enclosures is None:
+        return None
+    e, p = cert.enclosures, cert.trajectory
+    name = cert.robot_name
+    png = out / f"certificate_{name}_{cert.v_min:.3f}.png"
+    forward = {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode}
+    text = (f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
+            f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
+            f"t_s = {cert.bounds.t_s:.3g} s, "
+            f"{cert.execution.kind.value} executions")
+    if cert.window is not None:  # the window passes certified: draw them, the forward pass only beside them
+        call = (plot_certificate, png, p.t_s, forward, cert.window, p.x, p.xd, p.k_sing,
+                {"title": f"{name}: crossing at v_min = {cert.v_min:.3f} m/s certified by window reasoning",
+                 "bounds": text})
+    else:
+        call = (plot_run, png, p.t_s, forward, p.x, p.xd, p.k_sing,
+                {"title": f"{name}: crossing at v_min = {cert.v_min:.3f} m/s certified by the forward pass",
+                 "truth": "planned", "bounds": text})
+    return png, call
