@@ -37,11 +37,14 @@ _TRIG_ULPS = float(TRIG_ULPS)
 #: numba's runtime (``_nrt=False``): the kernels never allocate, and with the
 #: runtime every array passed to a callee costs an atomic reference-count
 #: increment and decrement, a third of the tracker's time (benchmarks/README.md).
-jit = njit(nogil=True, _nrt=False)
-#: The top-level kernels called from Python (the step drivers are built in
-#: :mod:`verifier.compiled.step` with the same flags): the caller allocates.
-cached_jit = njit(cache=True, nogil=True, _nrt=False)
-_ieee_jit = njit(nogil=True, error_model="numpy", _nrt=False)
+KERNEL_FLAGS = {"nogil": True, "_nrt": False}
+jit = njit(**KERNEL_FLAGS)
+#: The top-level kernels called from Python (the step drivers of
+#: :mod:`verifier.compiled.step` add ``parallel``): the caller allocates.
+cached_jit = njit(cache=True, **KERNEL_FLAGS)
+#: IEEE division as numpy's (x / 0 is inf or NaN): numba's default raises
+#: ZeroDivisionError, which an empty divisor such as [0.3, 0] reached.
+_ieee_jit = njit(error_model="numpy", **KERNEL_FLAGS)
 
 
 @intrinsic

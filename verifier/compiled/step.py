@@ -49,7 +49,7 @@ from .contractors import (
     velocity_gs,
 )
 from .linalg import linear_enclosure
-from .ops import jit
+from .ops import KERNEL_FLAGS, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 
@@ -183,10 +183,11 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
 
 @jit
 def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``; its mode lands
-    in ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
-    in row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is the step's
-    work: results are written, not returned, which parallel regions need); with
+    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``.  Writes its mode
+    to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
+    Results are written rather than returned because an assignment of a
+    call's result inside a ``prange`` body went wrong (test_backends); with
     ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
     hold the truth at this sample are intersected with the prediction."""
     X = rows.x
@@ -405,7 +406,7 @@ def _make_driver(parallel: bool):
     # names the serial driver would load the parallel one from the cache (and
     # wake the thread pool at every call) or the reverse
     run.__name__ = run.__qualname__ = "run_parallel" if parallel else "run_serial"
-    return njit(cache=True, nogil=True, parallel=parallel, _nrt=False)(run)
+    return njit(cache=True, parallel=parallel, **KERNEL_FLAGS)(run)
 
 
 def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
@@ -431,4 +432,4 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
 run_serial = _make_driver(False)
 #: Scenarios spread over numba's threads, thread slot ``t`` running scenarios ``t, t + T, ...``.
 run_parallel = _make_driver(True)
-run_hypotheses_parallel = njit(cache=True, nogil=True, parallel=True, _nrt=False)(run_hypotheses_parallel)
+run_hypotheses_parallel = njit(cache=True, parallel=True, **KERNEL_FLAGS)(run_hypotheses_parallel)
