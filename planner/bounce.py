@@ -165,7 +165,7 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: fl
             q, _ = fam.recording(d)
             x0 = initial_box_from_mode(imodel, q[0], fam.m0, s)
             verdicts[d] = track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES,
-                                       parallel=parallel).verdict
+                                       parallel=parallel, goal=Verdict.MODE_UNCHANGED).verdict
         return verdicts[d] is Verdict.MODE_UNCHANGED
 
     if exhaustive:

@@ -198,7 +198,8 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
         for i in range(len(qs)):
             if verdicts[i] is Verdict.UNKNOWN:
                 verdicts[i] = track_window(imodel, q[i], settings, x0=(x0[0][i], x0[1][i]),
-                                           max_geometries=MC_WINDOW_GEOMETRIES, parallel=parallel).verdict
+                                           max_geometries=MC_WINDOW_GEOMETRIES, parallel=parallel,
+                                           goal=Verdict.MODE_CHANGED).verdict
     misses, failures, wrong = [], [], []
     for i, r in enumerate(range(start, stop)):
         inside = (np.all(rec["x_lo"][i] <= plan.x) and np.all(plan.x <= rec["x_hi"][i])

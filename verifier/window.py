@@ -302,7 +302,7 @@ def _combined_mode(modes, alive):
 def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None,
                  max_passes: int = WINDOW_MAX_PASSES, rel_tol: float = WINDOW_REL_TOL,
                  max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
-                 parallel: bool = True) -> WindowResult:
+                 parallel: bool = True, goal: Verdict | None = None) -> WindowResult:
     """Verdict of a whole recording by forward-backward window passes (module docstring).
 
     Parameters
@@ -331,6 +331,15 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     backend : {"compiled", "numpy"}
     parallel : bool
         Compiled backend: geometry sub-boxes in parallel.
+    goal : Verdict, optional
+        The one verdict the caller asks about (``MODE_CHANGED``: a crossing to
+        certify; ``MODE_UNCHANGED``: a bounce).  Only the hypothesis whose
+        refutation gives it runs window passes; the other is left consistent
+        and incomplete, so any other answer comes out ``unknown`` (or from the
+        forward pass).  When the recording is what the caller expects, the
+        verdict is the one ``None`` gives, at a fraction of the cost: the true
+        hypothesis is never refuted, and its rounds are the costly ones.
+        ``None``: both hypotheses.
 
     Returns
     -------
@@ -350,6 +359,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         raise InputError(f"max_geometries must be a positive integer, got {max_geometries!r}")
     if not (0.0 <= rel_tol < 1.0):
         raise InputError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
+    goal = _goal(goal)
     if (x0 is None) == (initial_mode is None):
         raise InputError("give exactly one of x0 and initial_mode")
     K = q.shape[0]
@@ -393,7 +403,8 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                 for m in (m0, -m0)]
         if not any(h.refuted for h in hyps):
             full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
-            _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w)
+            _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w,
+                    _targets(hyps, m0, goal))
         else:  # refuted by the last reading alone: the other ran no pass
             for h in hyps:
                 h.complete = h.refuted
@@ -539,10 +550,12 @@ class _Passes:
     def __init__(self, q, cfg_f, cfg_b):
         self.q, self.cfg_f, self.cfg_b = q, cfg_f, cfg_b
         self.q_rev = np.ascontiguousarray(q[::-1])
+        self.rows = 0  # rows run by every pass so far: the cost :func:`_decide` balances
 
     def run(self, h, backward):
         """One pass over the rows of hypothesis ``h``, which takes its tubes."""
         x0, xi = h.starts(backward), (h.xlo, h.xhi)
+        self.rows += len(h.xlo)
         if backward:
             x, xd, md, bad, xi = _run(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
             x, xd = _reverse(x, xd)
@@ -568,28 +581,71 @@ def _round(h, passes, max_passes, rel_tol):
         width = new
 
 
-def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w):
-    """Rounds on each hypothesis in turn (the initial mode's first), halving each one's geometries
-    between rounds while it stays within ``max_geometries``, until a hypothesis is refuted or none can be
-    halved.
+#: The verdicts a window can be asked about (``track_window(goal=...)``).
+_GOALS = (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED)
+
+
+def _goal(goal):
+    """``goal`` as a :class:`Verdict` of :data:`_GOALS`, or ``None``."""
+    if goal is None:
+        return None
+    try:
+        verdict = Verdict(goal)
+    except ValueError:
+        verdict = None
+    if verdict not in _GOALS:
+        raise InputError(f"goal must be one of {[g.value for g in _GOALS]} or None, got {goal!r}")
+    return verdict
+
+
+def _targets(hyps, m0, goal):
+    """The hypotheses whose refutation can give the verdict ``goal`` (all of them when ``goal`` is ``None``):
+    ``MODE_CHANGED`` is reached only by refuting the initial mode ``m0``, ``MODE_UNCHANGED`` only by refuting
+    the other one."""
+    if goal is None:
+        return list(hyps)
+    return [h for h in hyps if (h.m == m0) == (goal is Verdict.MODE_CHANGED)]
+
+
+def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=None):
+    """Rounds on the hypotheses ``targets`` (all of ``hyps`` by default), halving each one's geometries
+    after each of its rounds while they stay within ``max_geometries``, until a hypothesis is refuted or
+    none can be halved.
+
+    The next round goes to the hypothesis that has run the fewest rows so far (the initial mode's first).
+    Under valid assumptions the true hypothesis is never refuted, and each hypothesis' rounds do not
+    depend on the other's: the verdict does not depend on this order, while the cost does.  A false
+    hypothesis loses rows at every round; the true one keeps them all and costs the most.  Balancing the
+    rows run bounds the work at twice what the false hypothesis needs to be refuted, where taking the
+    hypotheses level by level spends the true one's rounds at every level.
 
     The rounds stop at the first refutation: the other hypothesis is then left as it stands, consistent
     but marked incomplete (``HypothesisResult.complete``), since its skipped rounds might have refuted
-    it too (the recording would then be ``inconsistent``).  Running them would cost a round of the
-    surviving hypothesis on every decided recording, and a refuted hypothesis is false whatever the
-    other one's tubes are (measured: benchmarks/README.md [8]).
+    it too (the recording would then be ``inconsistent``).  Running them would cost the surviving
+    hypothesis' rounds on every decided recording, and a refuted hypothesis is false whatever the
+    other one's tubes are (measured: benchmarks/README.md [8]).  A hypothesis left out of ``targets``
+    runs no round and is marked incomplete too.
     """
-    open_ = list(hyps)
+    open_ = list(hyps if targets is None else targets)
+    for h in hyps:
+        if h not in open_:
+            h.complete = h.refuted
+    rows = [0] * len(open_)
     while open_:
-        for h in open_:
-            _round(h, passes, max_passes, rel_tol)
-            if h.refuted:
-                for other in open_:
-                    other.complete = other.refuted
-                return
-        open_ = [h for h in open_ if 2 * len(h.xlo) <= max_geometries]
-        for h in open_:
-            h.split(full_w, passes.q[0])
+        i = min(range(len(open_)), key=rows.__getitem__)  # ties: the first, the initial mode's
+        h = open_[i]
+        before = passes.rows
+        _round(h, passes, max_passes, rel_tol)
+        rows[i] += passes.rows - before
+        if not h.refuted and 2 * len(h.xlo) <= max_geometries:
+            h.split(full_w, passes.q[0])  # may refute it: no child has a final box
+        elif not h.refuted:
+            del open_[i], rows[i]  # its budget is spent: it stays consistent and complete
+            continue
+        if h.refuted:
+            for other in open_:
+                other.complete = other.refuted
+            return
 
 
 @dataclass(frozen=True)

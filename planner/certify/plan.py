@@ -161,7 +161,7 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
     s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
-                        max_geometries=max_geometries, parallel=parallel)
+                        max_geometries=max_geometries, parallel=parallel, goal=Verdict.MODE_CHANGED)
 
 
 @dataclass(frozen=True, eq=False)
