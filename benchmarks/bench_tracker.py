@@ -161,15 +161,22 @@ def load_now() -> str:
 
 
 def kernel_cache_stats() -> dict:
-    """numba's on-disk cache hits and misses (= compilations) of the two step drivers in this process."""
+    """numba's on-disk cache hits and misses (= compilations) of the batch drivers in this process: ``run_slot``
+    since 2026-12-02 (threads over one driver), ``run_serial`` and ``run_parallel`` in older checkouts."""
     from crosscert.verifier.compiled import step as kernels
 
-    out = {}
-    for name in ("run_serial", "run_parallel"):
-        st = getattr(kernels, name).stats
-        out[name] = dict(hits=int(sum(st.cache_hits.values())), misses=int(sum(st.cache_misses.values())))
-    out["cache_dir"] = str(kernels.run_serial.stats.cache_path)
+    out = {"drivers": {}}
+    for name in ("run_slot", "run_serial", "run_parallel"):
+        if hasattr(kernels, name):
+            st = getattr(kernels, name).stats
+            out["drivers"][name] = dict(hits=int(sum(st.cache_hits.values())), misses=int(sum(st.cache_misses.values())))
+            out["cache_dir"] = str(st.cache_path)
     return out
+
+
+def _drivers(k: dict) -> str:
+    """``name hits/misses`` of each driver of :func:`kernel_cache_stats`."""
+    return ", ".join(f"{name} {v['hits']}/{v['misses']}" for name, v in k["drivers"].items())
 
 
 def load_kernels(model) -> float:
@@ -340,8 +347,7 @@ def bench_start() -> dict:
             k = r["kernels"]
             say(f"  {label:<34}{wall:>10.1f}{r['import_s']:>10.2f}{r['first_initial_box_s']:>10.2f}"
                 f"{r['first_track_s']:>12.2f}{r['first_batch2_s']:>16.2f}{r['warm_track_s']:>13.4f}"
-                f"{r['warm_initial_box_s']:>11.4f}  serial {k['run_serial']['hits']}/{k['run_serial']['misses']}, "
-                f"parallel {k['run_parallel']['hits']}/{k['run_parallel']['misses']}")
+                f"{r['warm_initial_box_s']:>11.4f}  {_drivers(k)}")
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     if "cold" in out and "cached" in out:
@@ -349,8 +355,8 @@ def bench_start() -> dict:
         say(f"  first track() of the {c['samples']}-sample crossing: cold {c['first_track_s']:.2f} s, "
             f"cache on disk {d['first_track_s']:.2f} s, warm {d['warm_track_s']:.4f} s "
             f"(+ first parallel batch: cold {c['first_batch2_s']:.2f} s, cache {d['first_batch2_s']:.2f} s)")
-        if d["kernels"]["run_serial"]["misses"]:
-            say("  !! the 'on disk' child compiled the serial driver: the cache in the source tree was stale "
+        if any(v["misses"] for v in d["kernels"]["drivers"].values()):
+            say("  !! the 'on disk' child compiled a driver: the cache in the source tree was stale "
                 "(the kernel sources changed since it was written)")
     return out
 
@@ -730,9 +736,8 @@ def main(argv=None) -> int:
         result["kernel_load_s"] = t_load
         result["kernel_cache"] = kernel_cache_stats()
         k = result["kernel_cache"]
-        say(f"  compiled kernels ready in this process in {t_load:.2f} s (driver cache hits/misses: serial "
-            f"{k['run_serial']['hits']}/{k['run_serial']['misses']}, parallel {k['run_parallel']['hits']}/"
-            f"{k['run_parallel']['misses']}; cache {k['cache_dir']}); not included below")
+        say(f"  compiled kernels ready in this process in {t_load:.2f} s (driver cache hits/misses: "
+            f"{_drivers(k)}; cache {k['cache_dir']}); not included below")
 
     if "latency" in parts:
         say(f"\n[1] latency of Tracker.update, one scenario (nominal geometry), one thread; {load_now()}")

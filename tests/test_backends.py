@@ -179,7 +179,7 @@ def test_threads_change_nothing():
 def test_read_only_readings_use_the_same_kernel(imodel, settings):
     """A read-only recording (a frozen plan's joints) runs the kernel compiled
     for writable arrays: no second compilation, the same boxes."""
-    from crosscert.verifier.compiled.step import run_serial
+    from crosscert.verifier.compiled.step import run_slot
 
     run = run_of(CATALOGUE["crossing_1458"])
     model, s = imodel, settings
@@ -194,17 +194,36 @@ def test_read_only_readings_use_the_same_kernel(imodel, settings):
     frozen = track(model, q, s, x0=x0)
     assert np.array_equal(frozen.x_lo, ref.x_lo)
     assert all(not any(getattr(t, "readonly", False) for t in sig if hasattr(t, "readonly"))
-               for sig in run_serial.signatures)
+               for sig in run_slot.signatures)
 
 
 def test_drivers_have_their_own_cache_entries():
-    """numba keys its on-disk cache by a function's qualified name: the serial
-    and parallel drivers must not share one, or one loads the other (a serial
-    tracker waking the thread pool at every sample)."""
+    """numba keys its on-disk cache by a function's qualified name: the batch
+    driver and the hypotheses' parallel one must not share one, or one loads
+    the other (a serial tracker waking the thread pool at every sample)."""
     from crosscert.verifier.compiled import step as kernels
 
-    names = {d.py_func.__qualname__ for d in (kernels.run_serial, kernels.run_parallel, kernels.run_hypotheses_parallel)}
-    assert len(names) == 3
+    names = {d.py_func.__qualname__ for d in (kernels.run_slot, kernels.run_hypotheses_parallel)}
+    assert len(names) == 2
+
+
+def test_a_parallel_batch_runs_one_slot_per_thread(monkeypatch):
+    """``parallel=True`` runs the one batch driver once per thread slot, the slots on the process's pool of
+    Python threads (the kernels release the GIL); a serial batch runs it once, on the calling thread.  The
+    boxes are the same (:func:`test_threads_change_nothing`)."""
+    import numba
+
+    from crosscert.verifier import step as S
+
+    asked, real = [], S._slot_pool
+    monkeypatch.setattr(S, "_slot_pool", lambda n: asked.append(n) or real(n))
+    model, s, q, x0 = _monte_carlo_batch()
+    q, x0 = q[:3, :20], (x0[0][:3], x0[1][:3])
+    track_batch(model, q, s, x0, parallel=False)
+    assert asked == []
+    track_batch(model, q, s, x0, parallel=True)
+    threads = min(numba.config.NUMBA_NUM_THREADS, 3)
+    assert (set(asked) == {threads}) if threads > 1 else asked == [], asked  # one pool request per kernel call
 
 
 def test_scratch_follows_the_configuration(imodel, settings):

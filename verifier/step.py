@@ -30,6 +30,8 @@ not depend on the other scenarios of its batch.
 from __future__ import annotations
 
 import itertools
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Protocol
@@ -468,7 +470,9 @@ class CompiledStep:
 
     @staticmethod
     def _threads(config, st):
-        """Which driver runs ``st`` and with how many scratch slots (threads)."""
+        """Which driver runs ``st`` and with how many scratch slots (threads): the hypotheses of a
+        sample over numba's threads (``spread_hypotheses``), or :func:`run_slot` once per slot, the
+        slots on Python threads (``parallel``; the kernels release the GIL)."""
         import numba
 
         from .compiled import step as kernels
@@ -477,8 +481,8 @@ class CompiledStep:
         if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
             return kernels.run_hypotheses_parallel, min(threads, st.hypotheses)
         if threads > 1 and config.parallel and st.batch > 1:
-            return kernels.run_parallel, min(threads, st.batch)
-        return kernels.run_serial, 1
+            return kernels.run_slot, min(threads, st.batch)
+        return kernels.run_slot, 1
 
     def _args(self, config, st):
         """The kernel's arguments that stay the same from call to call, built
@@ -497,6 +501,8 @@ class CompiledStep:
             B, n = st.batch, model.n
             a.update(
                 run=run,
+                # run_slot's (slot, slots) arguments, one call per slot; none for the hypotheses' driver
+                slots=tuple((t, threads) for t in range(threads)) if run is kernels.run_slot else (),
                 # the kernels' views of the state, field by field under the same names
                 rows=kernels.Rows(*(getattr(st, f) for f in kernels.Rows._fields)),
                 scen=kernels.Scenarios(*(getattr(st, f) for f in kernels.Scenarios._fields)),
@@ -510,13 +516,14 @@ class CompiledStep:
 
     def advance(self, config, st, q, record=None, prior=None):
         a = self._args(config, st)
-        if record is None and prior is None:
+        slots = a["slots"]
+        head = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"])
+        if record is None and prior is None and len(slots) < 2:
             # the online path: every argument's type is fixed for this state (q is a
             # C-contiguous float64 copy), so after the first call the compiled entry
             # point runs directly; numba's dispatcher would spend longer typing the
             # nested tuples of arrays than the kernel takes for a sample at rest
-            args = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"], int(st.k), q, False,
-                    a["no_record"], False, a["no_prior"])
+            args = head + (*(slots[0] if slots else ()), int(st.k), q, False, a["no_record"], False, a["no_prior"])
             entry = a.get("entry")
             if entry is None:
                 a["run"](*args)
@@ -526,8 +533,12 @@ class CompiledStep:
         else:
             rec = a["no_record"] if record is None else a["Record"](*record)
             pri = a["no_prior"] if prior is None else a["Prior"](*prior)
-            a["run"](config.model.program, config.const, a["rows"], a["scen"], a["scratch"], int(st.k), q,
-                     record is not None, rec, prior is not None, pri)
+            tail = (int(st.k), q, record is not None, rec, prior is not None, pri)
+            if len(slots) < 2:
+                a["run"](*head, *(slots[0] if slots else ()), *tail)
+            else:
+                for f in [_slot_pool(len(slots)).submit(a["run"], *head, t, n, *tail) for t, n in slots]:
+                    f.result()  # every slot finishes before the state is read; re-raises a slot's error
         st.k += q.shape[1]
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
@@ -544,6 +555,18 @@ class CompiledStep:
         if count < 0:
             return None
         return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
+
+
+_POOL: dict = {}
+_POOL_LOCK = threading.Lock()
+
+
+def _slot_pool(threads):
+    """The threads that run a batch's slots: one pool per thread count, for the process."""
+    with _POOL_LOCK:
+        if threads not in _POOL:
+            _POOL[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="crosscert-slot")
+        return _POOL[threads]
 
 
 def _entry_point(dispatcher, args):

@@ -393,24 +393,20 @@ def scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior
         _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
-def _make_driver(parallel: bool):
-    def run(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
-        T = S.w.shape[0]
-        B = q.shape[0]
-        for t in prange(T):
-            sc = thread_scratch(S, t)
-            for b in range(t, B, T):
-                scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior)
-
-    # numba names a cached function by its qualified name: without distinct
-    # names the serial driver would load the parallel one from the cache (and
-    # wake the thread pool at every call) or the reverse
-    run.__name__ = run.__qualname__ = "run_parallel" if parallel else "run_serial"
-    return njit(cache=True, parallel=parallel, **KERNEL_FLAGS)(run)
+@njit(cache=True, **KERNEL_FLAGS)
+def run_slot(prog, c, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, prior):
+    """Advance scenarios ``t, t + T, ...`` of the batch over the readings ``q``
+    ``(B, Kc, n)`` with scratch slot ``t`` (``t = 0, T = 1``: every scenario).
+    The one driver of batches: several threads call it at once, each with its
+    own slot (``verifier.step``), since it releases the GIL and the scenarios
+    of different slots share no array element."""
+    sc = thread_scratch(S, t)
+    for b in range(t, q.shape[0], T):
+        scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior)
 
 
 def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
-    """As :func:`run_serial`, the geometry hypotheses of each sample spread
+    """As :func:`run_slot` over every scenario, the geometry hypotheses of each sample spread
     over the threads (one scenario online: its latency, not throughput);
     thread slot ``t`` runs hypotheses ``t, t + T, ...`` with its scratch."""
     T = S.w.shape[0]
@@ -428,8 +424,4 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
-#: Every scenario in this thread (thread slots one after the other).
-run_serial = _make_driver(False)
-#: Scenarios spread over numba's threads, thread slot ``t`` running scenarios ``t, t + T, ...``.
-run_parallel = _make_driver(True)
 run_hypotheses_parallel = njit(cache=True, parallel=True, **KERNEL_FLAGS)(run_hypotheses_parallel)
