@@ -17,6 +17,8 @@ Run: ``python benchmarks/bench_window.py`` (about 10 minutes on 2 cores).
 S1. window reasoning per sample on the 1.0 m/s crossings of the 20 true
     geometries, split by outcome (undecided, decided by the window, decided by
     the forward pass), after a warm-up run;
+S1b. (since 2026-12-02) the same runs asked only ``mode-changed``
+    (``track_window(goal=...)``, what ``certify`` asks), verdicts compared;
 S2. where one undecided run spends its time: the kernel passes
     (``advance``), the forward-kinematics enumeration of the final boxes
     (``pose_solutions``) and the rest (tube bookkeeping in Python);
@@ -32,6 +34,7 @@ script measures an older checkout (run it with that checkout's interpreter).
 
 from __future__ import annotations
 
+import inspect
 import os
 import subprocess
 import sys
@@ -183,6 +186,21 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
                   f"max {1e3 * per.max():.3f}; mean {np.mean([r[2] for r in sel]):.3f} s per run", flush=True)
     print(f"  verdicts: {[r[4].verdict.value for r in rows]}")
     print(f"  {_load('')}", flush=True)
+    if "goal" in inspect.signature(track_window).parameters:  # since 2026-12-02: what certify asks
+        print("[S1b] the same runs asked only `mode-changed` (track_window(goal=...), as certify's search, "
+              "certificate run and Monte Carlo ask)", flush=True)
+        per = {}
+        for i, q in enumerate(runs):
+            t0 = time.perf_counter()
+            w = track_window(im, q, s, initial_mode=1, goal="mode-changed")
+            dt = time.perf_counter() - t0
+            same = w.verdict is rows[i][4].verdict
+            per.setdefault(rows[i][0], []).append(dt / len(q))
+            print(f"  geometry {i:2d}: {w.verdict.value:15s} {'same' if same else 'DIFFERS'}  {dt:7.3f} s  "
+                  f"{1e3 * dt / len(q):7.3f} ms/sample", flush=True)
+        for kind, v in per.items():
+            print(f"  {kind:9s} ({len(v):2d} runs): mean {1e3 * np.mean(v):.3f} ms/sample", flush=True)
+        print(f"  {_load('')}", flush=True)
     und = [i for i, r in enumerate(rows) if r[0] == "undecided"] or [0]
     q = runs[und[0]]
     print(f"[S2] where an undecided run spends its time (geometry {und[0]}, {len(q)} samples)", flush=True)
