@@ -326,6 +326,19 @@ def test_fixed_lag_modes_are_true(runs, settings):
     assert gained > 0
 
 
+def test_fixed_lag_answers_the_same_on_one_thread(runs, settings):
+    """The rows of a window call over the thread slots (``parallel``, the default) or on one thread: the same
+    answer at every sample."""
+    from crosscert.verifier.window import FixedLagWindow
+
+    sc = runs[N_RUNS + 1]
+    x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
+    a, b = (FixedLagWindow(interval_model(), settings, x0, lag=20, parallel=p) for p in (True, False))
+    assert a.cfg_b.parallel and not b.cfg_b.parallel
+    for q in sc.q_meas:
+        assert a.update(q) == b.update(q)
+
+
 def test_fixed_lag_runs_only_rows_that_can_change_the_answer(runs, settings, monkeypatch):
     """The fixed-lag window runs its (hypothesis, geometry) rows a pair at a time and stops once no row left
     can change the answer: the results must be those of running every row at once (on runs where the

@@ -536,9 +536,13 @@ class CompiledStep:
             tail = (int(st.k), q, record is not None, rec, prior is not None, pri)
             if len(slots) < 2:
                 a["run"](*head, *(slots[0] if slots else ()), *tail)
-            else:
-                for f in [_slot_pool(len(slots)).submit(a["run"], *head, t, n, *tail) for t, n in slots]:
-                    f.result()  # every slot finishes before the state is read; re-raises a slot's error
+            else:  # slot 0 on this thread, the others on the pool's
+                others = [_slot_pool(len(slots) - 1).submit(a["run"], *head, t, n, *tail) for t, n in slots[1:]]
+                try:
+                    a["run"](*head, *slots[0], *tail)
+                finally:
+                    for f in others:
+                        f.result()  # every slot finishes before the state is read; re-raises a slot's error
         st.k += q.shape[1]
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):

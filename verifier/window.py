@@ -702,10 +702,14 @@ class FixedLagWindow:
         Samples of look-ahead (>= 1).
     xi_box : (lo, hi), optional
     backend : {"compiled", "numpy"}
+    parallel : bool
+        Compiled backend: the rows of a window call over the thread slots (the
+        pair of each call, one per hypothesis, runs on two cores; the same
+        answers).
     """
 
     def __init__(self, model, settings: TrackerSettings, x0, *, lag: int, xi_box=None,
-                 backend: str | Backend = Backend.COMPILED):
+                 backend: str | Backend = Backend.COMPILED, parallel: bool = True):
         if isinstance(lag, bool) or int(lag) != lag or lag < 1:
             raise InputError(f"lag must be a positive number of samples, got {lag!r}")
         self.model, self.lag, self.backend = model, int(lag), str(Backend(backend))
@@ -716,7 +720,8 @@ class FixedLagWindow:
         lo, hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
         self.xi_rows = (np.ascontiguousarray(lo[0]), np.ascontiguousarray(hi[0]))
         # keep_xi: within a window the sub-box is contracted by each sample's loop closure in turn
-        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None, keep_xi=True), backend, parallel=False)
+        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None, keep_xi=True), backend,
+                               parallel=parallel)
         L, n = self.lag + 1, model.n
         # the last L samples newest first, the order of the backward pass: readings (rad), the tracker's
         # pose boxes (m) and its velocity boxes of the reversed motion ([-hi, -lo], m/s), its modes
