@@ -62,10 +62,11 @@ class Scratch(NamedTuple):
     row_qdd: np.ndarray
 
 
-@jit
 def workspace_size(n):
     """Floats of ``Scratch.w`` for dimension ``n``: at most ``13 n + 14 n^2``
-    (interval Newton, then the joint-acceleration bound's two solves), with room."""
+    (interval Newton, then the joint-acceleration bound's two solves), with room.
+    Plain Python: only the allocation calls it (compiled, every process paid a
+    compilation for it)."""
     return 16 * n + 16 * n * n + 64
 
 
