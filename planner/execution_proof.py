@@ -49,6 +49,9 @@ certificate"):
    ``max_boxes`` sub-boxes were evaluated (the bounds are proved either way;
    only their tightness differs).  The class takes the hull of the leaves'
    ``C`` and the largest ``e`` and ``d``: the leaves partition ``[xi]``.
+   The joints' searches run in lockstep, each round's sub-boxes of all of
+   them evaluated in one call (each distinct one once): the bounds are
+   those of the searches run one by one, bit for bit.
 
 Every operation is outward-rounded (:mod:`verifier.interval`); an empty
 enclosure contradicts step 2 and is reported as ``proved: false``
