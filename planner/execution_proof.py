@@ -475,7 +475,10 @@ def _branch_and_bound_joints(path: _Path, tol: float, max_boxes: int, joints) ->
     round evaluates the sub-boxes all searches asked for in one :meth:`_Path.evaluate` call, each
     distinct sub-box once (the first round's whole box is the same for every joint): the cost of an
     evaluation is mostly per call.  The bounds are those of the searches run one after the other,
-    bit for bit, because every row of an evaluation depends on its own sub-box only.
+    bit for bit, because every row of an evaluation depends on its own sub-box only.  (One exception,
+    never met on the benchmark plans: :meth:`_Path.newton` stops for the whole call at a singular
+    Jacobian, so another row may then get another float centre; what is proved stays proved, only the
+    bounds' tightness can differ.)
     """
     searches = [_JointSearch(path, tol, max_boxes, i) for i in joints]
     while True:
