@@ -3,6 +3,7 @@
 Prints numbers, asserts nothing.  Usage::
 
     python benchmarks/bench_certify.py [--repeat 2] [--method smoothstep] [--foreground] [--no-cold] [--json out.json]
+    python benchmarks/bench_certify.py --moved
 
 Each measurement runs in a fresh child process (this script with ``--child``):
 
@@ -17,6 +18,12 @@ Each measurement runs in a fresh child process (this script with ``--child``):
 (``refute_in_background=False``) instead of the background worker.  CPU time
 is that of the certifying process (all its threads) plus that of the worker
 process, which is waited for when the certificate is returned.
+
+``--moved`` instead times the call an optimisation script repeats
+(``certify_crossing(..., refute=False, monte_carlo_runs=0, bounce=False)``) in
+one process: the task, the same task again, then the task moved 2, 4 and 6 mm
+along y; once from scratch each time and once with ``v_guess`` = the previous
+call's ``v_min`` (issue 19's target: a new task in <= 2 s).
 
 ``--profile`` instead profiles one warm run with every search in the calling
 process (``refute_in_background=False``, so the worker's share is seen too)
@@ -140,6 +147,32 @@ def profile(method: str, cpu: bool = False, save: str | None = None) -> None:
         print(f"{label:<52}{int(calls):>7}{tot:>9.2f}{tot / wall:>8.0%}")
 
 
+def moved(guess: bool) -> list:
+    """The repeated call of an optimisation script, in this process: one dict per call (see ``--moved``)."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from crosscert.planner import PlanningBounds, benchmark_task, certify_crossing
+    from crosscert.robots import DEFAULT_ROBOT, KinematicModel, get_entry
+    from crosscert.verifier.model import IntervalModel
+
+    entry = get_entry(DEFAULT_ROBOT)
+    robot, task = entry.robot, benchmark_task(entry)
+    kin, imodel = KinematicModel(robot), IntervalModel(robot)
+    calls, previous = [], None
+    for mm in (0, 0, 2, 4, 6):
+        shift = np.array([0.0, 1e-3 * mm])
+        t = replace(task, start=task.start + shift, goal=task.goal + shift)
+        c0, t0 = time.process_time(), time.perf_counter()
+        cert = certify_crossing(robot, t, PlanningBounds(), kin=kin, imodel=imodel, refute=False, monte_carlo_runs=0,
+                                bounce=False, v_guess=previous if guess else None)
+        calls.append({"moved_mm": mm, "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+                      "v_min": cert.v_min, "questions": len(cert.trials)})
+        previous = cert.v_min
+    return calls
+
+
 def measure(args: argparse.Namespace, repeat: int, cache_dir: str | None) -> list | None:
     """Run the child process; ``cache_dir`` None = the numba cache of the source tree."""
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
@@ -164,8 +197,15 @@ def main(argv=None) -> int:
     p.add_argument("--profile", action="store_true", help="profile one warm run by part of the work instead")
     p.add_argument("--cpu", action="store_true", help="with --profile: CPU time instead of wall time")
     p.add_argument("--save", help="with --profile: write the raw cProfile statistics to this file")
+    p.add_argument("--moved", action="store_true", help="time the repeated call of an optimisation script instead")
+    p.add_argument("--guess", action="store_true", help=argparse.SUPPRESS)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
+    if a.moved and a.child:
+        print(json.dumps(moved(a.guess)))
+        return 0
+    if a.moved:
+        return _print_moved()
     if a.profile:
         profile(a.method, a.cpu, a.save)
         return 0
@@ -198,6 +238,25 @@ def main(argv=None) -> int:
           f"load average at the end {' / '.join(f'{v:.2f}' for v in os.getloadavg())})")
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+def _print_moved() -> int:
+    """``--moved``: both variants, each in a fresh child process, one after the other."""
+    print(f"machine: {os.cpu_count()} CPUs; load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())}",
+          flush=True)
+    print(f"{'call':<34}{'wall s':>8}{'CPU s':>8}{'questions':>11}{'v_min':>10}")
+    for guess in (False, True):
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--moved"] + (["--guess"] if guess else [])
+        out = subprocess.run(cmd, capture_output=True, text=True)
+        if out.returncode != 0:
+            print(f"!! child failed:\n{out.stderr}", flush=True)
+            return 1
+        for i, c in enumerate(json.loads(out.stdout.strip().splitlines()[-1])):
+            what = ("first call" if i == 0 else "same task" if i == 1 else f"task moved {c['moved_mm']} mm")
+            what += " (v_guess)" if guess and i > 0 else ""
+            print(f"{what:<34}{c['wall_s']:>8.2f}{c['cpu_s']:>8.2f}{c['questions']:>11}{c['v_min']:>10.4f}")
+    print(f"load average at the end {' / '.join(f'{v:.2f}' for v in os.getloadavg())}")
     return 0
 
 

@@ -49,6 +49,9 @@ certificate"):
    ``max_boxes`` sub-boxes were evaluated (the bounds are proved either way;
    only their tightness differs).  The class takes the hull of the leaves'
    ``C`` and the largest ``e`` and ``d``: the leaves partition ``[xi]``.
+   The joints' searches run in lockstep, each round's sub-boxes of all of
+   them evaluated in one call (each distinct one once): the bounds are
+   those of the searches run one by one, bit for bit.
 
 Every operation is outward-rounded (:mod:`verifier.interval`); an empty
 enclosure contradicts step 2 and is reported as ``proved: false``
@@ -442,8 +445,7 @@ def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, 
             if isinstance(path, str):
                 return ClassProof(False, path, time_s=time.perf_counter() - t0)
             # one branch and bound per joint: each splits only the parameters its own bounds need
-            for i in range(n):
-                res = _branch_and_bound(path, tol, max_boxes, i)
+            for i, res in enumerate(_branch_and_bound_joints(path, tol, max_boxes, range(n))):
                 if isinstance(res, str):
                     return ClassProof(False, res, time_s=time.perf_counter() - t0)
                 boxes += res["boxes"]
@@ -463,15 +465,76 @@ def prove_cartesian_class(robot, x_path, q_plan, xi_plan, *, tol: float = 0.05, 
 
 def _branch_and_bound(path: _Path, tol: float, max_boxes: int, i: int):
     """Step 4 on one path for joint ``i``: a dict of proved bounds, or the reason (str) why nothing is proved."""
-    p, n = len(path.free), path.n
-    blo, bhi = path.lo[path.free][None].copy(), path.hi[path.free][None].copy()
-    Uparent = (path.U0[0][None], path.U0[1][None])
-    L = None  # the leaves: boxes and proved bounds
-    best = {"drift": 0.0, "step": 0.0, "c_lo": np.inf, "c_hi": -np.inf, "drift_xi": None, "step_xi": None}
-    boxes, atol = 0, 1e-15
+    return _branch_and_bound_joints(path, tol, max_boxes, [i])[0]
 
-    def met(points, U=None, roots=None):
+
+def _branch_and_bound_joints(path: _Path, tol: float, max_boxes: int, joints) -> list:
+    """Step 4 for each joint of ``joints``, in lockstep: :func:`_branch_and_bound`'s results, in that order.
+
+    Each joint's search is its own (its sub-boxes, splits, budget and termination rule), but every
+    round evaluates the sub-boxes all searches asked for in one :meth:`_Path.evaluate` call, each
+    distinct sub-box once (the first round's whole box is the same for every joint): the cost of an
+    evaluation is mostly per call.  The bounds are those of the searches run one after the other,
+    bit for bit, because every row of an evaluation depends on its own sub-box only.  (One exception,
+    never met on the benchmark plans: :meth:`_Path.newton` stops for the whole call at a singular
+    Jacobian, so another row may then get another float centre; what is proved stays proved, only the
+    bounds' tightness can differ.)
+    """
+    searches = [_JointSearch(path, tol, max_boxes, i) for i in joints]
+    while True:
+        active = [s for s in searches if s.result is None]
+        if not active:
+            return [s.result for s in searches]
+        blo = np.concatenate([s.blo for s in active])
+        bhi = np.concatenate([s.bhi for s in active])
+        Ul = np.concatenate([s.Uparent[0] for s in active])
+        Uh = np.concatenate([s.Uparent[1] for s in active])
+        index: dict = {}  # a sub-box's bytes -> its row among the distinct ones
+        unique, where = [], np.empty(len(blo), dtype=np.int64)
+        for r in range(len(blo)):
+            key = b"".join(a[r].tobytes() for a in (blo, bhi, Ul, Uh))
+            if key not in index:
+                index[key] = len(unique)
+                unique.append(r)
+            where[r] = index[key]
+        ev = path.evaluate(blo[unique], bhi[unique], (Ul[unique], Uh[unique]))
+        at = 0
+        for s in active:
+            k = len(s.blo)
+            s.advance(_take(ev, where[at:at + k]))
+            at += k
+
+
+def _take(ev, idx):
+    """The rows ``idx`` of every array (also inside tuples) of an evaluation ``ev``."""
+    if ev is None:
+        return None
+    if isinstance(ev, dict):
+        return {k: _take(v, idx) for k, v in ev.items()}
+    if isinstance(ev, tuple):
+        return tuple(_take(v, idx) for v in ev)
+    return ev[idx]
+
+
+class _JointSearch:
+    """Step 4 on one path for joint ``i``, one round per :meth:`advance` (:func:`_branch_and_bound_joints`).
+
+    ``blo, bhi, Uparent``: the sub-boxes to evaluate next and their parents' root boxes; ``result``
+    (None while running): a dict of proved bounds, or the reason (str) why nothing is proved.
+    """
+
+    def __init__(self, path: _Path, tol: float, max_boxes: int, i: int):
+        self.path, self.tol, self.max_boxes, self.i = path, tol, max_boxes, i
+        self.blo, self.bhi = path.lo[path.free][None].copy(), path.hi[path.free][None].copy()
+        self.Uparent = (path.U0[0][None], path.U0[1][None])
+        self.L = None  # the leaves: boxes and proved bounds
+        self.best = {"drift": 0.0, "step": 0.0, "c_lo": np.inf, "c_hi": -np.inf, "drift_xi": None, "step_xi": None}
+        self.boxes = 0
+        self.result = None
+
+    def _met(self, points, U=None, roots=None):
         """Update the largest values met with the geometries ``points`` (N, p) (float ``roots``, or by Newton in ``U``)."""
+        path, best, i = self.path, self.best, self.i
         full = path.full(points)
         e, d, c = (v[:, i] for v in path.values(path.newton(full, U) if roots is None else roots))
         a, b = int(np.argmax(e)), int(np.argmax(d))
@@ -482,32 +545,39 @@ def _branch_and_bound(path: _Path, tol: float, max_boxes: int, i: int):
         best["c_lo"] = min(best["c_lo"], float(c.min()))
         best["c_hi"] = max(best["c_hi"], float(c.max()))
 
-    while True:
-        ev = path.evaluate(blo, bhi, Uparent)
-        boxes += len(blo)
+    def advance(self, ev) -> None:
+        """Take the evaluation ``ev`` of the pending sub-boxes; set the next ones, or the result."""
+        path, tol, i, best = self.path, self.tol, self.i, self.best
+        p, n = len(path.free), path.n
+        blo, bhi = self.blo, self.bhi
+        atol = 1e-15
+        self.boxes += len(blo)
         if ev["bad"].any():
-            return ("inconsistent: an enclosure of the inverse kinematics became empty or unbounded on a sub-box "
-                    "of [xi], which contradicts its proved existence")
+            self.result = ("inconsistent: an enclosure of the inverse kinematics became empty or unbounded on a "
+                           "sub-box of [xi], which contradicts its proved existence")
+            return
         Ub = ev["U"]
-        met(ev["ctr"], roots=I.midpoint(*ev["Uc"]))
+        self._met(ev["ctr"], roots=I.midpoint(*ev["Uc"]))
         if p:
             pts, own = path.candidates(blo, bhi, ev, i)
-            met(pts, (Ub[0][own].reshape(-1, n), Ub[1][own].reshape(-1, n)))
+            self._met(pts, (Ub[0][own].reshape(-1, n), Ub[1][own].reshape(-1, n)))
         new = dict(lo=blo, hi=bhi, e=ev["e"][:, i], d=ev["d"][:, i], c_lo=ev["c_lo"][:, i], c_hi=ev["c_hi"][:, i],
                    U=Ub, score_e=ev["score_e"][:, i], score_d=ev["score_d"][:, i])
-        L = new if L is None else {k: _cat(L[k], new[k]) for k in L}
+        L = new if self.L is None else {k: _cat(self.L[k], new[k]) for k in self.L}
         # the exact termination rule: a leaf is settled when its bounds are within tol of what was met
         wc = best["c_hi"] - best["c_lo"]
         settled = ((L["e"] <= (1.0 + tol) * best["drift"] + atol) & (L["d"] <= (1.0 + tol) * best["step"] + atol)
                    & (L["c_lo"] >= best["c_lo"] - tol * wc - atol) & (L["c_hi"] <= best["c_hi"] + tol * wc + atol))
         open_ = np.nonzero(~settled)[0]
-        if open_.size == 0 or p == 0 or boxes + 2 > max_boxes:
-            break
+        if open_.size == 0 or p == 0 or self.boxes + 2 > self.max_boxes:
+            self.L = L
+            self.result = self._finish(open_.size == 0)
+            return
         # split the worst leaves first (best-first search, a few per round), along the parameter
         # whose remainder exceeds the linear part most, for the bound that is furthest off
         re, rd = L["e"] / max(best["drift"], atol), L["d"] / max(best["step"], atol)
         excess = np.maximum(re, rd)[open_]
-        take = open_[np.argsort(-excess, kind="stable")][: max(1, min(_SPLITS, (max_boxes - boxes) // 2))]
+        take = open_[np.argsort(-excess, kind="stable")][: max(1, min(_SPLITS, (self.max_boxes - self.boxes) // 2))]
         keep = np.setdiff1d(np.arange(len(L["e"])), take)
         sl, sh = L["lo"][take], L["hi"][take]
         by_d = (rd > re)[take]
@@ -517,14 +587,17 @@ def _branch_and_bound(path: _Path, tol: float, max_boxes: int, i: int):
         left_hi, right_lo = sh.copy(), sl.copy()
         left_hi[rows, axis] = mid
         right_lo[rows, axis] = mid
-        blo, bhi = np.concatenate([sl, right_lo]), np.concatenate([left_hi, sh])
-        Uparent = (np.concatenate([L["U"][0][take]] * 2), np.concatenate([L["U"][1][take]] * 2))
-        L = {k: (v[0][keep], v[1][keep]) if k == "U" else v[keep] for k, v in L.items()}
-    if not all(np.all(np.isfinite(L[k])) for k in ("e", "d", "c_lo", "c_hi")):
-        # a NaN would vanish in max() below: no bound is claimed from a leaf that is not finite
-        return "a bound over a sub-box of [xi] is not finite (the enclosures diverged): not proved"
-    return {"e": float(L["e"].max()), "d": float(L["d"].max()), "c_lo": float(L["c_lo"].min()),
-            "c_hi": float(L["c_hi"].max()), "boxes": boxes, "converged": bool(open_.size == 0), "found": best}
+        self.blo, self.bhi = np.concatenate([sl, right_lo]), np.concatenate([left_hi, sh])
+        self.Uparent = (np.concatenate([L["U"][0][take]] * 2), np.concatenate([L["U"][1][take]] * 2))
+        self.L = {k: (v[0][keep], v[1][keep]) if k == "U" else v[keep] for k, v in L.items()}
+
+    def _finish(self, converged: bool):
+        L = self.L
+        if not all(np.all(np.isfinite(L[k])) for k in ("e", "d", "c_lo", "c_hi")):
+            # a NaN would vanish in max() below: no bound is claimed from a leaf that is not finite
+            return "a bound over a sub-box of [xi] is not finite (the enclosures diverged): not proved"
+        return {"e": float(L["e"].max()), "d": float(L["d"].max()), "c_lo": float(L["c_lo"].min()),
+                "c_hi": float(L["c_hi"].max()), "boxes": self.boxes, "converged": converged, "found": self.best}
 
 
 def _cat(a, b):

@@ -160,3 +160,42 @@ def test_cli_certify_bad_input(tmp_path, capsys):
     assert main(["plan", "--v-sing", "9", "-o", str(tmp_path / "p.csv")]) == 2
     assert "no feasible crossing" in capsys.readouterr().err
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_search_from_the_previous_tasks_v_min_on_a_moved_task(task, kin, imodel):
+    """The optimisation-script case (issue 19): the benchmark task moved 2 mm, searched from the
+    catalogue's v_min of the unmoved task: two questions, a certified speed within tol of the
+    catalogue's, a failed one within tol below it."""
+    from dataclasses import replace
+
+    from crosscert.planner.certify.plan import search_v_min
+
+    moved = replace(task, start=task.start + np.array([0.0, 2e-3]), goal=task.goal + np.array([0.0, 2e-3]))
+    expected = BENCHMARK.expected
+    r = search_v_min(kin, imodel, moved, PlanningBounds(), 0.6, speed_ceiling(kin, moved, PlanningBounds()),
+                     tol=0.01, parallel=False, v_guess=expected.v_min)
+    assert len(r.trials) <= 3
+    check_certified_speed(r.v_min, expected, tol=2 * expected.v_min_tol)
+    assert r.runs[r.v_min].verdict is Verdict.MODE_CHANGED
+    failed = [t.v_sing for t in r.trials if t.verdict is not Verdict.MODE_CHANGED]
+    assert failed and 0 < r.v_min - max(failed) <= 0.01
+
+
+def test_certify_crossing_passes_its_guess_to_the_speed_search(task, kin, imodel, monkeypatch):
+    """``certify_crossing(v_guess=...)`` reaches the search; a bad guess is refused before any work."""
+    import crosscert.planner.certify.crossing as crossing_mod
+    from crosscert.planner.certify.plan import SpeedSearch, SpeedTrial
+
+    seen = []
+
+    def spy(kin, imodel, task, b, v_low, v_high, **kw):
+        seen.append(kw["v_guess"])
+        return SpeedSearch(None, (SpeedTrial(v_high, Verdict.UNKNOWN, 0.0, 0.0, None, Verdict.UNKNOWN),), {})
+
+    monkeypatch.setattr(crossing_mod, "search_v_min", spy)
+    cert = certify_crossing(DEXTAR, task, kin=kin, imodel=imodel, refute=False, monte_carlo_runs=0, bounce=False,
+                            v_guess=0.97)
+    assert seen == [0.97] and cert.v_min is None
+    with pytest.raises(InputError, match="v_guess"):
+        certify_crossing(DEXTAR, task, kin=kin, imodel=imodel, refute=False, monte_carlo_runs=0, v_guess=0.0)
+    assert seen == [0.97]

@@ -154,3 +154,57 @@ def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(mo
         v, warm = calls[i]
         fastest = max(u for u, _w in calls[:i] if u <= 0.84)  # the fastest refuted speed searched before
         assert warm == f"ce@{fastest}", (v, warm)
+
+
+@pytest.mark.parametrize("threshold", [0.61, 0.8438, 0.9987, 1.5, 1.95])
+@pytest.mark.parametrize("guess", [0.3, 0.6, 0.95, 0.9987, 1.0, 1.3, 1.96, 2.5])
+def test_search_from_a_guess_brackets_a_monotone_threshold_within_tol(monkeypatch, threshold, guess):
+    """From any guess (inside, outside or at the ends of the bracket) the search finds the threshold
+    within tol, with every failed speed below v_min and one of them within tol of it."""
+    asked = _answers(monkeypatch, lambda v: v >= threshold)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=guess)
+    assert r.v_min is not None and threshold <= r.v_min <= threshold + 0.01
+    by_v = {t.v_sing: t.verdict for t in r.trials}
+    assert all((v is Verdict.MODE_CHANGED) == (s >= r.v_min) for s, v in by_v.items())
+    below = [s for s in by_v if s < r.v_min]
+    assert below and r.v_min - max(below) <= 0.01
+    assert asked[0] == round(min(max(guess, 0.6), 1.96), 6) and len(asked) == len(set(asked))
+    # doubling away from the guess, then bisection: about 2 log2(distance / tol) questions
+    far = max(abs(threshold - min(max(guess, 0.6), 1.96)), 0.01)
+    assert len(asked) <= 2 * math.ceil(math.log2(far / 0.01)) + 3
+
+
+def test_a_guess_within_tol_asks_two_speeds(monkeypatch):
+    """The repeated-task case: last task's v_min as the guess, the answer moved by less than tol."""
+    asked = _answers(monkeypatch, lambda v: v >= 0.9680)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=0.9690)
+    # one step down is on the 1e-6 m/s grid, no farther than tol in floating point
+    assert r.v_min == 0.969 and asked == [0.969, 0.959001]
+    asked.clear()
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=0.9670)
+    assert r.v_min == 0.976999 and asked == [0.967, 0.976999]
+
+
+def test_search_from_a_guess_at_the_ends(monkeypatch):
+    """Everything certifies: v_low itself; nothing certifies: no v_min, v_high asked and failed."""
+    asked = _answers(monkeypatch, lambda v: True)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=1.0)
+    assert r.v_min == 0.6 and asked[-1] == 0.6
+    asked = _answers(monkeypatch, lambda v: False)
+    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=1.0)
+    assert r.v_min is None and asked[-1] == 1.96 and all(v < 1.96 for v in asked[:-1])
+
+
+def test_non_monotone_answers_from_a_guess_keep_the_guarantee(monkeypatch):
+    _answers(monkeypatch, lambda v: v >= 1.2 or 0.9 < v < 1.0)
+    for guess in (0.7, 0.95, 1.1, 1.5):
+        r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=guess)
+        by_v = {t.v_sing: t.verdict for t in r.trials}
+        assert by_v[r.v_min] is Verdict.MODE_CHANGED
+        assert all(v is Verdict.MODE_CHANGED for s, v in by_v.items() if s >= r.v_min)
+
+
+def test_bad_guess_is_refused(monkeypatch):
+    _answers(monkeypatch, lambda v: True)
+    with pytest.raises(InputError, match="v_guess"):
+        search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, v_guess=-1.0)

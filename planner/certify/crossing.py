@@ -194,11 +194,13 @@ def package_versions() -> dict:
 
 @dataclass(frozen=True)
 class SpeedBracket:
-    """The speeds a certification searches: ``v_min`` in ``[v_low, v_high]`` m/s, to ``tol`` m/s."""
+    """The speeds a certification searches: ``v_min`` in ``[v_low, v_high]`` m/s, to ``tol`` m/s, found
+    around ``v_guess`` m/s when given (:func:`~planner.certify.plan.search_v_min`)."""
 
     v_low: float
     v_high: float
     tol: float
+    v_guess: float | None = None
 
 
 @dataclass(frozen=True)
@@ -229,7 +231,7 @@ class _Job:
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=V_LOW, v_high=None,
                      tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
                      executor: Executor | None = None, seed=0, progress=None, kin=None,
-                     imodel=None, bounce: bool = True) -> CrossingCertificate:
+                     imodel=None, bounce: bool = True, v_guess=None) -> CrossingCertificate:
     """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
 
     The steps: the speed search (:func:`~planner.certify.plan.search_v_min`), whose run at ``v_min``
@@ -244,6 +246,12 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     v_low, v_high, tol : float
         Speed bracket and resolution of ``v_min``, m/s (:class:`SpeedBracket`); ``v_high`` defaults
         to (and is capped at) :func:`speed_ceiling`: the fastest crossing the time law allows.
+    v_guess : float, optional
+        A speed near the expected ``v_min``, m/s (an optimisation script passes the previous
+        certificate's ``v_min`` on a nearby task): the speed search brackets ``v_min`` around it
+        instead of bisecting ``[v_low, v_high]`` (:func:`~planner.certify.plan.search_v_min`), 2-3
+        questions instead of about 9 when it is within ``tol``.  Same guarantee; when certification
+        is not monotone in the speed the result may differ from the search without it.
     monte_carlo_runs : int
         Executions simulated at ``v_min`` (0 to skip).
     refute, refute_speeds, refute_in_background, executor, bounce
@@ -262,7 +270,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     """
     t0 = time.perf_counter()
     opts = RefuteOptions(refute, refute_speeds, refute_in_background, executor, bounce)
-    job = _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, threads=not (refute and refute_in_background))
+    job = _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, threads=not (refute and refute_in_background),
+                   v_guess=v_guess)
     refuter, starts = _start_refuter(job, opts, seed)
     clock = _Clock({"setup": time.perf_counter() - t0})
     try:
@@ -309,7 +318,7 @@ class _Clock:
         return time.perf_counter()
 
 
-def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: bool) -> _Job:
+def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: bool, v_guess=None) -> _Job:
     """The models, the bounds bound to the robot, the start's mode and the checked speed bracket."""
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
@@ -325,7 +334,8 @@ def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: b
     # numba's threads for the tracking, unless the counterexample worker runs beside it: it holds the
     # other core, the serial kernels are as fast then (benchmarks/README.md), and the first run after
     # an install does not compile the threaded ones
-    return _Job(robot, task, b, kin, imodel, m0, SpeedBracket(v_low, v_high, tol), threads)
+    guess = None if v_guess is None else V.positive("v_guess", v_guess)
+    return _Job(robot, task, b, kin, imodel, m0, SpeedBracket(v_low, v_high, tol, guess), threads)
 
 
 def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
@@ -349,8 +359,10 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
 def _search(job: _Job, refuter, progress):
     """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above)."""
     br = job.bracket
-    # the bisection asks v_high, then halves the bracket down to tol, then maybe v_low itself
-    enter(progress, Phase.SEARCH, 2 + max(0, math.ceil(math.log2((br.v_high - br.v_low) / br.tol))), unit="speed")
+    # the bisection asks v_high, then halves the bracket down to tol, then maybe v_low itself; from a
+    # guess, typically the guess and one speed tol away (the bar's size is an estimate)
+    size = 3 if br.v_guess is not None else 2 + max(0, math.ceil(math.log2((br.v_high - br.v_low) / br.tol)))
+    enter(progress, Phase.SEARCH, size, unit="speed")
 
     def observe(t):
         if refuter is not None and t.verdict is Verdict.MODE_CHANGED:
@@ -359,7 +371,7 @@ def _search(job: _Job, refuter, progress):
             progress(1)
 
     return search_v_min(job.kin, job.imodel, job.task, job.b, br.v_low, br.v_high, tol=br.tol,
-                        observe=observe, parallel=job.threads)
+                        observe=observe, parallel=job.threads, v_guess=br.v_guess)
 
 
 def _refute_below(refuter, top, tol, in_background: bool):
