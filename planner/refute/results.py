@@ -8,12 +8,13 @@ outcome means that none exists.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .problem import Counterexample, CounterexampleKind, SearchOutcome, ipopt_outcome
+from .problem import ACCEL_MARGIN, Counterexample, CounterexampleKind, SearchOutcome, ipopt_outcome
 
 __all__ = ["BounceSearch", "CrossingFloor", "RecordingRefutation", "RefutationBound", "SpeedRefutation", "Verification",
            "deciding_attempt"]
@@ -71,7 +72,8 @@ class BounceSearch:
     Attributes
     ----------
     found : bool
-        IPOPT converged (its status maps to :attr:`SearchOutcome.CONVERGED`).
+        IPOPT converged (its status maps to :attr:`SearchOutcome.CONVERGED`) to a
+        motion within ``a_max`` (``accel_needed <= 1``): a candidate.
     verified : bool
         ``found`` and the independent check (:func:`~planner.refute.verify_bounce`
         or :func:`~planner.refute.verify_crossing`) accepted the candidate: a counterexample.
@@ -90,9 +92,17 @@ class BounceSearch:
         Its check (``None`` unless ``found``).
     kind : CounterexampleKind
         The kind of counterexample searched (default: a bounce).
+    accel_needed : float
+        The acceleration scale IPOPT converged to: ``max |u_k,i| / a_max_i`` of the
+        motion that explains the readings with the least acceleration it found
+        (a local minimum of a non-convex problem; ``nan`` unless IPOPT converged).
+        Above 1 there is no candidate: this start found no counterexample, and the
+        figure says by how much ``a_max`` it falls short, not that none exists.
     outcome : SearchOutcome
-        Derived from ``status`` and ``verification``: FOUND or REJECTED once a
-        converged candidate has been checked, else :func:`ipopt_outcome` of the status.
+        Derived from ``status``, ``accel_needed`` and ``verification``: FOUND or
+        REJECTED once a converged candidate has been checked, INFEASIBLE when
+        IPOPT converged to a motion needing more than ``a_max``, else
+        :func:`ipopt_outcome` of the status.
     """
 
     found: bool
@@ -106,12 +116,16 @@ class BounceSearch:
     counterexample: Counterexample | None = field(default=None, repr=False)
     verification: Verification | None = None
     kind: CounterexampleKind = CounterexampleKind.BOUNCE
+    accel_needed: float = math.nan
     outcome: SearchOutcome = field(init=False)
 
     def __post_init__(self) -> None:
         out = ipopt_outcome(self.status)
-        if out is SearchOutcome.CONVERGED and self.verification is not None:
-            out = SearchOutcome.FOUND if self.verified else SearchOutcome.REJECTED
+        if out is SearchOutcome.CONVERGED:
+            if self.verification is not None:
+                out = SearchOutcome.FOUND if self.verified else SearchOutcome.REJECTED
+            elif self.accel_needed > 1 - ACCEL_MARGIN:  # a local minimum of the excess over a_max
+                out = SearchOutcome.INFEASIBLE
         object.__setattr__(self, "outcome", out)
 
 
@@ -124,6 +138,12 @@ def deciding_attempt(attempts: Sequence[BounceSearch]) -> BounceSearch | None:
     if converged:
         return converged[-1]
     return attempts[-1] if attempts else None
+
+
+def least_accel_needed(attempts: Sequence[BounceSearch]) -> float:
+    """The smallest :attr:`BounceSearch.accel_needed` of the attempts (``nan`` if none converged)."""
+    vals = [a.accel_needed for a in attempts if not math.isnan(a.accel_needed)]
+    return min(vals) if vals else math.nan
 
 
 def row_outcome(verified: bool, attempts) -> SearchOutcome:
@@ -177,6 +197,15 @@ class SpeedRefutation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "outcome", row_outcome(self.verified, self.attempts))
+
+    @property
+    def accel_needed(self) -> float:
+        """The least acceleration scale (``max |u| / a_max``) any attempt converged to; ``nan`` if none did.
+
+        Below 1 at a refuted speed; above 1, how far ``a_max`` falls short of the
+        best motion this search found (a local optimum: no proof that none fits).
+        """
+        return least_accel_needed(self.attempts)
 
 
 @dataclass(frozen=True)
@@ -252,6 +281,15 @@ class RecordingRefutation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "outcome", row_outcome(self.verified, self.attempts))
+
+    @property
+    def accel_needed(self) -> float:
+        """The least acceleration scale (``max |u| / a_max``) any attempt converged to; ``nan`` if none did.
+
+        Below 1 at a refuted speed; above 1, how far ``a_max`` falls short of the
+        best motion this search found (a local optimum: no proof that none fits).
+        """
+        return least_accel_needed(self.attempts)
 
 
 @dataclass(frozen=True)
