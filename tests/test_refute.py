@@ -256,3 +256,56 @@ def test_warm_start_from_a_neighbouring_speed_is_verified_like_any_other(slow_ca
     assert again.found and not again.verified and again.outcome is SearchOutcome.REJECTED
     with pytest.raises(InputError, match="warm"):
         search_counterexample(kin, rb, "bounce", warm=warm, xi_start=DEXTAR.xi_center)
+
+
+def test_accel_needed_is_the_counterexamples_own_acceleration(slow_case, bound):
+    """The NLP minimises the acceleration scale: at a refuted speed it is the candidate's max |u| / a_max
+    (below 1); a row reports the least over its attempts."""
+    _kin, _rb, res = slow_case
+    assert 0 < res.accel_needed < 1
+    assert res.accel_needed == pytest.approx(res.verification.accel_ratio, abs=1e-8)
+    row = next(r for r in bound.rows if r.speed == SLOW)
+    assert row.accel_needed == min(a.accel_needed for a in row.attempts)
+    stopped = BounceSearch(False, False, "Maximum_CpuTime_Exceeded", 10, 1.0, 1, 1, res.xi_start)
+    assert np.isnan(stopped.accel_needed)
+    over = BounceSearch(False, False, "Solve_Succeeded", 10, 1.0, 1, 1, res.xi_start, accel_needed=1.2)
+    assert over.outcome is SearchOutcome.INFEASIBLE
+
+
+# The default task of `crosscert certify` (its plan at each speed, with that plan's a_max), searched as
+# certify searches it; docs/planning.md, "What limits the refutation bound": verified bounces up to
+# 0.848 m/s, every start converging to 1.0001 a_max at 0.849 m/s and 1.0009 at 0.85 m/s.
+NEW_BOUND, ABOVE = 0.848, 0.85  # m/s
+
+
+@pytest.fixture(scope="module")
+def benchmark_rows():
+    from crosscert.planner.certify.crossing import refute_speed
+    from crosscert.planner.simulate import random_geometry
+    from crosscert.planner.task import PlanningBounds, crossing_on_segment
+
+    from problems import PLANNING
+
+    kin, task = kinematics(), PLANNING["dextar_benchmark"].task()
+    b = PlanningBounds().for_robot(DEXTAR)
+    m0 = crossing_on_segment(kin, task, DEXTAR.xi_center).m0
+    starts = [DEXTAR.xi_center, random_geometry(DEXTAR, np.random.default_rng(0), corners=True)]  # certify's, seed 0
+    return {v: refute_speed(DEXTAR, task, b, m0, starts, v, kin=kin) for v in (NEW_BOUND, ABOVE)}
+
+
+def test_the_benchmark_task_is_refuted_at_0_848_m_s(benchmark_rows):
+    """Above today's bound of 0.84375 m/s: a verified bounce, which the trusted check accepts again."""
+    row = benchmark_rows[NEW_BOUND]
+    assert row.verified and row.outcome is SearchOutcome.FOUND and row.accel_needed < 1
+    att = next(a for a in row.attempts if a.verified)
+    ce = att.counterexample
+    assert ce.q.shape[0] == row.n_samples and DEXTAR.xi_in_box(ce.xi)
+    assert att.verification.ok and att.verification.accel_ratio <= 1 and att.verification.joint_ratio <= 1
+
+
+def test_the_benchmark_task_needs_more_than_a_max_at_0_85_m_s(benchmark_rows):
+    """No start gives a candidate; each converges to a motion needing slightly more than a_max."""
+    row = benchmark_rows[ABOVE]
+    assert not row.verified and row.outcome is SearchOutcome.INFEASIBLE
+    assert all(a.counterexample is None and a.outcome is SearchOutcome.INFEASIBLE for a in row.attempts)
+    assert all(1.0 < a.accel_needed < 1.01 for a in row.attempts)
