@@ -1,9 +1,10 @@
 """Tests of the refutation bound (planner.refute) on the DexTAR benchmark crossing.
 
 Measured (seed 0, floor quantisation, box-centre geometry): verified bounces
-exist for every crossing from 0.3 to 0.93 m/s, IPOPT reports infeasibility
-from 0.94 m/s up; the tests assert only the robust ends of that (0.6 found,
-1.458 not found) and that verification rejects tampered candidates.
+exist for every crossing from 0.3 to 0.93 m/s (0.9988 a_max needed at 0.93),
+none from 0.94 m/s up (1.015 a_max needed at 0.94, 1.045 at 0.95); the tests
+assert only the robust ends of that (0.6 found, 1.458 not found) and that
+verification rejects tampered candidates.
 """
 
 from __future__ import annotations
