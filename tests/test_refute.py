@@ -260,8 +260,8 @@ def test_warm_start_from_a_neighbouring_speed_is_verified_like_any_other(slow_ca
 
 
 def test_accel_needed_is_the_counterexamples_own_acceleration(slow_case, bound):
-    """The NLP minimises the acceleration scale: at a refuted speed it is the candidate's max |u| / a_max
-    (below 1); a row reports the least over its attempts."""
+    """At a refuted speed accel_needed is the candidate's own max |u| / a_max (below 1); a row reports the
+    least over its attempts; a converged attempt above 1 is locally infeasible."""
     _kin, _rb, res = slow_case
     assert 0 < res.accel_needed < 1
     assert res.accel_needed == pytest.approx(res.verification.accel_ratio, abs=1e-8)

@@ -59,7 +59,8 @@ IPOPT_TOL = 1e-9
 #: rows (eps_q- and full-acceleration units): far inside the margins above.
 IPOPT_CONSTR_VIOL_TOL = 1e-10
 #: Weight of the mean squared acceleration (in units of a_max) beside the acceleration scale in the
-#: objective: small enough not to move the scale's optimum beyond IPOPT's tolerance on the benchmark.
+#: objective: small enough not to move the scale's optimum above a_max beyond IPOPT's tolerance
+#: on the benchmark.
 SMOOTHNESS_WEIGHT = 1e-4
 #: Sample counts of the counterexample NLPs are rounded up to a multiple of this (see _build_and_solve).
 SAMPLE_BUCKET = 32
@@ -243,7 +244,7 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     p = ca.vertcat(ca.vec(qm), eps, amax, ts, xc, xh, fs, m0)
 
     # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq, and the
-    # acceleration scale al >= |w| (the objective).
+    # acceleration scale al >= |w| (the objective; its floor, a variable bound, is the NLP's a_max).
     s = ca.SX.sym("s", m)
     Xs = ca.SX.sym("x", n, K)
     Vs = ca.SX.sym("v", n, K)
@@ -268,13 +269,14 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
         mode_rows = ca.vec(M)
     else:
         mode_rows = ca.vertcat(M[0], -M[K - 1])
-    # |w| <= al as rows, al free above: every motion through the joint intervals is feasible, so IPOPT
-    # ends at a local minimum of the acceleration it needs instead of wandering in its restoration
-    # phase when a_max is too small; a candidate is kept only if al <= 1 (see _build_and_solve).
+    # |w| <= al as rows, al free above: every motion through the joint intervals is feasible, so where
+    # a_max is too small IPOPT ends at a local minimum of the acceleration the readings need instead
+    # of wandering in its restoration phase; a candidate is kept only at al's floor (_build_and_solve).
     scale = ca.vertcat(al - ca.vec(Ws), al + ca.vec(Ws))
     g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), mode_rows, scale)
     z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds), al)
-    # The smallest acceleration scale; the small smoothness term picks a regular point among equals.
+    # The smallest acceleration scale; the small smoothness term picks a regular point among equals
+    # (all of them at the floor: then this is the feasibility problem with |w| <= floor).
     obj = al + SMOOTHNESS_WEIGHT * ca.sumsqr(Ws) / (n * (K - 1))
     solver = ParametricSolver(kind.value, z, p, obj, g, ipopt=ipopt)
     _SOLVERS[key] = solver
@@ -311,9 +313,10 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
                      max_iter: int, max_cpu_time: float, print_level: int, warm: Counterexample | None = None):
     """Solve the NLP of ``kind`` from ``xi_start``.
 
-    Returns ``(candidate or None, status, iterations, time, nv, ng, scale)``: ``scale`` is the
-    acceleration scale IPOPT ended at (``max |u| / a_max`` of its motion; ``nan`` unless it
-    converged); the candidate is kept only when it converged with ``scale <= 1 - ACCEL_MARGIN``.
+    Returns ``(candidate or None, status, iterations, time, nv, ng, scale)``: ``scale`` is
+    ``max |u| / a_max`` of the motion IPOPT converged to (``nan`` unless it converged): the
+    candidate's when the scale stayed at its floor ``1 - ACCEL_MARGIN`` (the candidate is kept
+    only then), else the local minimum above it.
     """
     K0, n, m = rb.n_samples, kin.n, kin.m
     ts, eps, amax = rb.t_s, rb.eps_q, rb.a_max
@@ -366,15 +369,19 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
         vb[:, 0] = np.minimum(vb[:, 0], (1 - ACCEL_MARGIN) * rb.v0_max)
     sb = np.full(m, 1 - XI_MARGIN)
     db = np.full((n, K), 1 - JOINT_MARGIN)
-    free_w = np.full(n * (K - 1), np.inf)  # |w| is bounded by the scale's rows, the scale by nothing
+    free_w = np.full(n * (K - 1), np.inf)  # |w| is bounded by the scale's rows
 
-    lbx = np.concatenate([-sb, vecF(x_lo), vecF(-vb), -free_w, vecF(-db), [0.0]])
+    # The scale's floor is the NLP's own acceleration bound: below it every motion is as good, so a
+    # bounded problem is solved as the feasibility problem it is (as fast), and only an excess over
+    # a_max is minimised.
+    floor = 1 - ACCEL_MARGIN
+    lbx = np.concatenate([-sb, vecF(x_lo), vecF(-vb), -free_w, vecF(-db), [floor]])
     ubx = np.concatenate([sb, vecF(x_hi), vecF(vb), free_w, vecF(db), [np.inf]])
     s0 = np.divide(xi_start - xc, xh, out=np.zeros(m), where=xh > 0)
     X0c = np.clip(X0.T, x_lo, x_hi)
     W0 = U0.T / amax[:, None]
     z0 = np.concatenate([np.clip(s0, -sb, sb), vecF(X0c), vecF(np.clip(V0.T, -vb, vb)),
-                         vecF(W0), vecF(np.clip(Dq0.T, -db, db)), [float(np.max(np.abs(W0)))]])
+                         vecF(W0), vecF(np.clip(Dq0.T, -db, db)), [max(float(np.max(np.abs(W0))), floor)]])
     run = solver.solve(p=p, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
     iters = int(stats.get("iter_count", -1))
@@ -383,14 +390,13 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
         return None, status, iters, elapsed, nv, ng, np.nan
     zs = np.asarray(sol["x"], dtype=float).reshape(-1)
     s_v, xv, vv, wv, dv, al = np.split(zs, np.cumsum([m, n * K, n * K, n * (K - 1), n * K]))
-    needed = float(al[0])
-    if not needed <= 1 - ACCEL_MARGIN:  # the motion IPOPT found needs more than a_max: no candidate
-        return None, status, iters, elapsed, nv, ng, needed
+    if not al[0] <= 1 - 0.5 * ACCEL_MARGIN:  # at its floor, up to IPOPT's tolerance, or a_max is exceeded
+        return None, status, iters, elapsed, nv, ng, float(al[0])
     Xv, Vv, Dv = (a.reshape((n, K), order="F").T[:K0] for a in (xv, vv, dv))
     Wv = wv.reshape((n, K - 1), order="F").T[:K0 - 1]
     ce = Counterexample(xi=xc + xh * s_v, x=Xv, v=Vv, u=amax[None, :] * Wv,
                         q=qm[:K0] + eps[None, :] * Dv, t_s=ts, m0=rb.m0, kind=kind)
-    return ce, status, iters, elapsed, nv, ng, needed
+    return ce, status, iters, elapsed, nv, ng, float(np.max(np.abs(Wv)))
 
 
 def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *, xi_start=None,

@@ -93,11 +93,12 @@ class BounceSearch:
     kind : CounterexampleKind
         The kind of counterexample searched (default: a bounce).
     accel_needed : float
-        The acceleration scale IPOPT converged to: ``max |u_k,i| / a_max_i`` of the
-        motion that explains the readings with the least acceleration it found
-        (a local minimum of a non-convex problem; ``nan`` unless IPOPT converged).
-        Above 1 there is no candidate: this start found no counterexample, and the
-        figure says by how much ``a_max`` it falls short, not that none exists.
+        ``max |u_k,i| / a_max_i`` of the motion IPOPT converged to (``nan``
+        unless it converged).  At most 1: the candidate's own peak (IPOPT
+        stops at the first motion within ``a_max``, the least is not sought).
+        Above 1: no candidate; a local minimum of the acceleration a motion
+        explaining the readings needs, i.e. by how much ``a_max`` falls short
+        from this start (no proof that no counterexample exists).
     outcome : SearchOutcome
         Derived from ``status``, ``accel_needed`` and ``verification``: FOUND or
         REJECTED once a converged candidate has been checked, INFEASIBLE when
@@ -200,10 +201,11 @@ class SpeedRefutation:
 
     @property
     def accel_needed(self) -> float:
-        """The least acceleration scale (``max |u| / a_max``) any attempt converged to; ``nan`` if none did.
+        """The least :attr:`BounceSearch.accel_needed` of the attempts (``max |u| / a_max``); ``nan`` if none converged.
 
-        Below 1 at a refuted speed; above 1, how far ``a_max`` falls short of the
-        best motion this search found (a local optimum: no proof that none fits).
+        At most 1 where a candidate was found (its peak); above 1, how far
+        ``a_max`` falls short of the best motion this search found (a local
+        optimum: no proof that none fits).
         """
         return least_accel_needed(self.attempts)
 
@@ -284,10 +286,11 @@ class RecordingRefutation:
 
     @property
     def accel_needed(self) -> float:
-        """The least acceleration scale (``max |u| / a_max``) any attempt converged to; ``nan`` if none did.
+        """The least :attr:`BounceSearch.accel_needed` of the attempts (``max |u| / a_max``); ``nan`` if none converged.
 
-        Below 1 at a refuted speed; above 1, how far ``a_max`` falls short of the
-        best motion this search found (a local optimum: no proof that none fits).
+        At most 1 where a candidate was found (its peak); above 1, how far
+        ``a_max`` falls short of the best motion this search found (a local
+        optimum: no proof that none fits).
         """
         return least_accel_needed(self.attempts)
 
