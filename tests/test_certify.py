@@ -199,3 +199,14 @@ def test_certify_crossing_passes_its_guess_to_the_speed_search(task, kin, imodel
     with pytest.raises(InputError, match="v_guess"):
         certify_crossing(DEXTAR, task, kin=kin, imodel=imodel, refute=False, monte_carlo_runs=0, v_guess=0.0)
     assert seen == [0.97]
+
+
+def test_the_coarse_scan_reaches_below_a_low_bracket():
+    """The default counterexample scan: every 0.1 m/s from 0.3 m/s when the speed bracket starts above it, from
+    ``v_low`` when below (a robot certified under 0.3 m/s had no floor searched: the scan started above its
+    ``v_min``, and every scanned speed was dropped as certified)."""
+    from crosscert.planner.certify.crossing import scan_speeds
+
+    assert scan_speeds(0.6, 1.0) == [0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9]
+    low = scan_speeds(0.05, 0.5)
+    assert low == [0.05, 0.15, 0.25, 0.35, 0.45] and min(low) == 0.05

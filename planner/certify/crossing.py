@@ -41,7 +41,7 @@ from ..worker import SubprocessExecutor
 from .plan import search_v_min
 
 __all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refute_speed", "Refuter", "refutation_search",
-           "REFUTE_CPU_TIME"]
+           "REFUTE_CPU_TIME", "scan_speeds", "SCAN_FROM", "SCAN_STEP"]
 
 log = logging.getLogger(__name__)
 
@@ -256,7 +256,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         Executions simulated at ``v_min`` (0 to skip).
     refute, refute_speeds, refute_in_background, executor, bounce
         The counterexample searches (:class:`RefuteOptions`): whether to search below ``v_min``; the
-        speeds of the coarse scan (default every 0.1 m/s from 0.3); on ``executor`` while the speed
+        speeds of the coarse scan (default :func:`scan_speeds`: every 0.1 m/s from 0.3, or from
+        ``v_low`` when lower); on ``executor`` while the speed
         search and the Monte Carlo run go on (default: a
         :class:`~planner.worker.SubprocessExecutor` made for this call; a given one is not shut down)
         or here, afterwards; also the bounces of the task at ``v_min`` (:mod:`planner.bounce`).
@@ -338,6 +339,18 @@ def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: b
     return _Job(robot, task, b, kin, imodel, m0, SpeedBracket(v_low, v_high, tol, guess), threads)
 
 
+#: The default coarse scan of the counterexample search: every SCAN_STEP m/s from SCAN_FROM m/s (or from
+#: ``v_low`` when that is lower) up to ``v_high``; the speeds the search certifies are dropped as it goes.
+SCAN_FROM, SCAN_STEP = 0.3, 0.1
+
+
+def scan_speeds(v_low: float, v_high: float) -> list:
+    """The default coarse scan of the counterexample search, m/s (see :data:`SCAN_FROM`): below ``v_low`` when
+    ``v_low`` is above 0.3 m/s (a bound below the bracket is still a bound), from ``v_low`` when it is below,
+    so that a robot certified slower than 0.3 m/s still has its floor searched."""
+    return [round(float(v), 6) for v in np.arange(min(SCAN_FROM, v_low), v_high, SCAN_STEP)]
+
+
 def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
     """The :class:`Refuter` with the coarse scan queued (``None`` without refutation) and its starting geometries."""
     if not opts.enabled:
@@ -345,7 +358,7 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
     robot = job.robot
     # starting geometries of the (non-convex) searches: the box centre and a seeded corner
     starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
-    scan = opts.speeds if opts.speeds is not None else np.arange(0.3, job.bracket.v_high, 0.1)
+    scan = opts.speeds if opts.speeds is not None else scan_speeds(job.bracket.v_low, job.bracket.v_high)
     try:
         scan = sorted({round(float(v), 6) for v in scan})
     except (TypeError, ValueError):
