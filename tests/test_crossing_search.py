@@ -109,9 +109,8 @@ def test_nlp_size(on_locus):
     kin, rb, res = on_locus
     K = -(-rb.n_samples // SAMPLE_BUCKET) * SAMPLE_BUCKET
     assert res.counterexample.x.shape == (rb.n_samples, kin.n)
-    assert res.n_variables == kin.m + kin.n * (4 * K - 1) + 1  # and the acceleration scale
-    # mode at the first and last sample only, and |w| <= scale on both sides
-    assert res.n_constraints == 2 * kin.n * (K - 1) + kin.n * K + 2 + 2 * kin.n * (K - 1)
+    assert res.n_variables == kin.m + kin.n * (4 * K - 1)
+    assert res.n_constraints == 2 * kin.n * (K - 1) + kin.n * K + 2  # mode at the first and last sample only
 
 
 def test_verification_rejects_acceleration_above_bound(on_locus):

@@ -58,10 +58,6 @@ IPOPT_TOL = 1e-9
 #: IPOPT's constraint violation tolerance (also the "acceptable" one), in the scaled
 #: rows (eps_q- and full-acceleration units): far inside the margins above.
 IPOPT_CONSTR_VIOL_TOL = 1e-10
-#: Weight of the mean squared acceleration (in units of a_max) beside the acceleration scale in the
-#: objective: small enough not to move the scale's optimum above a_max beyond IPOPT's tolerance
-#: on the benchmark.
-SMOOTHNESS_WEIGHT = 1e-4
 #: Sample counts of the counterexample NLPs are rounded up to a multiple of this (see _build_and_solve).
 SAMPLE_BUCKET = 32
 #: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
@@ -243,14 +239,12 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     fs, m0 = ca.SX.sym("fscale", n), ca.SX.sym("m0")
     p = ca.vertcat(ca.vec(qm), eps, amax, ts, xc, xh, fs, m0)
 
-    # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq, and the
-    # acceleration scale al >= |w| (the objective; its floor, a variable bound, is the NLP's a_max).
+    # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq.
     s = ca.SX.sym("s", m)
     Xs = ca.SX.sym("x", n, K)
     Vs = ca.SX.sym("v", n, K)
     Ws = ca.SX.sym("w", n, K - 1)
     Ds = ca.SX.sym("dq", n, K)
-    al = ca.SX.sym("al")
     xi = xc + xh * s
     U = ca.repmat(amax, 1, K - 1) * Ws
     Q = qm + ca.repmat(eps, 1, K) * Ds
@@ -269,15 +263,10 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
         mode_rows = ca.vec(M)
     else:
         mode_rows = ca.vertcat(M[0], -M[K - 1])
-    # |w| <= al as rows, al free above: every motion through the joint intervals is feasible, so where
-    # a_max is too small IPOPT ends at a local minimum of the acceleration the readings need instead
-    # of wandering in its restoration phase; a candidate is kept only at al's floor (_build_and_solve).
-    scale = ca.vertcat(al - ca.vec(Ws), al + ca.vec(Ws))
-    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), mode_rows, scale)
-    z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds), al)
-    # The smallest acceleration scale; the small smoothness term picks a regular point among equals
-    # (all of them at the floor: then this is the feasibility problem with |w| <= floor).
-    obj = al + SMOOTHNESS_WEIGHT * ca.sumsqr(Ws) / (n * (K - 1))
+    g = ca.vertcat(ca.vec(dyn_x), ca.vec(dyn_v), ca.vec(F), mode_rows)
+    z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds))
+    # Feasibility problem; the small smoothness objective picks a regular point.
+    obj = ca.sumsqr(Ws) / (n * (K - 1))
     solver = ParametricSolver(kind.value, z, p, obj, g, ipopt=ipopt)
     _SOLVERS[key] = solver
     return solver
@@ -311,13 +300,7 @@ def _mapped_start(warm: Counterexample, qm: np.ndarray, ts: float):
 
 def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndarray, kind: CounterexampleKind, *,
                      max_iter: int, max_cpu_time: float, print_level: int, warm: Counterexample | None = None):
-    """Solve the NLP of ``kind`` from ``xi_start``.
-
-    Returns ``(candidate or None, status, iterations, time, nv, ng, scale)``: ``scale`` is
-    ``max |u| / a_max`` of the motion IPOPT converged to (``nan`` unless it converged): the
-    candidate's when the scale stayed at its floor ``1 - ACCEL_MARGIN`` (the candidate is kept
-    only then), else the local minimum above it.
-    """
+    """Solve the NLP of ``kind`` from ``xi_start``; returns (Counterexample or None, status, iters, time, nv, ng)."""
     K0, n, m = rb.n_samples, kin.n, kin.m
     ts, eps, amax = rb.t_s, rb.eps_q, rb.a_max
     xc, xh = 0.5 * (rb.xi_lo + rb.xi_hi), 0.5 * (rb.xi_hi - rb.xi_lo)
@@ -335,6 +318,7 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     Dq0 = np.zeros((K, n))
     if warm is not None:
         X0, V0, U0, Q0 = _mapped_start(warm, qm, ts)
+        U0 = np.clip(U0, -amax, amax)
         Dq0 = (Q0 - qm) / eps[None, :]
     elif kind is CounterexampleKind.BOUNCE:
         X0, _solved = fk_branch_guess(kin, qm, xi_start, rb.m0)
@@ -342,7 +326,7 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
         X0, _k = fk_crossing_guess(kin, qm, xi_start, rb.m0)
     if warm is None:
         V0 = np.gradient(X0, ts, axis=0)
-        U0 = np.diff(V0, axis=0) / ts  # unclipped: the scale starts at the guess's own peak
+        U0 = np.clip(np.diff(V0, axis=0) / ts, -amax, amax)
     # Scales: f in "eps_q-equivalents" (row norm of J_q times eps_q), the
     # dynamics in units of one full-acceleration step; IPOPT then sees O(1) rows.
     jq = kin.jac_q_batch(X0, qm, xi_start)
@@ -357,9 +341,9 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
 
     p = np.concatenate([vecF(qm.T), eps, amax, [ts], xc, xh, fscale, [float(rb.m0)]])
     n_mode = K if kind is CounterexampleKind.BOUNCE else 2
-    n_eq, n_scale = 2 * n * (K - 1) + n * K, 2 * n * (K - 1)
-    lbg = np.concatenate([np.zeros(n_eq), np.full(n_mode, MODE_MARGIN), np.zeros(n_scale)])
-    ubg = np.concatenate([np.zeros(n_eq), np.full(n_mode + n_scale, np.inf)])
+    n_eq = 2 * n * (K - 1) + n * K
+    lbg = np.concatenate([np.zeros(n_eq), np.full(n_mode, MODE_MARGIN)])
+    ubg = np.concatenate([np.zeros(n_eq), np.full(n_mode, np.inf)])
 
     inf = np.inf
     x_lo = np.full((n, K), -inf) if rb.x_lo is None else np.repeat(rb.x_lo[:, None], K, axis=1)
@@ -368,35 +352,28 @@ def _build_and_solve(kin: KinematicModel, rb: RecordingBounds, xi_start: np.ndar
     if rb.v0_max is not None:
         vb[:, 0] = np.minimum(vb[:, 0], (1 - ACCEL_MARGIN) * rb.v0_max)
     sb = np.full(m, 1 - XI_MARGIN)
+    wb = np.full((n, K - 1), 1 - ACCEL_MARGIN)
     db = np.full((n, K), 1 - JOINT_MARGIN)
-    free_w = np.full(n * (K - 1), np.inf)  # |w| is bounded by the scale's rows
 
-    # The scale's floor is the NLP's own acceleration bound: below it every motion is as good, so a
-    # bounded problem is solved as the feasibility problem it is (as fast), and only an excess over
-    # a_max is minimised.
-    floor = 1 - ACCEL_MARGIN
-    lbx = np.concatenate([-sb, vecF(x_lo), vecF(-vb), -free_w, vecF(-db), [floor]])
-    ubx = np.concatenate([sb, vecF(x_hi), vecF(vb), free_w, vecF(db), [np.inf]])
+    lbx = np.concatenate([-sb, vecF(x_lo), vecF(-vb), vecF(-wb), vecF(-db)])
+    ubx = np.concatenate([sb, vecF(x_hi), vecF(vb), vecF(wb), vecF(db)])
     s0 = np.divide(xi_start - xc, xh, out=np.zeros(m), where=xh > 0)
     X0c = np.clip(X0.T, x_lo, x_hi)
-    W0 = U0.T / amax[:, None]
     z0 = np.concatenate([np.clip(s0, -sb, sb), vecF(X0c), vecF(np.clip(V0.T, -vb, vb)),
-                         vecF(W0), vecF(np.clip(Dq0.T, -db, db)), [max(float(np.max(np.abs(W0))), floor)]])
+                         vecF(U0.T / amax[:, None]), vecF(np.clip(Dq0.T, -db, db))])
     run = solver.solve(p=p, z0=z0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)
     sol, stats, status, elapsed = run.solution, run.stats, run.status, run.elapsed_s
     iters = int(stats.get("iter_count", -1))
     nv, ng = solver.n_variables, solver.n_constraints
     if ipopt_outcome(status) is not SearchOutcome.CONVERGED:
-        return None, status, iters, elapsed, nv, ng, np.nan
+        return None, status, iters, elapsed, nv, ng
     zs = np.asarray(sol["x"], dtype=float).reshape(-1)
-    s_v, xv, vv, wv, dv, al = np.split(zs, np.cumsum([m, n * K, n * K, n * (K - 1), n * K]))
-    if not al[0] <= 1 - 0.5 * ACCEL_MARGIN:  # at its floor, up to IPOPT's tolerance, or a_max is exceeded
-        return None, status, iters, elapsed, nv, ng, float(al[0])
+    s_v, xv, vv, wv, dv = np.split(zs, np.cumsum([m, n * K, n * K, n * (K - 1)]))
     Xv, Vv, Dv = (a.reshape((n, K), order="F").T[:K0] for a in (xv, vv, dv))
     Wv = wv.reshape((n, K - 1), order="F").T[:K0 - 1]
     ce = Counterexample(xi=xc + xh * s_v, x=Xv, v=Vv, u=amax[None, :] * Wv,
                         q=qm[:K0] + eps[None, :] * Dv, t_s=ts, m0=rb.m0, kind=kind)
-    return ce, status, iters, elapsed, nv, ng, float(np.max(np.abs(Wv)))
+    return ce, status, iters, elapsed, nv, ng
 
 
 def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, *, xi_start=None,
@@ -440,12 +417,12 @@ def search_counterexample(kin: KinematicModel, rb: RecordingBounds, kind: Counte
         xs = 0.5 * (rb.xi_lo + rb.xi_hi) if xi_start is None else V.vector("xi_start", xi_start, kin.m, broadcast=True)
     if np.any(xs < rb.xi_lo) or np.any(xs > rb.xi_hi):
         raise InputError(f"xi_start = {xs.tolist()} lies outside the calibration box")
-    ce, status, iters, elapsed, nv, ng, needed = _build_and_solve(
+    ce, status, iters, elapsed, nv, ng = _build_and_solve(
         kin, rb, xs, kind, max_iter=max_iter, max_cpu_time=max_cpu_time, print_level=print_level, warm=warm)
     if ce is None:
-        return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs, kind=kind, accel_needed=needed)
+        return BounceSearch(False, False, status, iters, elapsed, nv, ng, xs, kind=kind)
     ver = verify_counterexample(kin, ce, rb, kind, dense=dense)
-    return BounceSearch(True, ver.ok, status, iters, elapsed, nv, ng, xs, ce, ver, kind=kind, accel_needed=needed)
+    return BounceSearch(True, ver.ok, status, iters, elapsed, nv, ng, xs, ce, ver, kind=kind)
 
 
 def search_bounce(kin: KinematicModel, rb: RecordingBounds, *, xi_start=None, max_iter: int = MAX_ITER,

@@ -108,9 +108,7 @@ class SearchOutcome(StrEnum):
     REJECTED = "candidate-rejected"
     #: IPOPT converged; the candidate has not been checked (all an IPOPT status can say).
     CONVERGED = "converged-unverified"
-    #: IPOPT converged to a point that locally minimises the constraint violation, or
-    #: to a local minimum of the acceleration scale above ``a_max``
-    #: (``BounceSearch.accel_needed > 1``): no motion near it fits the bounds.
+    #: IPOPT converged to a point that locally minimises the constraint violation.
     INFEASIBLE = "locally-infeasible"
     #: IPOPT stopped without converging (step too small, restoration failed, diverging iterates).
     NOT_CONVERGED = "not-converged"

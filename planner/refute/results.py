@@ -8,13 +8,12 @@ outcome means that none exists.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .problem import ACCEL_MARGIN, Counterexample, CounterexampleKind, SearchOutcome, ipopt_outcome
+from .problem import Counterexample, CounterexampleKind, SearchOutcome, ipopt_outcome
 
 __all__ = ["BounceSearch", "CrossingFloor", "RecordingRefutation", "RefutationBound", "SpeedRefutation", "Verification",
            "deciding_attempt"]
@@ -72,8 +71,7 @@ class BounceSearch:
     Attributes
     ----------
     found : bool
-        IPOPT converged (its status maps to :attr:`SearchOutcome.CONVERGED`) to a
-        motion within ``a_max`` (``accel_needed <= 1``): a candidate.
+        IPOPT converged (its status maps to :attr:`SearchOutcome.CONVERGED`).
     verified : bool
         ``found`` and the independent check (:func:`~planner.refute.verify_bounce`
         or :func:`~planner.refute.verify_crossing`) accepted the candidate: a counterexample.
@@ -92,18 +90,9 @@ class BounceSearch:
         Its check (``None`` unless ``found``).
     kind : CounterexampleKind
         The kind of counterexample searched (default: a bounce).
-    accel_needed : float
-        ``max |u_k,i| / a_max_i`` of the motion IPOPT converged to (``nan``
-        unless it converged).  At most 1: the candidate's own peak (IPOPT
-        stops at the first motion within ``a_max``, the least is not sought).
-        Above 1: no candidate; a local minimum of the acceleration a motion
-        explaining the readings needs, i.e. by how much ``a_max`` falls short
-        from this start (no proof that no counterexample exists).
     outcome : SearchOutcome
-        Derived from ``status``, ``accel_needed`` and ``verification``: FOUND or
-        REJECTED once a converged candidate has been checked, INFEASIBLE when
-        IPOPT converged to a motion needing more than ``a_max``, else
-        :func:`ipopt_outcome` of the status.
+        Derived from ``status`` and ``verification``: FOUND or REJECTED once a
+        converged candidate has been checked, else :func:`ipopt_outcome` of the status.
     """
 
     found: bool
@@ -117,16 +106,12 @@ class BounceSearch:
     counterexample: Counterexample | None = field(default=None, repr=False)
     verification: Verification | None = None
     kind: CounterexampleKind = CounterexampleKind.BOUNCE
-    accel_needed: float = math.nan
     outcome: SearchOutcome = field(init=False)
 
     def __post_init__(self) -> None:
         out = ipopt_outcome(self.status)
-        if out is SearchOutcome.CONVERGED:
-            if self.verification is not None:
-                out = SearchOutcome.FOUND if self.verified else SearchOutcome.REJECTED
-            elif self.accel_needed > 1 - ACCEL_MARGIN:  # a local minimum of the excess over a_max
-                out = SearchOutcome.INFEASIBLE
+        if out is SearchOutcome.CONVERGED and self.verification is not None:
+            out = SearchOutcome.FOUND if self.verified else SearchOutcome.REJECTED
         object.__setattr__(self, "outcome", out)
 
 
@@ -139,12 +124,6 @@ def deciding_attempt(attempts: Sequence[BounceSearch]) -> BounceSearch | None:
     if converged:
         return converged[-1]
     return attempts[-1] if attempts else None
-
-
-def least_accel_needed(attempts: Sequence[BounceSearch]) -> float:
-    """The smallest :attr:`BounceSearch.accel_needed` of the attempts (``nan`` if none converged)."""
-    vals = [a.accel_needed for a in attempts if not math.isnan(a.accel_needed)]
-    return min(vals) if vals else math.nan
 
 
 def row_outcome(verified: bool, attempts) -> SearchOutcome:
@@ -198,16 +177,6 @@ class SpeedRefutation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "outcome", row_outcome(self.verified, self.attempts))
-
-    @property
-    def accel_needed(self) -> float:
-        """The least :attr:`BounceSearch.accel_needed` of the attempts (``max |u| / a_max``); ``nan`` if none converged.
-
-        At most 1 where a candidate was found (its peak); above 1, how far
-        ``a_max`` falls short of the best motion this search found (a local
-        optimum: no proof that none fits).
-        """
-        return least_accel_needed(self.attempts)
 
 
 @dataclass(frozen=True)
@@ -283,16 +252,6 @@ class RecordingRefutation:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "outcome", row_outcome(self.verified, self.attempts))
-
-    @property
-    def accel_needed(self) -> float:
-        """The least :attr:`BounceSearch.accel_needed` of the attempts (``max |u| / a_max``); ``nan`` if none converged.
-
-        At most 1 where a candidate was found (its peak); above 1, how far
-        ``a_max`` falls short of the best motion this search found (a local
-        optimum: no proof that none fits).
-        """
-        return least_accel_needed(self.attempts)
 
 
 @dataclass(frozen=True)
