@@ -253,3 +253,32 @@ def test_warm_start_from_a_neighbouring_speed_is_verified_like_any_other(slow_ca
     assert again.found and not again.verified and again.outcome is SearchOutcome.REJECTED
     with pytest.raises(InputError, match="warm"):
         search_counterexample(kin, rb, "bounce", warm=warm, xi_start=DEXTAR.xi_center)
+
+
+# The default task of `crosscert certify` (its plan at each speed, with that plan's a_max), searched as certify
+# searches it.  docs/planning.md, "What limits the refutation bound": verified bounces up to 0.848 m/s; an
+# NLP minimising the acceleration scale (tried 2026-12-02) converged from every start to 1.0001 a_max at
+# 0.849 m/s and 1.0009 a_max at 0.85 m/s, so the printed bound (0.84375 m/s, bisected to 0.01 m/s) is
+# within 0.005 m/s of what this search can reach.
+NEAR_FLOOR = 0.848  # m/s
+
+
+def test_the_benchmark_task_is_refuted_at_0_848_m_s():
+    """Above the printed bound of 0.84375 m/s: a verified bounce on certify's own plan and starts, which the
+    trusted check accepts again."""
+    from crosscert.planner.certify.crossing import refute_speed
+    from crosscert.planner.simulate import random_geometry
+    from crosscert.planner.task import PlanningBounds, crossing_on_segment
+
+    from problems import PLANNING
+
+    kin, task = kinematics(), PLANNING["dextar_benchmark"].task()
+    b = PlanningBounds().for_robot(DEXTAR)
+    m0 = crossing_on_segment(kin, task, DEXTAR.xi_center).m0
+    starts = [DEXTAR.xi_center, random_geometry(DEXTAR, np.random.default_rng(0), corners=True)]  # certify's, seed 0
+    row = refute_speed(DEXTAR, task, b, m0, starts, NEAR_FLOOR, kin=kin)
+    assert row.verified and row.outcome is SearchOutcome.FOUND
+    att = next(a for a in row.attempts if a.verified)
+    ce = att.counterexample
+    assert ce.q.shape[0] == row.n_samples and DEXTAR.xi_in_box(ce.xi)
+    assert att.verification.ok and att.verification.accel_ratio <= 1 and att.verification.joint_ratio <= 1
