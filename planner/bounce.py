@@ -151,7 +151,7 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: fl
     uncertified distance (the nearest is presumed uncertified until the
     bracket reaches it).  ``exhaustive`` tracks every distance.  Every tried
     distance from ``certified_from`` on is certified, monotone family or not.
-    ``parallel``: window passes over numba's threads (the same verdicts).
+    ``parallel``: window passes over the thread slots (the same verdicts).
     """
     fam = _Bounces(robot, task, bounds, speed, kin)
     imodel = IntervalModel(robot) if imodel is None else imodel

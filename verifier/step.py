@@ -74,10 +74,11 @@ class StepConfig:
     const : verifier.constants.StepConstants
         The step's constants, rounded outward, read by name by both implementations.
     parallel : bool
-        Compiled backend: spread the scenarios of a batch over numba's
-        threads (one parallel region per block of samples).  Turn it off
-        inside process pools or Dask workers; ``NUMBA_NUM_THREADS=1`` has the
-        same effect.
+        Compiled backend: spread the scenarios of a batch over
+        ``NUMBA_NUM_THREADS`` thread slots (slot 0 on the calling thread, the
+        others on a pool of Python threads, one kernel call each per block of
+        samples).  Turn it off inside process pools or Dask workers;
+        ``NUMBA_NUM_THREADS=1`` has the same effect.
     spread_hypotheses : bool
         Compiled backend, fewer scenarios than threads: spread the geometry
         hypotheses of every sample over the threads instead (one parallel

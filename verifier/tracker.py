@@ -233,8 +233,9 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         The compiled kernels (default) or the numpy reference
         (:mod:`verifier.step`).
     parallel, spread_hypotheses : bool
-        Compiled backend: spread the scenarios, or the geometry hypotheses of
-        each sample, over numba's threads; the same results either way (see
+        Compiled backend: spread the scenarios over the thread slots, or the
+        geometry hypotheses of each sample over numba's threads; the same
+        results either way (see
         :class:`verifier.step.StepConfig`).
 
     Returns

@@ -225,7 +225,7 @@ class _Job:
     imodel: IntervalModel
     m0: int
     bracket: SpeedBracket
-    threads: bool  # numba's threads for the tracking (not beside a background worker)
+    threads: bool  # thread slots for the tracking (not beside a background worker)
 
 
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=V_LOW, v_high=None,
@@ -332,9 +332,8 @@ def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: b
     if v_high <= v_low:
         raise InputError(f"no feasible crossing speed above v_low = {v_low} m/s: the {b.method} time law allows "
                          f"at most {v_feasible:.3f} m/s on this task")
-    # numba's threads for the tracking, unless the counterexample worker runs beside it: it holds the
-    # other core, the serial kernels are as fast then (benchmarks/README.md), and the first run after
-    # an install does not compile the threaded ones
+    # thread slots for the tracking, unless the counterexample worker runs beside it: it holds the
+    # other core, and the serial kernels are as fast then (benchmarks/README.md)
     guess = None if v_guess is None else V.positive("v_guess", v_guess)
     return _Job(robot, task, b, kin, imodel, m0, SpeedBracket(v_low, v_high, tol, guess), threads)
 

@@ -153,7 +153,7 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
 
     ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
     certifies every admissible execution, as for :func:`certify_plan`.  ``parallel``: the geometry
-    sub-boxes over numba's threads (the same boxes either way).
+    sub-boxes over the thread slots (the same boxes either way).
     """
     robot = imodel.robot
     b = bounds.for_robot(robot)
@@ -206,7 +206,7 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
 
     What the certificate of ``v_sing`` is: its verdict ``MODE_CHANGED``
     certifies every admissible execution of the plan (module docstring).
-    ``parallel``: window passes over numba's threads (the same boxes; off
+    ``parallel``: window passes over the thread slots (the same boxes; off
     where another process holds the other cores).
     """
     b = bounds.for_robot(kin.robot)
