@@ -24,7 +24,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from crosscert.verifier.motion_model import MOTION_OFFSETS, contract_tubes
+from crosscert.verifier.motion_model import MOTION_OFFSETS, _constants, _remainder, contract_tubes
 
 T_S = 0.001  # s (A6: the float itself)
 A_MAX = np.array([80.0, 60.0])  # m/s^2
@@ -148,3 +148,24 @@ def test_offsets_beyond_the_recording_are_skipped():
     assert max(MOTION_OFFSETS) >= 3
     assert not contract_tubes(x, xd, T_S, A_MAX).any()
     _check_inside(x, xd, truth)
+
+
+def test_constants_and_remainder_bound_the_exact_values():
+    """Each rounded quantity against its exact rational value, on many random velocity pairs and sample
+    distances (a rounding to nearest is below the exact value about half the time)."""
+    rng = np.random.default_rng(5)
+    for j in (1, 2, 3, 4, 7, 8, 13, 16):
+        a = rng.uniform(1.0, 200.0, 64)
+        tau, inv2, e4, four_a = _constants(j, T_S, a)
+        t = j * Fraction(T_S)
+        assert Fraction(float(tau[0])) <= t <= Fraction(float(tau[1]))
+        assert Fraction(float(inv2[0])) <= 2 / t <= Fraction(float(inv2[1]))
+        vk = rng.uniform(-2.0, 2.0, 64)
+        vl = vk + rng.uniform(-1.0, 1.0, 64) * a * float(t)
+        r = _remainder((vk, vk), (vl, vl), e4, four_a)
+        for i in range(64):
+            A = Fraction(float(a[i]))
+            assert Fraction(float(four_a[0][i])) <= 4 * A <= Fraction(float(four_a[1][i]))
+            assert Fraction(float(e4[i])) >= A * t * t / 4
+            exact = A * t * t / 4 - (Fraction(float(vl[i])) - Fraction(float(vk[i]))) ** 2 / (4 * A)
+            assert Fraction(float(r[i])) >= exact, (j, i)

@@ -39,16 +39,30 @@ def _pm(box, r):
     return I.add(*box, -r, r)
 
 
-def _pair(x, xd, k, l, tau, inv_tau2, e4, four_a):
-    """Contract the boxes of samples ``k`` and ``l`` (slices of equal length, ``l`` later) with ``(*)``,
-    in place; ``tau`` encloses ``t_l - t_k``, ``inv_tau2`` ``2 / tau``, ``e4`` bounds ``a tau^2 / 4`` from
-    above and ``four_a`` encloses ``4 a``.  Returns where the remainder bound is negative ``(R, *, n)``."""
-    xk, xl = (x[:, k, 0], x[:, k, 1]), (x[:, l, 0], x[:, l, 1])
-    vk, vl = (xd[:, k, 0], xd[:, k, 1]), (xd[:, l, 0], xd[:, l, 1])
-    # r >= a tau^2 / 4 - (v_l - v_k)^2 / (4 a): the square's lower bound over the boxes, divided upwards
+def _constants(j: int, t_s: float, a):
+    """For pairs ``j`` samples apart: enclosures of ``tau = j t_s``, ``2 / tau`` and ``4 a``, and an upper
+    bound of ``a tau^2 / 4`` (``a`` ``(n,)``)."""
+    tau = I.scale(float(j), t_s, t_s)
+    e4 = I.mul(*I.mul(a, a, *tau), *I.scale(0.25, *tau))[1]
+    return tau, I.div(2.0, 2.0, *tau), e4, I.scale(4.0, a, a)
+
+
+def _remainder(vk, vl, e4, four_a):
+    """Upper bound of ``a tau^2 / 4 - (v_l - v_k)^2 / (4 a)`` over the velocity boxes ``vk``, ``vl``: the
+    square's lower bound, divided by ``4 a`` downwards, subtracted upwards (negative: no motion within
+    ``a`` joins the two velocities)."""
     d2 = I.sqr(*I.sub(*vl, *vk))[0]
     q = I.div(d2, d2, *four_a)[0]
-    r = I.sub(e4, e4, q, q)[1]
+    return I.sub(e4, e4, q, q)[1]
+
+
+def _pair(x, xd, k, l, tau, inv_tau2, e4, four_a):
+    """Contract the boxes of samples ``k`` and ``l`` (slices of equal length, ``l`` later) with ``(*)``,
+    in place (:func:`_constants` gives the other arguments).  Returns where the remainder bound is
+    negative ``(R, *, n)``."""
+    xk, xl = (x[:, k, 0], x[:, k, 1]), (x[:, l, 0], x[:, l, 1])
+    vk, vl = (xd[:, k, 0], xd[:, k, 1]), (xd[:, l, 0], xd[:, l, 1])
+    r = _remainder(vk, vl, e4, four_a)
     # velocities: v_k + v_l = 2 (x_l - x_k) / tau + [-2 r / tau, 2 r / tau]
     s2 = I.mul(*I.sub(*xl, *xk), *inv_tau2)
     r2 = I.mul(r, r, *inv_tau2)[1]
@@ -92,14 +106,10 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS):
     a = np.asarray(a_max, dtype=np.float64)
     empty = np.zeros(R, dtype=bool)
     with I.quiet_fp():
-        four_a = I.scale(4.0, a, a)
         for j in offsets:
             if not 0 < j < K:
                 continue
-            tau = I.scale(float(j), t_s, t_s)  # j t_s, enclosed
-            inv_tau2 = I.div(2.0, 2.0, *tau)
-            e4 = I.mul(*I.mul(a, a, *tau), *I.scale(0.25, *tau))[1]
-            neg = _pair(x, xd, slice(0, K - j), slice(j, K), tau, inv_tau2, e4, four_a)
+            neg = _pair(x, xd, slice(0, K - j), slice(j, K), *_constants(j, t_s, a))
             empty |= neg.any(axis=(1, 2))
         empty |= np.any(~(x[:, :, 0] <= x[:, :, 1]), axis=(1, 2)) | np.any(~(xd[:, :, 0] <= xd[:, :, 1]), axis=(1, 2))
     return empty
