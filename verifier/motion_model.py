@@ -16,8 +16,9 @@ back between two samples needs the distance ``(v_l - v_k)^2 / (4 a)`` that
 plain Taylor remainders (``a tau^2 / 2`` about either end) give away.
 
 :func:`contract_tubes` projects ``(*)`` onto each of the four quantities, for
-every pair ``(k, k + j)``, ``j`` in :data:`MOTION_OFFSETS`, vectorised over
-``k``, with outward rounding (:mod:`verifier.interval`).  Shapes: ``R`` rows,
+the pairs ``(k, k + j)``, ``j`` in :data:`MOTION_OFFSETS`, whose velocity
+boxes are disjoint in some row (elsewhere the square's lower bound is 0),
+vectorised over ``k``, with outward rounding (:mod:`verifier.interval`).  Shapes: ``R`` rows,
 ``K`` samples, pose dimension ``n``; SI units.
 """
 
