@@ -28,7 +28,7 @@ S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
 ``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
 geometries in S1).
 
-``--ceiling`` (``--speeds 1.0,0.95``, ``--starts N``) asks, for each crossing of
+``--ceiling`` (``--speeds 1.0,0.95``, ``--starts N``, ``--geometries N``) asks, for each crossing of
 table 1, whether *any* sound method could certify it: besides the window's
 verdict it searches a bounce (a motion that stays in the initial mode, within
 ``a_max``, the reading error and ``[ξ]``, that explains the same readings;
@@ -110,12 +110,13 @@ def main() -> None:
                   f"{1e3 * np.max(t):.1f} ms  {np.mean([r.lagged_mode != 0 for r in lagged]):.3f}  {late}", flush=True)
 
 
-def ceiling(speeds, starts: int) -> None:
+def ceiling(speeds, starts: int, geometries: int = 20) -> None:
     """Certified runs against the runs no sound method can certify (module docstring, ``--ceiling``)."""
     from crosscert.planner.refute import RecordingBounds, search_bounce
 
     kin, im, s, bench = kinematics(), interval_model(), default_settings(), benchmark_crossing()
-    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0)) for i in range(1, 20)]
+    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0))
+                      for i in range(1, geometries)]
     # starting geometries of the non-convex search, seeded apart from the true ones
     seeds = [None] + [random_geometry(DEXTAR, np.random.default_rng(100 + i), corners=(i % 2 == 0))
                       for i in range(starts)]
@@ -133,7 +134,7 @@ def ceiling(speeds, starts: int) -> None:
             certified = w.verdict.value == "mode-changed"
             marks.append("!" if certified and bounce else "C" if certified else "B" if bounce else ".")
         line = "".join(marks)
-        print(f"{v:5.2f}  {line}  certified {line.count('C')} / 20, provably uncertifiable {line.count('B')}, "
+        print(f"{v:5.2f}  {line}  certified {line.count('C')} / {len(line)}, provably uncertifiable {line.count('B')}, "
               f"open {line.count('.')}, conflicts {line.count('!')}", flush=True)
     print(f"  {_load('')}", flush=True)
 
@@ -269,7 +270,8 @@ if __name__ == "__main__":
     if "--ceiling" in sys.argv:
         ceiling([float(v) for v in (sys.argv[sys.argv.index("--speeds") + 1] if "--speeds" in sys.argv
                                     else "1.0,0.95").split(",")],
-                int(sys.argv[sys.argv.index("--starts") + 1]) if "--starts" in sys.argv else 4)
+                int(sys.argv[sys.argv.index("--starts") + 1]) if "--starts" in sys.argv else 4,
+                int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20)
     elif "--speed" in sys.argv:
         speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20,
               sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3")
