@@ -225,7 +225,7 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
     und = [i for i, r in enumerate(rows) if r[0] == "undecided"] or [0]
     q = runs[und[0]]
     print(f"[S2] where an undecided run spends its time (geometry {und[0]}, {len(q)} samples)", flush=True)
-    with _Clock(W, ("advance", "pose_solutions")) as clock:
+    with _Clock(W, ("advance", "pose_solutions", "contract_tubes")) as clock:
         t0 = time.perf_counter()
         track_window(im, q, s, initial_mode=1)
         total = time.perf_counter() - t0
