@@ -8,13 +8,15 @@ samples).  Positions and velocities are exact rationals (``Fraction``); the
 tubes are the tightest float boxes around them (one ulp), or wider ones, and
 the contracted boxes must still hold the exact values.
 
-Removal checks (2026-12-02, each made a test here fail): the remainder's
-square term with the wrong sign (``+ (v_l - v_k)^2 / (4 a)`` dropped, i.e.
-``a tau^2 / 4`` alone, fails ``test_contracts_what_taylor_cannot``; with the
-square's upper bound instead of its lower one, the containment tests fail);
-the remainder halved (containment tests fail); ``r`` without its outward
-rounding (``(e4 - q)`` to nearest: ``test_one_ulp_tubes_keep_the_exact_truth``
-fails).
+Removal checks (2026-12-02, each made a test here fail): the square term
+dropped (``a tau^2 / 4`` alone: ``test_contracts_what_taylor_cannot``); the
+square's upper bound instead of its lower one, or the remainder halved (the
+containment tests; halved, also test_window's adversarial soundness tests);
+``tau = j t_s`` rounded to nearest (``test_constants_and_remainder_...``).
+Rounding the remainder, the quotient by ``4 a``, ``a tau^2 / 4`` or
+``2 r / tau`` to nearest failed no test: each error is at most half an ulp,
+absorbed by the next operation's outward step (docs/soundness.md, "Window
+reasoning", step 8).
 """
 
 from __future__ import annotations
