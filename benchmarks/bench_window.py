@@ -28,7 +28,17 @@ S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
     the catalogue's 1.1 m/s crossing and 1.2 m/s bounce.
 
 ``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
-geometries in S1).  The speed part uses only names that exist since 2026-12-01, so the same
+geometries in S1).
+
+``--ceiling`` (``--speeds 1.0,0.95``, ``--starts N``, ``--geometries N``) asks, for each crossing of
+table 1, whether *any* sound method could certify it: besides the window's
+verdict it searches a bounce (a motion that stays in the initial mode, within
+``a_max``, the reading error and ``[ξ]``, that explains the same readings;
+``planner.refute.search_bounce`` from the box centre and ``N`` seeded starting
+geometries, every candidate checked by ``verify_bounce``).  A run with a
+verified bounce cannot be certified ``mode-changed`` by any sound method; a
+run certified *and* with a verified bounce would be a soundness bug (counted
+as a conflict; must be 0).  About 2 s per search.  The speed part uses only names that exist since 2026-12-01, so the same
 script measures an older checkout (run it with that checkout's interpreter).
 """
 
@@ -101,6 +111,35 @@ def main() -> None:
             late = sum(r.lagged_mode != 0 and fwd[r.lagged] == 0 for r in lagged)
             print(f"{'bounce' if bounce else 'crossing'} {v} m/s  lag {lag}  {1e3 * np.mean(t):.1f} / "
                   f"{1e3 * np.max(t):.1f} ms  {np.mean([r.lagged_mode != 0 for r in lagged]):.3f}  {late}", flush=True)
+
+
+def ceiling(speeds, starts: int, geometries: int = 20) -> None:
+    """Certified runs against the runs no sound method can certify (module docstring, ``--ceiling``)."""
+    from crosscert.planner.refute import RecordingBounds, search_bounce
+
+    kin, im, s, bench = kinematics(), interval_model(), default_settings(), benchmark_crossing()
+    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0))
+                      for i in range(1, geometries)]
+    # starting geometries of the non-convex search, seeded apart from the true ones
+    seeds = [None] + [random_geometry(DEXTAR, np.random.default_rng(100 + i), corners=(i % 2 == 0))
+                      for i in range(starts)]
+    print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
+    print("[C] crossings: C certified mode-changed by the window, B a verified bounce explains the readings "
+          "(no sound method can certify), . neither, ! both (a soundness bug)", flush=True)
+    for v in speeds:
+        marks = []
+        for xi in geoms:
+            r = simulate_crossing(kin, bench.point, bench.direction, v, xi_true=xi, t_rest=0.05,
+                                  working_guess=bench.q_point, seed=1, cruise=cruise_for(v))
+            w = track_window(im, r.q_meas, s, initial_mode=1)
+            rb = RecordingBounds(q_meas=r.q_meas, m0=1, assumptions=s.assumptions)
+            bounce = any(search_bounce(kin, rb, xi_start=x0).verified for x0 in seeds)
+            certified = w.verdict.value == "mode-changed"
+            marks.append("!" if certified and bounce else "C" if certified else "B" if bounce else ".")
+        line = "".join(marks)
+        print(f"{v:5.2f}  {line}  certified {line.count('C')} / {len(line)}, provably uncertifiable {line.count('B')}, "
+              f"open {line.count('.')}, conflicts {line.count('!')}", flush=True)
+    print(f"  {_load('')}", flush=True)
 
 
 def _load(note: str) -> str:
@@ -204,7 +243,7 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
     und = [i for i, r in enumerate(rows) if r[0] == "undecided"] or [0]
     q = runs[und[0]]
     print(f"[S2] where an undecided run spends its time (geometry {und[0]}, {len(q)} samples)", flush=True)
-    with _Clock(W, ("advance", "pose_solutions")) as clock:
+    with _Clock(W, ("advance", "pose_solutions", "contract_tubes")) as clock:
         t0 = time.perf_counter()
         track_window(im, q, s, initial_mode=1)
         total = time.perf_counter() - t0
@@ -246,7 +285,12 @@ def _speed_lag(im, s) -> None:
 
 
 if __name__ == "__main__":
-    if "--speed" in sys.argv:
+    if "--ceiling" in sys.argv:
+        ceiling([float(v) for v in (sys.argv[sys.argv.index("--speeds") + 1] if "--speeds" in sys.argv
+                                    else "1.0,0.95").split(",")],
+                int(sys.argv[sys.argv.index("--starts") + 1]) if "--starts" in sys.argv else 4,
+                int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20)
+    elif "--speed" in sys.argv:
         speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20,
               sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3")
     else:

@@ -385,3 +385,19 @@ def test_halving_follows_the_pose_spread_and_covers_the_parent():
             assert np.array_equal(left[0], lo[r]) and np.array_equal(right[1], hi[r])
             others = np.arange(len(XI[0])) != a
             assert np.array_equal(left[1][others], hi[r][others]) and np.array_equal(right[0][others], lo[r][others])
+
+
+def test_acceleration_bound_between_samples_certifies_the_plan_at_0961():
+    """``crosscert certify``'s plan at 0.961 m/s (derived a_max 80 / 66 m/s^2): undecided by the passes
+    alone (the bounce hypothesis survives with 9-10 sub-boxes), certified once every pass's tubes are
+    contracted with the two-sample acceleration bound (verifier.motion_model, docs/soundness.md, "Window
+    reasoning", step 8).  Removal check (2026-12-02): without the call in ``_Hypothesis.take`` this test
+    fails (``unknown``)."""
+    from crosscert.planner.certify.plan import certify_speed
+    from crosscert.planner.task import benchmark_task
+    from crosscert.robots import KinematicModel
+
+    run = certify_speed(KinematicModel(DEXTAR), interval_model(), benchmark_task(get_entry("dextar")),
+                        PlanningBounds(), 0.961)
+    assert run.forward.verdict is Verdict.UNKNOWN
+    assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()

@@ -44,6 +44,7 @@ from crosscert.robots.errors import InputError
 
 from . import interval as I
 from .linalg import point_inverse
+from .motion_model import contract_tubes
 from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
 from .tracker import Tracker, initial_box_from_mode, verdict_of
@@ -515,14 +516,17 @@ class _Hypothesis:
         self.passes += 1
         last, first = md[:, -1], md[:, 0]
         other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
-        live = (bad < 0) & ~other
+        s = self.finals.s
+        # empty tubes, or tubes no motion within a_max fits (contracted between samples: step 8)
+        dead = (bad >= 0) | contract_tubes(x, xd, s.t_s, s.a_max)
+        live = ~dead & ~other
         self.tx, self.txd = x, xd
         # the pass started from these sub-boxes and only contracted them; intersecting is exact and keeps
         # a row's sub-box inside its parent's whatever the kernel holds
         self.xlo, self.xhi = np.maximum(self.xlo, xi[0]), np.minimum(self.xhi, xi[1])
         live &= np.all(self.xlo <= self.xhi, axis=1)  # no geometry of the sub-box fits every sample
         if not live.any():
-            self.refutation = Refutation.EMPTY_TUBE if np.all(bad >= 0) else Refutation.OTHER_MODE
+            self.refutation = Refutation.EMPTY_TUBE if np.all(dead) else Refutation.OTHER_MODE
         self._keep(live)
 
     def split(self, full_w, q_first):

@@ -1,0 +1,173 @@
+"""The two-sample acceleration bound on tubes (verifier.motion_model): the exact truth stays inside.
+
+The motions spend the whole budget: every coordinate accelerates at exactly
+``+-a_max`` at every instant, switching sign between samples, so that the
+bound is attained (``|x_l - x_k - (v_k + v_l) tau / 2|`` equals
+``a tau^2 / 4 - (v_l - v_k)^2 / (4 a)`` on every interval between two
+samples).  Positions and velocities are exact rationals (``Fraction``); the
+tubes are the tightest float boxes around them (one ulp), or wider ones, and
+the contracted boxes must still hold the exact values.
+
+Removal checks (2026-12-02, each made a test here fail): the square term
+dropped (``a tau^2 / 4`` alone: ``test_contracts_what_taylor_cannot``); the
+square's upper bound instead of its lower one, or the remainder halved (the
+containment tests; halved, also test_window's adversarial soundness tests);
+``tau = j t_s`` rounded to nearest (``test_constants_and_remainder_...``).
+Rounding the remainder, the quotient by ``4 a``, ``a tau^2 / 4`` or
+``2 r / tau`` to nearest failed no test: each error is at most half an ulp,
+absorbed by the next operation's outward step (docs/soundness.md, "Window
+reasoning", step 8).
+"""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from crosscert.verifier.motion_model import MOTION_OFFSETS, _constants, _remainder, contract_tubes
+
+T_S = 0.001  # s (A6: the float itself)
+A_MAX = np.array([80.0, 60.0])  # m/s^2
+
+
+def _exact_motion(rng, K, a, x0, v0, dwell):
+    """Exact positions and velocities at ``t_k = k T_S`` of a motion with ``x'' = +-a`` everywhere, its sign
+    switching at rational instants drawn ``dwell`` (in samples) apart, never at a sample."""
+    ts, a = Fraction(T_S), Fraction(a)
+    t_end = ts * (K - 1)
+    switches, t = [], Fraction(0)
+    while t < t_end:
+        t += ts * Fraction(int(rng.integers(int(1000 * dwell[0]), int(1000 * dwell[1]))), 1000)
+        if (t / ts).denominator == 1:  # not at a sample
+            t += ts / 7
+        switches.append(t)
+    sign = 1 if rng.random() < 0.5 else -1
+    x, v, t, xs, vs = Fraction(x0), Fraction(v0), Fraction(0), [], []
+    events = sorted([(ts * k, "sample") for k in range(K)] + [(s, "switch") for s in switches if s < t_end])
+    for te, kind in events:
+        h = te - t
+        x, v, t = x + v * h + sign * a * h * h / 2, v + sign * a * h, te
+        if kind == "sample":
+            xs.append(x)
+            vs.append(v)
+        else:
+            sign = -sign
+    return xs, vs
+
+
+def _box(values, widen=0.0, rng=None):
+    """Tightest float boxes ``(K, 2)`` around exact values, widened by up to ``widen`` on each side."""
+    lo = np.array([float(v) for v in values])
+    hi = lo.copy()
+    for i, v in enumerate(values):
+        if Fraction(lo[i]) > v:
+            lo[i] = np.nextafter(lo[i], -np.inf)
+        if Fraction(hi[i]) < v:
+            hi[i] = np.nextafter(hi[i], np.inf)
+    if widen:
+        lo -= widen * rng.random(len(lo))
+        hi += widen * rng.random(len(hi))
+    return np.stack([lo, hi], axis=1)
+
+
+def _tubes(seed, rows=4, K=60, dwell=(1.1, 3.0), widen_x=0.0, widen_v=0.0):
+    """Rows of exact motions (both coordinates at their ``A_MAX``) and their tubes ``(R, K, 2, n)``."""
+    rng = np.random.default_rng(seed)
+    n = len(A_MAX)
+    x, xd = np.empty((rows, K, 2, n)), np.empty((rows, K, 2, n))
+    truth = []
+    for r in range(rows):
+        row = []
+        for c in range(n):
+            xs, vs = _exact_motion(rng, K, A_MAX[c], rng.uniform(-0.1, 0.1), rng.uniform(-1.5, 1.5), dwell)
+            x[r, :, :, c] = _box(xs, widen_x, rng)
+            xd[r, :, :, c] = _box(vs, widen_v, rng)
+            row.append((xs, vs))
+        truth.append(row)
+    return x, xd, truth
+
+
+def _check_inside(x, xd, truth):
+    for r, row in enumerate(truth):
+        for c, (xs, vs) in enumerate(row):
+            for k in range(len(xs)):
+                assert Fraction(x[r, k, 0, c]) <= xs[k] <= Fraction(x[r, k, 1, c]), ("pose", r, c, k)
+                assert Fraction(xd[r, k, 0, c]) <= vs[k] <= Fraction(xd[r, k, 1, c]), ("velocity", r, c, k)
+
+
+def test_one_ulp_tubes_keep_the_exact_truth():
+    """The tightest tubes around motions that attain the bound on every interval: nothing may be lost."""
+    for seed in range(3):
+        x, xd, truth = _tubes(seed)
+        empty = contract_tubes(x, xd, T_S, A_MAX)
+        assert not empty.any()
+        _check_inside(x, xd, truth)
+
+
+@pytest.mark.parametrize("widen_x, widen_v", [(1e-6, 0.0), (0.0, 0.05), (2e-5, 0.3)])
+def test_wide_tubes_keep_the_exact_truth_and_shrink(widen_x, widen_v):
+    x, xd, truth = _tubes(10, widen_x=widen_x, widen_v=widen_v, dwell=(0.6, 4.0))
+    w0 = (x[..., 1, :] - x[..., 0, :]).sum() + (xd[..., 1, :] - xd[..., 0, :]).sum()
+    empty = contract_tubes(x, xd, T_S, A_MAX)
+    assert not empty.any()
+    _check_inside(x, xd, truth)
+    assert (x[..., 1, :] - x[..., 0, :]).sum() + (xd[..., 1, :] - xd[..., 0, :]).sum() < w0
+
+
+def test_contracts_what_taylor_cannot():
+    """Velocities -0.039 and +0.039 m/s one sample apart at 80 m/s^2: the motion must accelerate almost the
+    whole time, so the displacement lies within ``r = a tau^2 / 4 - (v_l - v_k)^2 / (4 a)`` (about 1 um) of
+    ``(v_k + v_l) tau / 2 = 0``; both ends are reached (accelerate, then brake, or the reverse), so the
+    contracted box must keep them.  Without the square term it is ``a tau^2 / 4 = 20 um`` wide."""
+    a, v = 80.0, 0.039
+    x = np.zeros((1, 2, 2, 1))
+    xd = np.zeros((1, 2, 2, 1))
+    x[0, 1, :, 0] = -1e-3, 1e-3
+    xd[0, 0, :, 0], xd[0, 1, :, 0] = -v, v
+    assert not contract_tubes(x, xd, T_S, [a], offsets=(1,)).any()
+    r = Fraction(a) * Fraction(T_S) ** 2 / 4 - (2 * Fraction(v)) ** 2 / (4 * Fraction(a))
+    lo, hi = Fraction(x[0, 1, 0, 0]), Fraction(x[0, 1, 1, 0])
+    assert lo <= -r and r <= hi
+    assert hi - lo < Fraction(201, 100) * r, (float(lo), float(hi), float(r))
+
+
+def test_no_motion_within_a_max_is_refuted():
+    """Velocities 1 m/s apart one sample apart need 1000 m/s^2: the row is refuted, the other kept."""
+    x = np.zeros((2, 5, 2, 2))
+    xd = np.zeros((2, 5, 2, 2))
+    xd[0, 3, :, 0] = 1.0
+    xd[0, 3, 0, 1] = -1e-3
+    x[0, 3:, :, 0] = 0.5e-3
+    empty = contract_tubes(x, xd, T_S, A_MAX)
+    assert empty.tolist() == [True, False]
+    assert np.all(x[1] == 0.0) and np.all(xd[1] == 0.0)  # exact zeros stay exact
+
+
+def test_offsets_beyond_the_recording_are_skipped():
+    x, xd, truth = _tubes(3, rows=1, K=3)
+    assert max(MOTION_OFFSETS) >= 3
+    assert not contract_tubes(x, xd, T_S, A_MAX).any()
+    _check_inside(x, xd, truth)
+
+
+def test_constants_and_remainder_bound_the_exact_values():
+    """Each rounded quantity against its exact rational value, on many random velocity pairs and sample
+    distances (a rounding to nearest is below the exact value about half the time)."""
+    rng = np.random.default_rng(5)
+    for j in (1, 2, 3, 4, 7, 8, 13, 16):
+        a = rng.uniform(1.0, 200.0, 64)
+        tau, inv2, e4, four_a = _constants(j, T_S, a)
+        t = j * Fraction(T_S)
+        assert Fraction(float(tau[0])) <= t <= Fraction(float(tau[1]))
+        assert Fraction(float(inv2[0])) <= 2 / t <= Fraction(float(inv2[1]))
+        vk = rng.uniform(-2.0, 2.0, 64)
+        vl = vk + rng.uniform(-1.0, 1.0, 64) * a * float(t)
+        r = _remainder((vk, vk), (vl, vl), e4, four_a)
+        for i in range(64):
+            A = Fraction(float(a[i]))
+            assert Fraction(float(four_a[0][i])) <= 4 * A <= Fraction(float(four_a[1][i]))
+            assert Fraction(float(e4[i])) >= A * t * t / 4
+            exact = A * t * t / 4 - (Fraction(float(vl[i])) - Fraction(float(vk[i]))) ** 2 / (4 * A)
+            assert Fraction(float(r[i])) >= exact, (j, i)

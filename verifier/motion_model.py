@@ -1,0 +1,122 @@
+"""The acceleration bound between two samples of a tube: a motion model over a window of samples.
+
+The tracker's step couples neighbouring samples only (the Taylor prediction)
+and the joints over its baselines (the displacement relation).  Over a whole
+recording (:mod:`verifier.window`) every pair of samples is coupled by the
+acceleration bound alone.  Per pose coordinate, with ``|x''| <= a`` on
+``[t_k, t_l]``, ``tau = t_l - t_k``, positions ``x_k, x_l`` and velocities
+``v_k, v_l`` at the two samples (docs/soundness.md, "Window reasoning", step 8)::
+
+    |x_l - x_k - (v_k + v_l) tau / 2|  <=  a tau^2 / 4 - (v_l - v_k)^2 / (4 a).        (*)
+
+The bound is sharp: it is what a motion that accelerates (or brakes) at
+``a`` and then brakes (accelerates) at ``a`` reaches.  Its last term is what
+the per-sample tracker misses near a Type 2 singularity: a motion that turns
+back between two samples needs the distance ``(v_l - v_k)^2 / (4 a)`` that
+plain Taylor remainders (``a tau^2 / 2`` about either end) give away.
+
+:func:`contract_tubes` projects ``(*)`` onto each of the four quantities, for
+the pairs ``(k, k + j)``, ``j`` in :data:`MOTION_OFFSETS`, whose velocity
+boxes are disjoint in some row (elsewhere the square's lower bound is 0),
+vectorised over ``k``, with outward rounding (:mod:`verifier.interval`).  Shapes: ``R`` rows,
+``K`` samples, pose dimension ``n``; SI units.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import interval as I
+
+__all__ = ["MOTION_OFFSETS", "contract_tubes"]
+
+#: Sample distances ``j`` of the coupled pairs ``(k, k + j)``, in this order (measured on the certify
+#: task's plan at 0.961 m/s: these certify it, 1 and 2 alone do not; docs/tracker.md, "Window reasoning").
+MOTION_OFFSETS = (1, 2, 4, 8)
+
+
+def _pm(box, r):
+    """``[box] + [-r, r]`` (``r`` an upper bound; a negative one shrinks the box, towards empty)."""
+    return I.add(*box, -r, r)
+
+
+def _constants(j: int, t_s: float, a):
+    """For pairs ``j`` samples apart: enclosures of ``tau = j t_s``, ``2 / tau`` and ``4 a``, and an upper
+    bound of ``a tau^2 / 4`` (``a`` ``(n,)``)."""
+    tau = I.scale(float(j), t_s, t_s)
+    e4 = I.mul(*I.mul(a, a, *tau), *I.scale(0.25, *tau))[1]
+    return tau, I.div(2.0, 2.0, *tau), e4, I.scale(4.0, a, a)
+
+
+def _remainder(vk, vl, e4, four_a):
+    """Upper bound of ``a tau^2 / 4 - (v_l - v_k)^2 / (4 a)`` over the velocity boxes ``vk``, ``vl``: the
+    square's lower bound, divided by ``4 a`` downwards, subtracted upwards (negative: no motion within
+    ``a`` joins the two velocities)."""
+    d2 = I.sqr(*I.sub(*vl, *vk))[0]
+    q = I.div(d2, d2, *four_a)[0]
+    return I.sub(e4, e4, q, q)[1]
+
+
+def _pair(x, xd, k, l, tau, inv_tau2, e4, four_a):
+    """Contract the boxes of samples ``k`` and ``l`` (index arrays of equal length, ``l`` later) with ``(*)``,
+    in place (:func:`_constants` gives the other arguments).  Returns where the remainder bound is
+    negative ``(R, *, n)``."""
+    xk, xl = (x[:, k, 0], x[:, k, 1]), (x[:, l, 0], x[:, l, 1])
+    vk, vl = (xd[:, k, 0], xd[:, k, 1]), (xd[:, l, 0], xd[:, l, 1])
+    r = _remainder(vk, vl, e4, four_a)
+    # velocities: v_k + v_l = 2 (x_l - x_k) / tau + [-2 r / tau, 2 r / tau]
+    s2 = I.mul(*I.sub(*xl, *xk), *inv_tau2)
+    r2 = I.mul(r, r, *inv_tau2)[1]
+    vk = I.intersect(*vk, *_pm(I.sub(*s2, *vl), r2))
+    vl = I.intersect(*vl, *_pm(I.sub(*s2, *vk), r2))
+    # positions: x_l - x_k = (v_k + v_l) tau / 2 + [-r, r]
+    m = I.mul(*I.add(*vk, *vl), *I.scale(0.5, *tau))
+    xl = I.intersect(*xl, *_pm(I.add(*xk, *m), r))
+    xk = I.intersect(*xk, *_pm(I.sub(*xl, *m), r))
+    # a sample is the k of one pair and the l of another: the second write keeps what the first contracted
+    for tube, new_k, new_l in ((xd, vk, vl), (x, xk, xl)):
+        tube[:, k, 0], tube[:, k, 1] = new_k
+        tube[:, l, 0], tube[:, l, 1] = I.intersect(tube[:, l, 0], tube[:, l, 1], *new_l)
+    return r < 0.0
+
+
+def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS):
+    """Contract pose and velocity tubes with the acceleration bound between pairs of samples (module docstring).
+
+    Parameters
+    ----------
+    x, xd : ndarray, shape (R, K, 2, n)
+        Pose (m) and velocity (m/s) tubes, ``[..., 0, :]`` the lower and
+        ``[..., 1, :]`` the upper bounds, at ``t_k = t_0 + k t_s``.
+        Contracted in place.
+    t_s : float
+        Sampling period, s (assumption A6: exactly this float).
+    a_max : array_like, shape (n,)
+        Bound on ``|x''|`` per pose coordinate, m/s^2 (assumption A2), > 0.
+    offsets : sequence of int
+        Sample distances of the coupled pairs.
+
+    Returns
+    -------
+    ndarray of bool, shape (R,)
+        Rows that no motion within ``a_max`` fits: a box became empty (or
+        NaN), or two samples are farther apart in velocity than ``a_max``
+        allows.  Their tubes are meaningless.
+    """
+    R, K = x.shape[:2]
+    a = np.asarray(a_max, dtype=np.float64)
+    empty = np.zeros(R, dtype=bool)
+    with I.quiet_fp():
+        for j in offsets:
+            if not 0 < j < K:
+                continue
+            # cost: only the pairs whose velocity boxes are disjoint in some row (a choice of pairs, no bound);
+            # elsewhere the square's lower bound is 0 and (*) is the plain trapezoid, which bought nothing
+            gap = np.maximum(xd[:, j:, 0] - xd[:, :K - j, 1], xd[:, :K - j, 0] - xd[:, j:, 1])
+            k = np.nonzero(np.any(gap > 0.0, axis=(0, 2)))[0]
+            if not k.size:
+                continue
+            neg = _pair(x, xd, k, k + j, *_constants(j, t_s, a))
+            empty |= neg.any(axis=(1, 2))
+        empty |= np.any(~(x[:, :, 0] <= x[:, :, 1]), axis=(1, 2)) | np.any(~(xd[:, :, 0] <= xd[:, :, 1]), axis=(1, 2))
+    return empty
