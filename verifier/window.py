@@ -620,8 +620,9 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=N
     Under valid assumptions the true hypothesis is never refuted, and each hypothesis' rounds do not
     depend on the other's: the verdict does not depend on this order, while the cost does.  A false
     hypothesis loses rows at every round; the true one keeps them all and costs the most.  Balancing the
-    rows run bounds the work at twice what the false hypothesis needs to be refuted, where taking the
-    hypotheses level by level spends the true one's rounds at every level.
+    rows run bounds the work by about twice what the false hypothesis needs to be refuted (up to one
+    round of the other), where taking the hypotheses level by level spends the true one's rounds at
+    every level.
 
     The rounds stop at the first refutation: the other hypothesis is then left as it stands, consistent
     but marked incomplete (``HypothesisResult.complete``), since its skipped rounds might have refuted
