@@ -502,8 +502,9 @@ class CompiledStep:
             B, n = st.batch, model.n
             a.update(
                 run=run,
-                # run_slot's (slot, slots) arguments, one call per slot; none for the hypotheses' driver
-                slots=tuple((t, threads) for t in range(threads)) if run is kernels.run_slot else (),
+                # the extra arguments of each call per block: run_slot's (slot, slots), once per slot; the
+                # hypotheses' driver is called once, with none
+                slots=tuple((t, threads) for t in range(threads)) if run is kernels.run_slot else ((),),
                 # the kernels' views of the state, field by field under the same names
                 rows=kernels.Rows(*(getattr(st, f) for f in kernels.Rows._fields)),
                 scen=kernels.Scenarios(*(getattr(st, f) for f in kernels.Scenarios._fields)),
@@ -519,12 +520,12 @@ class CompiledStep:
         a = self._args(config, st)
         slots = a["slots"]
         head = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"])
-        if record is None and prior is None and len(slots) < 2:
+        if record is None and prior is None and len(slots) == 1:
             # the online path: every argument's type is fixed for this state (q is a
             # C-contiguous float64 copy), so after the first call the compiled entry
             # point runs directly; numba's dispatcher would spend longer typing the
             # nested tuples of arrays than the kernel takes for a sample at rest
-            args = head + (*(slots[0] if slots else ()), int(st.k), q, False, a["no_record"], False, a["no_prior"])
+            args = head + slots[0] + (int(st.k), q, False, a["no_record"], False, a["no_prior"])
             entry = a.get("entry")
             if entry is None:
                 a["run"](*args)
@@ -535,15 +536,13 @@ class CompiledStep:
             rec = a["no_record"] if record is None else a["Record"](*record)
             pri = a["no_prior"] if prior is None else a["Prior"](*prior)
             tail = (int(st.k), q, record is not None, rec, prior is not None, pri)
-            if len(slots) < 2:
-                a["run"](*head, *(slots[0] if slots else ()), *tail)
-            else:  # slot 0 on this thread, the others on the pool's
-                others = [_slot_pool(len(slots) - 1).submit(a["run"], *head, t, n, *tail) for t, n in slots[1:]]
-                try:
-                    a["run"](*head, *slots[0], *tail)
-                finally:
-                    for f in others:
-                        f.result()  # every slot finishes before the state is read; re-raises a slot's error
+            # slot 0 on this thread, the others on the pool's
+            others = [_slot_pool(len(slots) - 1).submit(a["run"], *head, *extra, *tail) for extra in slots[1:]]
+            try:
+                a["run"](*head, *slots[0], *tail)
+            finally:
+                for f in others:
+                    f.result()  # every slot finishes before the state is read; re-raises a slot's error
         st.k += q.shape[1]
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
