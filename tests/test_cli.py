@@ -315,10 +315,17 @@ def test_ctrl_c_stops_certify_promptly_with_130(tmp_path):
     proc = subprocess.Popen([sys.executable, "-m", "crosscert", *CERTIFY_NARROW, "--out", str(tmp_path / "c")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=root,
                             start_new_session=True)
+    children = f"/proc/{proc.pid}/task/{proc.pid}/children"
     try:
-        time.sleep(8.0)  # the speed search and the counterexample searches are running
+        # once the background worker is up, the speed search and the counterexample searches run for
+        # seconds (the whole command takes about 8 s on an idle machine): interrupt 2 s into them, not
+        # after a fixed time from the start, which an idle machine can outrun
+        deadline = time.perf_counter() + 60.0
+        while proc.poll() is None and not open(children).read().split() and time.perf_counter() < deadline:
+            time.sleep(0.05)
+        time.sleep(2.0)
         assert proc.poll() is None
-        workers = open(f"/proc/{proc.pid}/task/{proc.pid}/children").read().split()
+        workers = open(children).read().split()
         t0 = time.perf_counter()
         os.killpg(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
