@@ -11,6 +11,7 @@ every command takes ``--robot``.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import sys
@@ -51,7 +52,8 @@ class _Interrupts:
     kernels compile) is only printed as "Exception ignored".  So, until the
     command has ended or reported the interrupt, it is sent again every
     ``_RESEND_S`` seconds (longer than the clean-up it interrupts), and
-    swallowed KeyboardInterrupts print nothing.
+    once interrupted, unraisable exceptions print nothing (a swallowed
+    KeyboardInterrupt, or C objects the interrupt left half-built).
     """
 
     def __init__(self) -> None:
@@ -74,7 +76,10 @@ class _Interrupts:
             os.kill(os.getpid(), signal.SIGINT)
 
     def _unraisable(self, unraisable) -> None:
-        if not isinstance(unraisable.exc_value, KeyboardInterrupt):  # a swallowed interrupt is sent again
+        # once interrupted, nothing unraisable is news: a swallowed interrupt is sent again, and what the
+        # interrupt stopped half-built in C is finalised with errors (llvmlite's ObjectRef.__del__ on an
+        # object whose constructor it cut short, while kernels compile)
+        if not self.seen:
             self._hook(unraisable)
 
     def report(self) -> int:
@@ -97,6 +102,8 @@ class _Interrupts:
 
     def __exit__(self, *exc) -> None:
         self._done.set()
+        if self.seen:
+            gc.collect()  # the interrupt's debris in reference cycles, finalised while the hook is ours
         if self.previous is not None:
             signal.signal(signal.SIGINT, self.previous)
             sys.unraisablehook = self._hook
