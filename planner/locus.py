@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import math
 import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +20,8 @@ from scipy.optimize import brentq
 
 from crosscert.robots.errors import SimulationError
 from crosscert.robots.kinematics import KinematicModel
+
+from .lru import LruCache
 
 __all__ = ["LineScan", "valid_poses", "scan_line", "refine_edge", "sign_changes", "joints_along",
            "locate_crossing", "valid_extent", "nearest_crossing"]
@@ -104,9 +105,10 @@ def scan_line(model, p, u, xi, q_guess, s_lo, s_hi, h) -> LineScan:
 
 #: Continuations of :func:`scan_line` on the grid ``s = sign h k``, by (model, line, guess, h, sign):
 #: ``[joints at k = 1, 2, ...], first invalid k or None``; most recently used last.
-_SIDES: OrderedDict = OrderedDict()
 #: How many continuations :data:`_SIDES` keeps (two per line; a few hundred joint vectors each).
 _SIDES_KEPT = 16
+_SIDES = LruCache(_SIDES_KEPT)
+#: One continuation extended at a time (taken out of the cache, grown, put back).
 _SIDES_LOCK = threading.Lock()
 
 
@@ -132,9 +134,7 @@ def _scan_side(model, p, u, xi, q0, sign, h, n_steps, s_end, key):
                 fail_k = k
             else:
                 qs.append(q)
-        _SIDES[key] = (qs, fail_k)
-        while len(_SIDES) > _SIDES_KEPT:
-            _SIDES.popitem(last=False)
+        _SIDES.put(key, (qs, fail_k))
     if fail_k is not None and fail_k < n_steps:
         return [sign * (h * k) for k in range(1, fail_k)], qs[:fail_k - 1], False, sign * (h * fail_k)
     used = qs[:max(n_steps - 1, 0)]

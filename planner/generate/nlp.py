@@ -39,13 +39,13 @@ A guess or solution is passed around as the tuple ``(X, V, A, J, Q, h_A, h_B)``
 from __future__ import annotations
 
 import threading
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 
 from ..ipopt import ParametricSolver
+from ..lru import LruCache
 from ..sampling import align_to_samples
 from .types import NotConverged, Objective, Samples
 
@@ -202,15 +202,7 @@ class CrossingNlp:
 
     def solver(self) -> CrossingSolver:
         """The :class:`CrossingSolver` of these data, built on first use and kept (:data:`_SOLVERS`)."""
-        key = self.key()
-        with _SOLVERS_LOCK:
-            solver = _SOLVERS.get(key)
-            if solver is None:
-                while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:
-                    _SOLVERS.popitem(last=False)
-                solver = _SOLVERS[key] = CrossingSolver(self)
-            _SOLVERS.move_to_end(key)
-        return solver
+        return _SOLVERS.get_or_build(self.key(), lambda: CrossingSolver(self))
 
 
 class CrossingSolver:
@@ -278,10 +270,9 @@ class CrossingSolver:
 
 
 #: Crossing solvers built in this process, by the value of what they are built from; most recently used last.
-_SOLVERS: OrderedDict = OrderedDict()
-_SOLVERS_LOCK = threading.Lock()
 #: How many :data:`_SOLVERS` are kept (a speed search plans one task with one objective at a time).
 _SOLVER_CACHE_SIZE = 4
+_SOLVERS = LruCache(_SOLVER_CACHE_SIZE)
 
 
 def solve_nlp(nlp: CrossingNlp, *, v_sing: float, margin: float, duration: float | None,

@@ -21,8 +21,6 @@ never reported as one: every converged candidate goes through
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import casadi as ca
 import numpy as np
 
@@ -31,6 +29,7 @@ from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.kinematics import KinematicModel
 
 from ..ipopt import ParametricSolver
+from ..lru import LruCache
 from .problem import (
     ACCEL_MARGIN,
     JOINT_MARGIN,
@@ -213,10 +212,10 @@ def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndar
 
 # --------------------------------------------------------------------- NLP
 #: Solvers built in this process, by (robot, samples, kind, IPOPT options): most recently used last.
-_SOLVERS: OrderedDict = OrderedDict()
 #: How many solvers :data:`_SOLVERS` keeps: each holds its expression graph and IPOPT's workspace,
 #: 30-50 MB for 200-500 samples of a two-joint robot; a bisection asks within one or two sample buckets.
 _SOLVER_CACHE_SIZE = 3
+_SOLVERS = LruCache(_SOLVER_CACHE_SIZE)
 
 
 def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind, ipopt: dict) -> ParametricSolver:
@@ -227,12 +226,11 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     and half-width ``xh`` (m each), the residual scales (n) and ``m0``.
     """
     key = (kin.robot, int(K), kind, tuple(sorted(ipopt.items())))
-    solver = _SOLVERS.get(key)
-    if solver is not None:
-        _SOLVERS.move_to_end(key)
-        return solver
-    while len(_SOLVERS) >= _SOLVER_CACHE_SIZE:  # make room first: the peak memory is the cache's size
-        _SOLVERS.popitem(last=False)
+    return _SOLVERS.get_or_build(key, lambda: _build_counterexample_solver(kin, int(K), kind, ipopt))
+
+
+def _build_counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind, ipopt: dict):
+    """The :class:`ParametricSolver` of :func:`_counterexample_solver`, built."""
     n, m = kin.n, kin.m
     qm, eps, amax = ca.SX.sym("qm", n, K), ca.SX.sym("eps", n), ca.SX.sym("amax", n)
     ts, xc, xh = ca.SX.sym("ts"), ca.SX.sym("xc", m), ca.SX.sym("xh", m)
@@ -267,9 +265,7 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
     z = ca.vertcat(s, ca.vec(Xs), ca.vec(Vs), ca.vec(Ws), ca.vec(Ds))
     # Feasibility problem; the small smoothness objective picks a regular point.
     obj = ca.sumsqr(Ws) / (n * (K - 1))
-    solver = ParametricSolver(kind.value, z, p, obj, g, ipopt=ipopt)
-    _SOLVERS[key] = solver
-    return solver
+    return ParametricSolver(kind.value, z, p, obj, g, ipopt=ipopt)
 
 
 def _mapped_start(warm: Counterexample, qm: np.ndarray, ts: float):
