@@ -65,6 +65,19 @@ from crosscert.verifier.tracker import initial_box_from_mode, track  # noqa: E40
 from crosscert.verifier.window import FixedLagWindow, track_window  # noqa: E402
 
 
+def _true_geometries(n: int) -> list:
+    """The true geometries of the tables: the centre of [xi] (None) and ``n - 1`` seeded ones, every other at a
+    corner of the box."""
+    return [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0)) for i in range(1, n)]
+
+
+def _crossing(v, xi):
+    """The simulated straight crossing of the tables at ``v`` m/s with true geometry ``xi``."""
+    kin, bench = kinematics(), benchmark_crossing()
+    return simulate_crossing(kin, bench.point, bench.direction, v, xi_true=xi, t_rest=0.05,
+                             working_guess=bench.q_point, seed=1, cruise=cruise_for(v))
+
+
 def _run(fn, v, xi, **kw):
     kin, im, s, bench = kinematics(), interval_model(), default_settings(), benchmark_crossing()
     r = fn(kin, bench.point, bench.direction, v, xi_true=xi, t_rest=0.05, working_guess=bench.q_point, seed=1,
@@ -79,7 +92,7 @@ def _run(fn, v, xi, **kw):
 
 
 def main() -> None:
-    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0)) for i in range(1, 20)]
+    geoms = _true_geometries(20)
     print("[1] crossings: v_sing, certified forward / window of 20, wrong, window s per run, us per sample fwd / win")
     for v in (0.9, 0.95, 1.0, 1.05, 1.1, 1.2, 1.3):
         res = [_run(simulate_crossing, v, xi) for xi in geoms]
@@ -117,9 +130,8 @@ def ceiling(speeds, starts: int, geometries: int = 20) -> None:
     """Certified runs against the runs no sound method can certify (module docstring, ``--ceiling``)."""
     from crosscert.planner.refute import RecordingBounds, search_bounce
 
-    kin, im, s, bench = kinematics(), interval_model(), default_settings(), benchmark_crossing()
-    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0))
-                      for i in range(1, geometries)]
+    kin, im, s = kinematics(), interval_model(), default_settings()
+    geoms = _true_geometries(geometries)
     # starting geometries of the non-convex search, seeded apart from the true ones
     seeds = [None] + [random_geometry(DEXTAR, np.random.default_rng(100 + i), corners=(i % 2 == 0))
                       for i in range(starts)]
@@ -129,8 +141,7 @@ def ceiling(speeds, starts: int, geometries: int = 20) -> None:
     for v in speeds:
         marks = []
         for xi in geoms:
-            r = simulate_crossing(kin, bench.point, bench.direction, v, xi_true=xi, t_rest=0.05,
-                                  working_guess=bench.q_point, seed=1, cruise=cruise_for(v))
+            r = _crossing(v, xi)
             w = track_window(im, r.q_meas, s, initial_mode=1)
             rb = RecordingBounds(q_meas=r.q_meas, m0=1, assumptions=s.assumptions)
             bounce = any(search_bounce(kin, rb, xi_start=x0).verified for x0 in seeds)
@@ -199,11 +210,7 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
     if "S1" not in parts and "S2" not in parts:
         _speed_lag(im, s)
         return
-    kin, bench = kinematics(), benchmark_crossing()
-    geoms = [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0))
-                      for i in range(1, geometries)]
-    runs = [simulate_crossing(kin, bench.point, bench.direction, 1.0, xi_true=xi, t_rest=0.05,
-                              working_guess=bench.q_point, seed=1, cruise=cruise_for(1.0)).q_meas for xi in geoms]
+    runs = [_crossing(1.0, xi).q_meas for xi in _true_geometries(geometries)]
     track_window(im, runs[0], s, initial_mode=1)  # warm-up: kernels loaded, caches filled
     print(f"[S1] window reasoning, 1.0 m/s crossings, {len(runs)} true geometries (ms per sample)", flush=True)
     rows = []
