@@ -25,6 +25,15 @@ from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
 # differences of the baselines follow from TB_DQ on
 # numpy integers: one compiled copy of the box helpers for every slot (see verifier.compiled.tape.T_F)
 TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = (np.int64(i) for i in range(10))
+#: Constant arguments of callees as numpy scalars, never Python literals: numba compiles a callee
+#: once more for every literal argument (``newton(..., True, ...)`` and ``newton(..., False, ...)``
+#: were two compilations of the whole Newton step; 19 of 88 such copies, test_kernels_compile_once).
+I0 = np.int64(0)
+NO_SLACK = np.int64(-1)
+ONE = np.int64(1)
+TWO = np.int64(2)
+YES = np.bool_(True)
+NO = np.bool_(False)
 
 
 class Scratch(NamedTuple):
@@ -107,7 +116,7 @@ def set_input(in_lo, in_hi, slot, B, b, k):
 
 @jit
 def _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m):
-    set_input(sc.il, sc.ih, 0, X, ix, n)
+    set_input(sc.il, sc.ih, I0, X, ix, n)
     set_input(sc.il, sc.ih, n, Q, iq, n)
     set_input(sc.il, sc.ih, 2 * n, XI, ixi, m)
 
@@ -173,7 +182,7 @@ def newton(prog, X, ix, Q, iq, XI, ixi, on_x, n, m, sc):
     for i in range(n):
         w[bl + i], w[bh + i] = -w[bh + i], -w[bl + i]
         w[yl + i], w[yh + i] = ops.sub(V[iv, 0, i], V[iv, 1, i], w[mid + i], w[mid + i])
-    gauss_seidel(w, al, ah, bl, bh, yl, yh, n, 1)
+    gauss_seidel(w, al, ah, bl, bh, yl, yh, n, ONE)
     for i in range(n):
         vl, vh = ops.add(w[mid + i], w[mid + i], w[yl + i], w[yh + i])
         V[iv, 0, i], V[iv, 1, i] = ops.intersect(V[iv, 0, i], V[iv, 1, i], vl, vh)
@@ -184,7 +193,7 @@ def mode_of(prog, X, ix, Q, iq, XI, ixi, n, m, sc):
     """+1 / -1 when ``mode_sign det J_x`` has that sign over the box, else 0."""
     _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
     forward(prog, T_DET, sc.il, sc.ih, sc.nl, sc.nh)
-    dl, dh = output(prog, T_DET, 0, sc.nl, sc.nh)
+    dl, dh = output(prog, T_DET, I0, sc.nl, sc.nh)
     if dl > 0.0:
         return 1
     if dh < 0.0:
@@ -218,7 +227,7 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
             w[yh + i] = w[y + n + i]
         else:
             w[yl + i], w[yh + i] = ops.add(w[y + i], w[y + n + i], w[slack + i], w[slack + n + i])
-    linear_enclosure(w, jl, jh, bl, bh, yl, yh, n, True, sweeps, yh + n)
+    linear_enclosure(w, jl, jh, bl, bh, yl, yh, n, YES, sweeps, yh + n)
     for i in range(n):
         if slack < 0:
             w[y + i] = w[yl + i]
@@ -236,7 +245,7 @@ def velocity_gs(prog, X, ix, Q, iq, XI, ixi, XD, ixd, QD, iqd, n, m, sc):
     for i in range(n):
         w[i] = XD[ixd, 0, i]
         w[n + i] = XD[ixd, 1, i]
-    _solve_vel(prog, sc, 0, -1, 1, 2 * n, n)
+    _solve_vel(prog, sc, I0, NO_SLACK, ONE, 2 * n, n)
     for i in range(n):
         XD[ixd, 0, i] = w[i]
         XD[ixd, 1, i] = w[n + i]
@@ -276,7 +285,7 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
             w[slack + i], w[slack + n + i] = ops.mul(-half_h, half_h, -a, a)
             w[u + i] = XD[ixd, 0, i]
             w[u + n + i] = XD[ixd, 1, i]
-        _solve_vel(prog, sc, u, slack, 1, 6 * n, n)
+        _solve_vel(prog, sc, u, slack, ONE, 6 * n, n)
         for i in range(n):
             w[accl + i] = w[u + i] if jb == 0 else ops.maxn(w[accl + i], w[u + i])
             w[acch + i] = w[u + n + i] if jb == 0 else ops.minn(w[acch + i], w[u + n + i])
@@ -322,7 +331,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     wi = sc.wi
     tb = sc.tb
     N = 1
-    copy_box(X, ix, P, 0, n)
+    copy_box(X, ix, P, I0, n)
     while True:
         any_split = False
         for p in range(N):
@@ -359,11 +368,11 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
                     tb[TB_PIECE, 0, d] = mid
                 alive = True
                 for _ in range(sweeps):
-                    hc4_pose(prog, tb, TB_PIECE, Q, iq, XI, ixi, n, m, sc, False)
+                    hc4_pose(prog, tb, TB_PIECE, Q, iq, XI, ixi, n, m, sc, NO)
                     if inverted_box(tb, TB_PIECE, n):
                         alive = False
                         break
-                    newton(prog, tb, TB_PIECE, Q, iq, XI, ixi, True, n, m, sc)
+                    newton(prog, tb, TB_PIECE, Q, iq, XI, ixi, YES, n, m, sc)
                     if inverted_box(tb, TB_PIECE, n):
                         alive = False
                         break
@@ -408,11 +417,11 @@ def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, ou
     """
     n = X_search.shape[2]
     m = XI.shape[2]
-    sc = thread_scratch(S, 0)
+    sc = thread_scratch(S, I0)
     stack = work
-    copy_box(X_search, 0, stack, 0, n)
+    copy_box(X_search, I0, stack, I0, n)
     top = 1
-    found = 0
+    found = I0  # a literal 0 here compiled copy_box once more
     seen = 0
     X = work[max_boxes + 2:max_boxes + 3]
     w0 = work[max_boxes + 3, 0]
@@ -421,24 +430,24 @@ def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, ou
         if seen > max_boxes:
             return -1
         top -= 1
-        copy_box(stack, top, X, 0, n)
+        copy_box(stack, top, X, I0, n)
         for _ in range(sweeps):
             for i in range(n):
                 w0[i] = X[0, 1, i] - X[0, 0, i]
-            hc4_pose(prog, X, 0, Q, 0, XI, 0, n, m, sc, False)
-            if inverted_box(X, 0, n):
+            hc4_pose(prog, X, I0, Q, I0, XI, I0, n, m, sc, NO)
+            if inverted_box(X, I0, n):
                 break
-            newton(prog, X, 0, Q, 0, XI, 0, True, n, m, sc)
-            if inverted_box(X, 0, n):
+            newton(prog, X, I0, Q, I0, XI, I0, YES, n, m, sc)
+            if inverted_box(X, I0, n):
                 break
             stalled = True
             for i in range(n):
                 stalled &= X[0, 1, i] - X[0, 0, i] >= 0.9 * w0[i]
             if stalled:
                 break
-        if inverted_box(X, 0, n):
+        if inverted_box(X, I0, n):
             continue
-        mode = mode_of(prog, X, 0, Q, 0, XI, 0, n, m, sc)
+        mode = mode_of(prog, X, I0, Q, I0, XI, I0, n, m, sc)
         d = 0
         wmax = X[0, 1, 0] - X[0, 0, 0]
         for i in range(1, n):
@@ -446,14 +455,14 @@ def pose_solutions(prog, Q, XI, X_search, tol, small, max_boxes, sweeps, out, ou
                 wmax = X[0, 1, i] - X[0, 0, i]
                 d = i
         if (mode != 0 and wmax < small) or wmax < tol:
-            copy_box(X, 0, out, found, n)
+            copy_box(X, I0, out, found, n)
             out_mode[found] = mode
             found += 1
             continue
         mid = 0.5 * (X[0, 0, d] + X[0, 1, d])
-        copy_box(X, 0, stack, top, n)
+        copy_box(X, I0, stack, top, n)
         stack[top, 1, d] = mid
-        copy_box(X, 0, stack, top + 1, n)
+        copy_box(X, I0, stack, top + 1, n)
         stack[top + 1, 0, d] = mid
         top += 2
     return found

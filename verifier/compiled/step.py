@@ -37,6 +37,10 @@ from .contractors import (
     TB_XDS,
     TB_XIW,
     TB_XS,
+    I0,
+    NO,
+    TWO,
+    YES,
     copy_box,
     empty_box,
     hc4_pose,
@@ -140,7 +144,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         tb[TB_Q0, 1, i] = qh + 0.05
     copy_box(tb, TB_Q0, tb, TB_QS, n)
     for _ in range(3):
-        newton(prog, tb, TB_XS, tb, TB_QS, XI, r, False, n, m, sc)
+        newton(prog, tb, TB_XS, tb, TB_QS, XI, r, NO, n, m, sc)
         for i in range(n):
             if tb[TB_QS, 0, i] > tb[TB_QS, 1, i]:
                 tb[TB_QS, 0, i] = tb[TB_Q0, 0, i]
@@ -148,7 +152,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
     inside = True
     for i in range(n):
         inside &= tb[TB_QS, 0, i] > tb[TB_Q0, 0, i] and tb[TB_QS, 1, i] < tb[TB_Q0, 1, i]
-    set_input(il, ih, 0, tb, TB_XS, n)
+    set_input(il, ih, I0, tb, TB_XS, n)
     set_input(il, ih, n, tb, TB_QS, n)
     set_input(il, ih, 2 * n, XI, r, m)
     set_input(il, ih, 2 * n + m, tb, TB_XDS, n)
@@ -161,7 +165,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         w[bl + i] = -rh
         w[bh + i] = -rl
     t = dh + n
-    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, False, 2, t)
+    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, NO, TWO, t)
     for i in range(n):
         il[3 * n + m + i] = w[dl + i]
         ih[3 * n + m + i] = w[dh + i]
@@ -172,7 +176,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         rl, rh = output(prog, T_ACCEL, i, sc.nl, sc.nh)
         w[bl + i] = -rh
         w[bh + i] = -rl
-    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, False, 2, t)
+    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, NO, TWO, t)
     for i in range(n):
         lo = w[dl + i]
         hi = w[dh + i]
@@ -250,7 +254,7 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
     copy_box(tb, TB_QN, Q, r, n)
     # displacement baselines: past boxes and readings only, built once per sample
     idx = sc.wi
-    n_base = 0
+    n_base = I0  # not the literal 0: see contractors.I0
     if vmodel == SOUND:
         for jb in range(c.baseline.shape[0]):
             j = c.baseline[jb].j
@@ -276,10 +280,10 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
         wv0 = _wsum(XD, r, n)
         if not keep_xi:
             copy_box(XI, r, tb, TB_XIW, m)
-        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, True)
+        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
         if keep_xi:
             copy_box(tb, TB_XIW, XI, r, m)
-        newton(prog, X, r, Q, r, XI, r, True, n, m, sc)
+        newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
         if vmodel == SOUND:
             velocity_displacement(prog, X, r, Q, r, XI, r, XD, r, past_x, past_q, r, tb, TB_DQ, c.baseline, idx,
                                   n_base, c.axis, n, m, sc)
@@ -302,7 +306,7 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
             for i in range(n):
                 narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
             if narrow:
-                mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, 2, n, m, sc,
+                mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
                                    c.baseline.shape[0])
                 dead = empty_box(X, r, n)
     if dead:
@@ -379,30 +383,26 @@ def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
         rec.mode[b, kk] = mode
 
 
-@jit
-def scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior):
-    """Advance scenario ``b`` over the readings ``q[b]`` ``(Kc, n)``, samples
-    ``k0 .. k0 + Kc - 1``, its hypotheses one after the other."""
-    P = c.hypotheses
-    for kk in range(q.shape[1]):
-        k = k0 + kk
-        for p in range(P):
-            r = b * P + p
-            if rows.row_bad[r] < 0:
-                _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
-        _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
-
-
 @njit(cache=True, **KERNEL_FLAGS)
 def run_slot(prog, c, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, prior):
     """Advance scenarios ``t, t + T, ...`` of the batch over the readings ``q``
     ``(B, Kc, n)`` with scratch slot ``t`` (``t = 0, T = 1``: every scenario).
     The one driver of batches: several threads call it at once, each with its
     own slot (``verifier.step``), since it releases the GIL and the scenarios
-    of different slots share no array element."""
+    of different slots share no array element.  Each scenario advances over
+    its readings ``q[b]`` ``(Kc, n)``, samples ``k0 .. k0 + Kc - 1``, its
+    hypotheses one after the other (in this body rather than a callee of its
+    own: typing the arguments again cost a second of the first compilation)."""
     sc = thread_scratch(S, t)
+    P = c.hypotheses
     for b in range(t, q.shape[0], T):
-        scenario_steps(prog, c, rows, scen, sc, b, k0, q, use_record, rec, use_prior, prior)
+        for kk in range(q.shape[1]):
+            k = k0 + kk
+            for p in range(P):
+                r = b * P + p
+                if rows.row_bad[r] < 0:
+                    _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
+            _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
 def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
@@ -411,7 +411,7 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
     thread slot ``t`` runs hypotheses ``t, t + T, ...`` with its scratch."""
     T = S.w.shape[0]
     P = c.hypotheses
-    s0 = thread_scratch(S, 0)
+    s0 = thread_scratch(S, I0)
     for kk in range(q.shape[1]):
         k = k0 + kk
         for b in range(q.shape[0]):

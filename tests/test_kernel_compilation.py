@@ -1,0 +1,69 @@
+"""Each kernel is compiled once: no kernel passes a Python literal to another.
+
+numba types a literal ``0`` or ``True`` in a call from compiled code as
+``Literal[int](0)`` / ``Literal[bool](True)`` and compiles the callee once more
+for that value, with its whole call tree: before 2026-12-02 the first run
+compiled 88 copies of 69 kernels, 26 s instead of 18 s (benchmarks/README.md,
+"Fewer copies").  Constant arguments are numpy scalars instead
+(:data:`verifier.compiled.contractors.I0`, ``YES``, ``NO``, ...), which numba
+types as ``int64`` / ``bool``.  This test reads the source of
+``verifier/compiled`` and fails on any call of a kernel with an int or bool
+literal argument.  (A counter first bound to a literal and passed on before it
+changes has the same effect; ``pose_solutions``' ``found`` starts at ``I0``
+for that reason, which this syntactic check does not see.)
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+
+from numba.core.registry import CPUDispatcher
+
+import crosscert.verifier.compiled as compiled_pkg
+
+MODULES = ("ops", "tape", "linalg", "contractors", "step", "vectorized")
+
+
+def _literal(node) -> bool:
+    """Whether ``node`` is an int or bool constant (``-1`` included); floats are never literal types."""
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        node = node.operand
+    return isinstance(node, ast.Constant) and isinstance(node.value, (bool, int))
+
+
+def _literal_kernel_calls(module_name: str) -> list[str]:
+    mod = importlib.import_module(f"crosscert.verifier.compiled.{module_name}")
+    kernels = {name for name, obj in vars(mod).items() if isinstance(obj, CPUDispatcher)}
+    ops_kernels = {name for name, obj in vars(importlib.import_module("crosscert.verifier.compiled.ops")).items()
+                   if isinstance(obj, CPUDispatcher)}
+    tree = ast.parse(Path(mod.__file__).read_text())
+    bad = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call):
+            continue
+        f = node.func
+        is_kernel = (isinstance(f, ast.Name) and f.id in kernels) or (
+            isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and f.value.id == "ops"
+            and f.attr in ops_kernels)
+        if is_kernel and any(_literal(a) for a in node.args):
+            bad.append(f"{module_name}.py:{node.lineno}: {ast.unparse(node)}")
+    return bad
+
+
+def test_no_kernel_passes_a_python_literal_to_a_kernel():
+    assert Path(compiled_pkg.__file__).parent.name == "compiled"
+    bad = [line for m in MODULES for line in _literal_kernel_calls(m)]
+    assert not bad, "literal arguments compile the callee once more; use a numpy scalar:\n" + "\n".join(bad)
+
+
+def test_the_check_sees_a_literal_argument(tmp_path, monkeypatch):
+    # the check itself: a call with a literal 0 in a module of kernels is reported
+    src = Path(importlib.import_module("crosscert.verifier.compiled.contractors").__file__).read_text()
+    assert "copy_box(X_search, I0, stack, I0, n)" in src
+    fake = tmp_path / "contractors.py"
+    fake.write_text(src.replace("copy_box(X_search, I0, stack, I0, n)", "copy_box(X_search, 0, stack, I0, n)"))
+    mod = importlib.import_module("crosscert.verifier.compiled.contractors")
+    monkeypatch.setattr(mod, "__file__", str(fake))
+    assert any("copy_box(X_search, 0, stack, I0, n)" in line for line in _literal_kernel_calls("contractors"))
