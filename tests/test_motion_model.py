@@ -234,11 +234,13 @@ def test_compiled_contraction_is_the_reference_on_adversarial_tubes(seed, specia
     refutes the same rows.  Without ``special`` most rows survive and are contracted."""
     rng = np.random.default_rng(seed)
     R, K, n = 6, 40, 2
-    # velocities 0.01 m/s apart from sample to sample in boxes narrower than that, poses their sums
-    v = np.cumsum(rng.choice([-0.01, 0.01], (R, K, 1, n)), axis=1)
+    # velocities 0.9 a_max t_s apart from sample to sample (the bound nearly binds), in boxes narrower than
+    # that; poses their trapezoid sums, in boxes wider than the remainder
+    v = np.cumsum(rng.choice([-0.9, 0.9], (R, K, 1, n)) * A_MAX * T_S, axis=1)
     side = np.array([-1.0, 1.0])[:, None]
-    xd = v + side * rng.uniform(0.0, 4e-3, (R, K, 2, n))
-    x = np.cumsum(v, axis=1) * T_S + side * rng.uniform(1e-7, 5e-6, (R, K, 2, n))
+    xd = v + side * rng.uniform(0.0, 2e-3, (R, K, 2, n))
+    x = np.concatenate([np.zeros((R, 1, 1, n)), np.cumsum(v[:, 1:] + v[:, :-1], axis=1) * (T_S / 2)], axis=1)
+    x = x + side * rng.uniform(1e-7, 5e-6, (R, K, 2, n))
     if special:
         values = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e-310, -1e-310])
         for tube in (x, xd):
