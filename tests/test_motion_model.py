@@ -17,6 +17,14 @@ Rounding the remainder, the quotient by ``4 a``, ``a tau^2 / 4`` or
 ``2 r / tau`` to nearest failed no test: each error is at most half an ulp,
 absorbed by the next operation's outward step (docs/soundness.md, "Window
 reasoning", step 8).
+
+The compiled pair contraction (``contract_tubes(compiled=True)``,
+verifier/motion_kernel.py) runs every containment test too and is compared
+with the reference bit for bit.  Removal checks on the kernel (2026-12-02):
+the remainder halved fails the containment tests; the remainder rounded to
+nearest, the ``l`` ends written before the ``k`` ends, the old ``v_k`` used
+for ``v_l``, or no flag on a negative remainder each fail
+``test_compiled_contraction_is_the_reference_on_adversarial_tubes``.
 """
 
 from __future__ import annotations
