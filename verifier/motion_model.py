@@ -128,6 +128,8 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
     R, K, n = x.shape[0], x.shape[1], x.shape[3]
     a = np.asarray(a_max, dtype=np.float64)
     empty = np.zeros(R, dtype=bool)
+    if compiled:
+        from .motion_kernel import pair_kernel  # numba loaded on first use only
     with I.quiet_fp():
         for j in offsets:
             if not 0 < j < K:
@@ -140,8 +142,6 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
                 continue
             tau, inv_tau2, e4, four_a = _constants_of(j, t_s, a)
             if compiled:
-                from .motion_kernel import pair_kernel
-
                 half = I.scale(0.5, *tau)
                 per_axis = (np.ascontiguousarray(np.broadcast_to(v, (n,)), np.float64) for v in (e4, *four_a))
                 pair_kernel(x, xd, k.astype(np.int64), j, float(tau[0]), float(tau[1]), float(inv_tau2[0]),
