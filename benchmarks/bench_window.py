@@ -191,6 +191,22 @@ class _Clock:
             setattr(self.module, name, fn)
 
 
+def _digest(w) -> str:
+    """A short hash of everything a window result reports but its time: verdicts, each hypothesis' summary and
+    surviving sub-boxes, the hull tubes, bit for bit (the same digest before and after a speed change)."""
+    import hashlib
+
+    h = hashlib.sha256(repr([w.verdict.value, w.forward_verdict.value, w.initial_mode,
+                             [(x.final_mode, x.status.value, x.refutation.value, x.passes, x.geometries_alive,
+                               x.complete) for x in w.hypotheses]]).encode())
+    arrays = [w.x_lo, w.x_hi, w.xd_lo, w.xd_hi]
+    for x in w.hypotheses:
+        arrays += [a for a in (x.x_lo, x.x_hi, x.xd_lo, x.xd_hi, x.xi_lo, x.xi_hi) if a is not None]
+    for a in arrays:
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    return h.hexdigest()[:12]
+
+
 def _lag_latency(im, s, q, lag):
     x0 = initial_box_from_mode(im, q[0], 1, s)
     fl = FixedLagWindow(im, s, x0, lag=lag)
@@ -215,21 +231,23 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
     print(f"[S1] window reasoning, 1.0 m/s crossings, {len(runs)} true geometries (ms per sample)", flush=True)
     rows = []
     for i, q in enumerate(runs):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         w = track_window(im, q, s, initial_mode=1)
-        dt = time.perf_counter() - t0
+        dt, dc = time.perf_counter() - t0, time.process_time() - c0
         kind = ("forward" if w.forward_verdict.value != "unknown" else
                 "undecided" if w.verdict.value == "unknown" else "window")
-        rows.append((kind, dt / len(q), dt, len(q), w))
+        rows.append((kind, dt / len(q), dt, len(q), w, dc / len(q)))
         print(f"  geometry {i:2d}: {len(q)} samples  {w.verdict.value:15s} {kind:9s} {dt:7.3f} s  "
-              f"{1e3 * dt / len(q):7.3f} ms/sample  passes {[h.passes for h in w.hypotheses]}  "
-              f"alive {[h.geometries_alive for h in w.hypotheses]}", flush=True)
+              f"{1e3 * dt / len(q):7.3f} ms/sample  (CPU {1e3 * dc / len(q):7.3f})  "
+              f"passes {[h.passes for h in w.hypotheses]}  alive {[h.geometries_alive for h in w.hypotheses]}  "
+              f"digest {_digest(w)}", flush=True)
     for kind in ("undecided", "window", "forward"):
         sel = [r for r in rows if r[0] == kind]
         if sel:
             per = np.array([r[1] for r in sel])
             print(f"  {kind:9s} ({len(sel):2d} runs): mean {1e3 * per.mean():.3f} ms/sample, min {1e3 * per.min():.3f}, "
-                  f"max {1e3 * per.max():.3f}; mean {np.mean([r[2] for r in sel]):.3f} s per run", flush=True)
+                  f"max {1e3 * per.max():.3f}; mean {np.mean([r[2] for r in sel]):.3f} s per run; "
+                  f"CPU {1e3 * np.mean([r[5] for r in sel]):.3f} ms/sample", flush=True)
     print(f"  verdicts: {[r[4].verdict.value for r in rows]}")
     print(f"  {_load('')}", flush=True)
     if "goal" in inspect.signature(track_window).parameters:  # since 2026-12-02: what certify asks
@@ -237,15 +255,17 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
               "certificate run and Monte Carlo ask)", flush=True)
         per = {}
         for i, q in enumerate(runs):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             w = track_window(im, q, s, initial_mode=1, goal="mode-changed")
-            dt = time.perf_counter() - t0
+            dt, dc = time.perf_counter() - t0, time.process_time() - c0
             same = w.verdict is rows[i][4].verdict
-            per.setdefault(rows[i][0], []).append(dt / len(q))
+            per.setdefault(rows[i][0], []).append((dt / len(q), dc / len(q)))
             print(f"  geometry {i:2d}: {w.verdict.value:15s} {'same' if same else 'DIFFERS'}  {dt:7.3f} s  "
-                  f"{1e3 * dt / len(q):7.3f} ms/sample", flush=True)
+                  f"{1e3 * dt / len(q):7.3f} ms/sample  (CPU {1e3 * dc / len(q):7.3f})  digest {_digest(w)}",
+                  flush=True)
         for kind, v in per.items():
-            print(f"  {kind:9s} ({len(v):2d} runs): mean {1e3 * np.mean(v):.3f} ms/sample", flush=True)
+            print(f"  {kind:9s} ({len(v):2d} runs): mean {1e3 * np.mean([a for a, _ in v]):.3f} ms/sample, "
+                  f"CPU {1e3 * np.mean([c for _, c in v]):.3f}", flush=True)
         print(f"  {_load('')}", flush=True)
     und = [i for i, r in enumerate(rows) if r[0] == "undecided"] or [0]
     q = runs[und[0]]

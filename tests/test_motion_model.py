@@ -17,6 +17,14 @@ Rounding the remainder, the quotient by ``4 a``, ``a tau^2 / 4`` or
 ``2 r / tau`` to nearest failed no test: each error is at most half an ulp,
 absorbed by the next operation's outward step (docs/soundness.md, "Window
 reasoning", step 8).
+
+The compiled pair contraction (``contract_tubes(compiled=True)``,
+verifier/motion_kernel.py) runs every containment test too and is compared
+with the reference bit for bit.  Removal checks on the kernel (2026-12-02):
+the remainder halved fails the containment tests; the remainder rounded to
+nearest, the ``l`` ends written before the ``k`` ends, the old ``v_k`` used
+for ``v_l``, or no flag on a negative remainder each fail
+``test_compiled_contraction_is_the_reference_on_adversarial_tubes``.
 """
 
 from __future__ import annotations
@@ -29,6 +37,8 @@ import pytest
 from crosscert.verifier.motion_model import MOTION_OFFSETS, _constants, _remainder, contract_tubes
 
 T_S = 0.001  # s (A6: the float itself)
+#: every containment test runs the numpy reference and the compiled kernel (verifier.motion_kernel)
+BOTH = pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
 A_MAX = np.array([80.0, 60.0])  # m/s^2
 
 
@@ -97,26 +107,29 @@ def _check_inside(x, xd, truth):
                 assert Fraction(xd[r, k, 0, c]) <= vs[k] <= Fraction(xd[r, k, 1, c]), ("velocity", r, c, k)
 
 
-def test_one_ulp_tubes_keep_the_exact_truth():
+@BOTH
+def test_one_ulp_tubes_keep_the_exact_truth(compiled):
     """The tightest tubes around motions that attain the bound on every interval: nothing may be lost."""
     for seed in range(3):
         x, xd, truth = _tubes(seed)
-        empty = contract_tubes(x, xd, T_S, A_MAX)
+        empty = contract_tubes(x, xd, T_S, A_MAX, compiled=compiled)
         assert not empty.any()
         _check_inside(x, xd, truth)
 
 
+@BOTH
 @pytest.mark.parametrize("widen_x, widen_v", [(1e-6, 0.0), (0.0, 0.05), (2e-5, 0.3)])
-def test_wide_tubes_keep_the_exact_truth_and_shrink(widen_x, widen_v):
+def test_wide_tubes_keep_the_exact_truth_and_shrink(widen_x, widen_v, compiled):
     x, xd, truth = _tubes(10, widen_x=widen_x, widen_v=widen_v, dwell=(0.6, 4.0))
     w0 = (x[..., 1, :] - x[..., 0, :]).sum() + (xd[..., 1, :] - xd[..., 0, :]).sum()
-    empty = contract_tubes(x, xd, T_S, A_MAX)
+    empty = contract_tubes(x, xd, T_S, A_MAX, compiled=compiled)
     assert not empty.any()
     _check_inside(x, xd, truth)
     assert (x[..., 1, :] - x[..., 0, :]).sum() + (xd[..., 1, :] - xd[..., 0, :]).sum() < w0
 
 
-def test_contracts_what_taylor_cannot():
+@BOTH
+def test_contracts_what_taylor_cannot(compiled):
     """Velocities -0.039 and +0.039 m/s one sample apart at 80 m/s^2: the motion must accelerate almost the
     whole time, so the displacement lies within ``r = a tau^2 / 4 - (v_l - v_k)^2 / (4 a)`` (about 1 um) of
     ``(v_k + v_l) tau / 2 = 0``; both ends are reached (accelerate, then brake, or the reverse), so the
@@ -126,29 +139,31 @@ def test_contracts_what_taylor_cannot():
     xd = np.zeros((1, 2, 2, 1))
     x[0, 1, :, 0] = -1e-3, 1e-3
     xd[0, 0, :, 0], xd[0, 1, :, 0] = -v, v
-    assert not contract_tubes(x, xd, T_S, [a], offsets=(1,)).any()
+    assert not contract_tubes(x, xd, T_S, [a], offsets=(1,), compiled=compiled).any()
     r = Fraction(a) * Fraction(T_S) ** 2 / 4 - (2 * Fraction(v)) ** 2 / (4 * Fraction(a))
     lo, hi = Fraction(x[0, 1, 0, 0]), Fraction(x[0, 1, 1, 0])
     assert lo <= -r and r <= hi
     assert hi - lo < Fraction(201, 100) * r, (float(lo), float(hi), float(r))
 
 
-def test_no_motion_within_a_max_is_refuted():
+@BOTH
+def test_no_motion_within_a_max_is_refuted(compiled):
     """Velocities 1 m/s apart one sample apart need 1000 m/s^2: the row is refuted, the other kept."""
     x = np.zeros((2, 5, 2, 2))
     xd = np.zeros((2, 5, 2, 2))
     xd[0, 3, :, 0] = 1.0
     xd[0, 3, 0, 1] = -1e-3
     x[0, 3:, :, 0] = 0.5e-3
-    empty = contract_tubes(x, xd, T_S, A_MAX)
+    empty = contract_tubes(x, xd, T_S, A_MAX, compiled=compiled)
     assert empty.tolist() == [True, False]
     assert np.all(x[1] == 0.0) and np.all(xd[1] == 0.0)  # exact zeros stay exact
 
 
-def test_offsets_beyond_the_recording_are_skipped():
+@BOTH
+def test_offsets_beyond_the_recording_are_skipped(compiled):
     x, xd, truth = _tubes(3, rows=1, K=3)
     assert max(MOTION_OFFSETS) >= 3
-    assert not contract_tubes(x, xd, T_S, A_MAX).any()
+    assert not contract_tubes(x, xd, T_S, A_MAX, compiled=compiled).any()
     _check_inside(x, xd, truth)
 
 
@@ -171,3 +186,89 @@ def test_constants_and_remainder_bound_the_exact_values():
             assert Fraction(float(e4[i])) >= A * t * t / 4
             exact = A * t * t / 4 - (Fraction(float(vl[i])) - Fraction(float(vk[i]))) ** 2 / (4 * A)
             assert Fraction(float(r[i])) >= exact, (j, i)
+
+
+def _same_floats(a, b):
+    """Equal float for float, the sign of zeros included; NaN where the other has NaN."""
+    num = ~np.isnan(a)
+    return np.array_equal(a, b, equal_nan=True) and np.array_equal(np.signbit(a[num]), np.signbit(b[num]))
+
+
+def _both_ways(x, xd, a, offsets=MOTION_OFFSETS, t_s=T_S):
+    """Contract copies of the tubes with the numpy reference and with the compiled kernel; check both give the
+    same floats and the same refuted rows.  Returns how many rows were refuted."""
+    out = []
+    for compiled in (False, True):
+        xc, xdc = x.copy(), xd.copy()
+        empty = contract_tubes(xc, xdc, t_s, a, offsets, compiled=compiled)
+        out.append((xc, xdc, empty))
+    (x0, xd0, e0), (x1, xd1, e1) = out
+    assert np.array_equal(e0, e1)
+    assert _same_floats(x0, x1) and _same_floats(xd0, xd1)
+    return int(e0.sum())
+
+
+def test_compiled_contraction_is_the_reference_on_a_window_run(monkeypatch):
+    """The tubes the window contracts on the catalogue's slow crossing (``crossing_0500``, a few rounds), after
+    every pass: the kernel gives numpy's floats bit for bit (the window's compiled backend uses the kernel,
+    and its verdicts and reported tubes are those of the reference's contraction)."""
+    import crosscert.verifier.window as W
+    from problems import CATALOGUE, default_settings, interval_model, run_of
+
+    seen = []
+
+    def spy(x, xd, t_s, a_max, *args, **kw):
+        seen.append((x.copy(), xd.copy(), t_s, np.array(a_max)))
+        return contract_tubes(x, xd, t_s, a_max, *args, **kw)
+
+    monkeypatch.setattr(W, "contract_tubes", spy)
+    run = run_of(CATALOGUE["crossing_0500"])
+    W.track_window(interval_model(), run.q_meas, default_settings(), initial_mode=1, max_geometries=4)
+    assert len(seen) >= 4
+    pairs = 0
+    for x, xd, t_s, a in seen:
+        assert t_s == default_settings().t_s
+        K = x.shape[1]
+        pairs += sum(np.any(np.maximum(xd[:, j:, 0] - xd[:, :K - j, 1], xd[:, :K - j, 0] - xd[:, j:, 1]) > 0)
+                     for j in MOTION_OFFSETS if j < K)
+        _both_ways(x, xd, a, t_s=t_s)
+    assert pairs > 0  # some pass had pairs to contract
+
+
+@pytest.mark.parametrize("seed, special", [(0, True), (1, True), (2, False), (3, False)])
+def test_compiled_contraction_is_the_reference_on_adversarial_tubes(seed, special):
+    """Random tubes with velocity jumps (some rows' remainders negative), and with ``special``, empty and NaN
+    boxes, signed zeros, subnormal, infinite and point bounds: the kernel gives the reference's floats and
+    refutes the same rows.  Without ``special`` most rows survive and are contracted."""
+    rng = np.random.default_rng(seed)
+    R, K, n = 6, 40, 2
+    # velocities 0.9 a_max t_s apart from sample to sample (the bound nearly binds), in boxes narrower than
+    # that; poses their trapezoid sums, in boxes wider than the remainder
+    v = np.cumsum(rng.choice([-0.9, 0.9], (R, K, 1, n)) * A_MAX * T_S, axis=1)
+    side = np.array([-1.0, 1.0])[:, None]
+    xd = v + side * rng.uniform(0.0, 2e-3, (R, K, 2, n))
+    x = np.concatenate([np.zeros((R, 1, 1, n)), np.cumsum(v[:, 1:] + v[:, :-1], axis=1) * (T_S / 2)], axis=1)
+    x = x + side * rng.uniform(1e-7, 5e-6, (R, K, 2, n))
+    if special:
+        values = np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 1e-310, -1e-310])
+        for tube in (x, xd):
+            hit = rng.random(tube.shape) < 0.03
+            tube[hit] = rng.choice(values, hit.sum())
+            flip = rng.random((R, K, n)) < 0.02  # empty boxes
+            lo, hi = tube[:, :, 0].copy(), tube[:, :, 1].copy()
+            tube[:, :, 0][flip], tube[:, :, 1][flip] = hi[flip], lo[flip]
+            point = rng.random((R, K, n)) < 0.05
+            tube[:, :, 1][point] = tube[:, :, 0][point]
+        x[0], xd[0] = 0.0, 0.0  # a row of exact zeros
+    xd[1, 10, :, 0] = 1.0  # a jump no motion within a_max makes
+    # the same in a row whose pose boxes are so wide that no box becomes empty: only the negative remainder
+    # refutes it (removal check: the kernel not flagging it passes every other test)
+    x[2, :, 0], x[2, :, 1] = -1.0, 1.0
+    xd[2, 20:, :, 1] += 0.5
+    refuted = _both_ways(x, xd, A_MAX)
+    assert 2 <= refuted < R or special
+    _both_ways(x, xd, A_MAX, offsets=(1, 3, 2, 1))
+    if not special:  # the reference contracts the surviving rows
+        xc, xdc = x.copy(), xd.copy()
+        live = ~contract_tubes(xc, xdc, T_S, A_MAX)
+        assert live.any() and (np.any(xc[live] != x[live]) or np.any(xdc[live] != xd[live]))

@@ -401,3 +401,32 @@ def test_acceleration_bound_between_samples_certifies_the_plan_at_0961():
                         PlanningBounds(), 0.961)
     assert run.forward.verdict is Verdict.UNKNOWN
     assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
+
+
+def test_the_compiled_contraction_changes_no_reported_box(monkeypatch):
+    """The window's compiled backend contracts its tubes with the compiled pair kernel
+    (``contract_tubes(compiled=True)``); with numpy's contraction instead, the same run reports the same
+    verdicts, passes and sub-boxes and the same tubes, bit for bit (catalogue problem ``crossing_0500``)."""
+    import crosscert.verifier.window as W
+    from problems import CATALOGUE, default_settings, run_of
+
+    real, calls = W.contract_tubes, []
+
+    def reference(*args, compiled=False, **kw):
+        calls.append(compiled)
+        return real(*args, **kw)
+
+    run, s = run_of(CATALOGUE["crossing_0500"]), default_settings()
+    kernel = track_window(interval_model(), run.q_meas, s, initial_mode=1, max_geometries=8)
+    monkeypatch.setattr(W, "contract_tubes", reference)
+    numpy = track_window(interval_model(), run.q_meas, s, initial_mode=1, max_geometries=8)
+    assert calls and all(calls)  # the compiled backend asked for the kernel, and got numpy's here
+    assert sum(h.passes for h in kernel.hypotheses) >= 4, kernel.summary()
+    assert kernel.verdict is numpy.verdict and kernel.hypotheses == numpy.hypotheses
+    pairs = [(kernel, numpy)] + list(zip(kernel.hypotheses, numpy.hypotheses))
+    for a, b in pairs:
+        for name in ("x_lo", "x_hi", "xd_lo", "xd_hi", "xi_lo", "xi_hi"):
+            u, v = getattr(a, name, None), getattr(b, name, None)
+            assert (u is None) == (v is None), name
+            if u is not None:
+                assert np.array_equal(u, v, equal_nan=True), name

@@ -518,7 +518,7 @@ class _Hypothesis:
         other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
         s = self.finals.s
         # empty tubes, or tubes no motion within a_max fits (contracted between samples: step 8)
-        dead = (bad >= 0) | contract_tubes(x, xd, s.t_s, s.a_max)
+        dead = (bad >= 0) | contract_tubes(x, xd, s.t_s, s.a_max, compiled=self.finals.backend == Backend.COMPILED)
         live = ~dead & ~other
         self.tx, self.txd = x, xd
         # the pass started from these sub-boxes and only contracted them; intersecting is exact and keeps

@@ -1,0 +1,68 @@
+"""The pair contraction of :mod:`verifier.motion_model` compiled: one loop over rows, pose coordinates and pairs.
+
+:func:`pair_kernel` computes what ``verifier.motion_model._pair`` computes, operation for
+operation, with the scalar interval operations of :mod:`verifier.compiled.ops` (which
+give numpy's floats bit for bit, docs/rounding.md), in the same order of reads and
+writes: every pair is read before any is written, the ``k`` ends are written, then
+each ``l`` end is intersected with what is there.  The same floats at a fraction of
+numpy's per-call cost (tests/test_motion_model.py compares the two bit for bit).
+Imported on first use only, so that the numpy backend never loads numba.
+"""
+
+from __future__ import annotations
+
+from .compiled.ops import add, cached_jit, div, intersect, mul, sqr, sub
+
+
+@cached_jit
+def pair_kernel(x, xd, k, j, tau_lo, tau_hi, it_lo, it_hi, half_lo, half_hi, e4, fa_lo, fa_hi, new, dead):
+    """Contract the boxes of samples ``k`` and ``k + j`` of tubes ``x``, ``xd`` ``(R, K, 2, n)`` in place.
+
+    ``tau``, ``it`` (``2 / tau``) and ``half`` (``tau / 2``) are enclosures; ``e4`` ``(n,)`` the upper
+    bound of ``a tau^2 / 4``, ``fa`` ``(n,)`` the enclosure of ``4 a``.  ``new`` ``(len(k), 8)`` is
+    scratch; ``dead`` ``(R,)`` is set where a remainder bound is negative.
+    """
+    R, n, P = x.shape[0], x.shape[3], k.shape[0]
+    for r in range(R):
+        for c in range(n):
+            for i in range(P):
+                a, b = k[i], k[i] + j
+                xkl, xkh, xll, xlh = x[r, a, 0, c], x[r, a, 1, c], x[r, b, 0, c], x[r, b, 1, c]
+                vkl, vkh, vll, vlh = xd[r, a, 0, c], xd[r, a, 1, c], xd[r, b, 0, c], xd[r, b, 1, c]
+                # the remainder bound: a tau^2 / 4 - (v_l - v_k)^2 / (4 a), rounded up
+                dl, dh = sub(vll, vlh, vkl, vkh)
+                d2 = sqr(dl, dh)[0]
+                q = div(d2, d2, fa_lo[c], fa_hi[c])[0]
+                rem = sub(e4[c], e4[c], q, q)[1]
+                if rem < 0.0:
+                    dead[r] = True
+                # velocities
+                sl, sh = mul(*sub(xll, xlh, xkl, xkh), it_lo, it_hi)
+                r2 = mul(rem, rem, it_lo, it_hi)[1]
+                tl, th = sub(sl, sh, vll, vlh)
+                vkl, vkh = intersect(vkl, vkh, *add(tl, th, -r2, r2))
+                tl, th = sub(sl, sh, vkl, vkh)
+                vll, vlh = intersect(vll, vlh, *add(tl, th, -r2, r2))
+                # positions
+                ml, mh = add(vkl, vkh, vll, vlh)
+                ml, mh = mul(ml, mh, half_lo, half_hi)
+                tl, th = add(xkl, xkh, ml, mh)
+                xll, xlh = intersect(xll, xlh, *add(tl, th, -rem, rem))
+                tl, th = sub(xll, xlh, ml, mh)
+                xkl, xkh = intersect(xkl, xkh, *add(tl, th, -rem, rem))
+                new[i, 0], new[i, 1], new[i, 2], new[i, 3] = vkl, vkh, vll, vlh
+                new[i, 4], new[i, 5], new[i, 6], new[i, 7] = xkl, xkh, xll, xlh
+            # the k ends first, then each l end intersected with what is there (a sample is the k of
+            # one pair and the l of another)
+            for i in range(P):
+                a = k[i]
+                xd[r, a, 0, c], xd[r, a, 1, c] = new[i, 0], new[i, 1]
+            for i in range(P):
+                b = k[i] + j
+                xd[r, b, 0, c], xd[r, b, 1, c] = intersect(xd[r, b, 0, c], xd[r, b, 1, c], new[i, 2], new[i, 3])
+            for i in range(P):
+                a = k[i]
+                x[r, a, 0, c], x[r, a, 1, c] = new[i, 4], new[i, 5]
+            for i in range(P):
+                b = k[i] + j
+                x[r, b, 0, c], x[r, b, 1, c] = intersect(x[r, b, 0, c], x[r, b, 1, c], new[i, 6], new[i, 7])
