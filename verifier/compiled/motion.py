@@ -11,7 +11,7 @@ Imported on first use only, so that the numpy backend never loads numba.
 
 from __future__ import annotations
 
-from .compiled.ops import add, cached_jit, div, intersect, mul, sqr, sub
+from .ops import add, cached_jit, div, intersect, mul, sqr, sub
 
 
 @cached_jit
