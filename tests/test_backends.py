@@ -160,6 +160,31 @@ def test_initial_box_backends_agree(name, imodel, settings):
             assert rm == fm and np.array_equal(rb[0], fb[0]) and np.array_equal(rb[1], fb[1])
 
 
+def test_the_enumeration_does_not_depend_on_the_call_before(imodel, settings):
+    """The compiled enumeration keeps its output and stack arrays from call to call (per thread and
+    size): a call after another one with more solutions, a budget that runs out, or another size gives
+    what it gives in a fresh process — the arrays it returns are its own, not views of the buffers."""
+    from crosscert.verifier.step import pose_solution_arrays
+
+    run = run_of(CATALOGUE["crossing_1458"])
+    eps = settings.validated(imodel.n).eps_q
+    X = tuple(np.asarray(v, dtype=float) for v in imodel.robot.x_bounds)
+
+    def enum(k, **kw):
+        q = run.q_meas[k]
+        return pose_solution_arrays(imodel, (q - eps, q + eps), imodel.xi_box(), X, tol=1e-5, **kw)
+
+    near, rest = run.k_sing - 30, 0
+    first = enum(rest)
+    assert first is not None and len(first[1]) > 0
+    again_near = enum(near)
+    assert enum(near, max_boxes=3) is None  # the budget ran out: no partial answer left behind
+    assert enum(rest, max_boxes=5000) is not None  # another size: other buffers
+    for before, after in ((first, enum(rest)), (again_near, enum(near))):
+        assert np.array_equal(before[0], after[0]) and np.array_equal(before[1], after[1])
+    assert not np.shares_memory(enum(rest)[0], enum(rest)[0])
+
+
 def test_threads_change_nothing():
     """Scenarios or hypotheses spread over threads: the serial kernel's boxes."""
     model, s, q, x0 = _monte_carlo_batch()

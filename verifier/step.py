@@ -46,7 +46,7 @@ from .constants import JOINT_FD, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
-           "advance", "pose_solutions", "StepImpl", "NumpyStep", "CompiledStep"]
+           "advance", "pose_solutions", "pose_solution_arrays", "StepImpl", "NumpyStep", "CompiledStep"]
 
 
 class Backend(str, Enum):
@@ -440,7 +440,7 @@ class StepImpl(Protocol):
         """Advance ``state`` over checked readings ``q`` ``(B, Kc, n)`` (see :func:`advance`)."""
 
     def pose_solutions(self, model, Q, XI, X_search, tol: float, small: float, max_boxes: int, sweeps: int):
-        """See :func:`pose_solutions`."""
+        """See :func:`pose_solution_arrays`."""
 
 
 class NumpyStep:
@@ -460,7 +460,11 @@ class NumpyStep:
             state.k += 1
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
-        return _np_pose_solutions(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps)
+        sols = _np_pose_solutions(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps)
+        if sols is None:
+            return None
+        boxes = np.array([np.stack(b) for b, _ in sols], dtype=np.float64).reshape(-1, 2, model.n)
+        return boxes, np.array([m for _, m in sols], dtype=np.int64)
 
 
 class CompiledStep:
@@ -547,18 +551,32 @@ class CompiledStep:
 
     def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
         from .compiled.contractors import pose_solutions as kernel
-        from .compiled.contractors import scratch_arrays
 
         box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)])[None])  # noqa: E731
-        out = np.empty((max_boxes, 2, model.n))
-        modes = np.empty(max_boxes, np.int64)
-        scratch = scratch_arrays(1, model.program.n_nodes, model.n, model.m, 0, 0, 1)
-        work = np.empty((max_boxes + 4, 2, model.n))  # the kernel's stack, current box and widths
+        out, modes, scratch, work = _enumeration_buffers(model, int(max_boxes))
         count = kernel(model.program, box(Q), box(XI), box(X_search), float(tol), float(small), int(max_boxes),
                        int(sweeps), out, modes, scratch, work)
         if count < 0:
             return None
-        return [((out[i, 0].copy(), out[i, 1].copy()), int(modes[i])) for i in range(count)]
+        return out[:count].copy(), modes[:count].copy()
+
+
+_BUFFERS = threading.local()
+
+
+def _enumeration_buffers(model, max_boxes: int):
+    """The compiled enumeration's output, scratch and stack ``(max_boxes + 4, 2, n)`` for this thread,
+    allocated once per size (the fixed-lag window enumerates at nearly every sample; the kernel
+    overwrites whatever it reads)."""
+    from .compiled.contractors import scratch_arrays
+
+    key = (model.n, model.m, model.program.n_nodes, max_boxes)
+    got = getattr(_BUFFERS, "by_size", None)
+    if got is None or got[0] != key:
+        got = _BUFFERS.by_size = (key, (np.empty((max_boxes, 2, model.n)), np.empty(max_boxes, np.int64),
+                                        scratch_arrays(1, model.program.n_nodes, model.n, model.m, 0, 0, 1),
+                                        np.empty((max_boxes + 4, 2, model.n))))
+    return got[1]
 
 
 _POOL: dict = {}
@@ -588,12 +606,24 @@ def _entry_point(dispatcher, args):
 _IMPLS = {Backend.NUMPY: NumpyStep(), Backend.COMPILED: CompiledStep()}
 
 
+def pose_solution_arrays(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 5e-3,
+                         max_boxes: int = 20000, sweeps: int = 30, backend: str | Backend = Backend.COMPILED):
+    """Enclose every forward-kinematics solution in ``X_search`` (the branch and prune of
+    :func:`verifier.contractors.pose_solutions`, same arguments) run by ``backend``: the solution
+    boxes ``(N, 2, n)`` (m) and their modes ``(N,)`` (0: undecided), or ``None`` when the budget of
+    ``max_boxes`` boxes ran out."""
+    return _IMPLS[Backend(backend)].pose_solutions(model, Q, XI, X_search, tol, small, max_boxes, sweeps)
+
+
 def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 5e-3, max_boxes: int = 20000,
                    sweeps: int = 30, backend: str | Backend = Backend.COMPILED):
-    """Enclose every forward-kinematics solution in ``X_search``: the branch
-    and prune of :func:`verifier.contractors.pose_solutions` (same arguments
-    and result) run by ``backend``."""
-    return _IMPLS[Backend(backend)].pose_solutions(model, Q, XI, X_search, tol, small, max_boxes, sweeps)
+    """:func:`pose_solution_arrays` as the reference returns it: a list of ``((lo, hi), mode)``, or ``None``."""
+    got = pose_solution_arrays(model, Q, XI, X_search, tol=tol, small=small, max_boxes=max_boxes, sweeps=sweeps,
+                               backend=backend)
+    if got is None:
+        return None
+    boxes, modes = got
+    return [((boxes[i, 0].copy(), boxes[i, 1].copy()), int(modes[i])) for i in range(len(modes))]
 
 
 def _kernel_array(a):

@@ -46,7 +46,7 @@ from . import interval as I
 from .linalg import point_inverse
 from .motion_model import contract_tubes
 from .settings import TrackerSettings, Verdict
-from .step import Backend, advance, configure, init_state, partition_xi, pose_solutions
+from .step import Backend, advance, configure, init_state, partition_xi, pose_solution_arrays
 from .tracker import Tracker, initial_box_from_mode, verdict_of
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
@@ -240,11 +240,7 @@ def _solutions(model, q_last, s, xi_row, backend, search, tol):
     ``None`` when the enumeration gave up.  One enumeration serves both final-mode hypotheses."""
     eps = s.eps_q
     Q = I.sub(q_last, q_last, eps, eps)[0], I.add(q_last, q_last, eps, eps)[1]
-    sols = pose_solutions(model, Q, xi_row, search, tol=tol, backend=backend)
-    if sols is None:
-        return None
-    boxes = np.array([np.stack(b) for b, _ in sols], dtype=np.float64).reshape(-1, 2, model.n)
-    return boxes, np.array([m for _, m in sols], dtype=np.int64)
+    return pose_solution_arrays(model, Q, xi_row, search, tol=tol, backend=backend)
 
 
 def _hull_of_mode(sols, mode, search):
