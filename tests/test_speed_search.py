@@ -156,33 +156,45 @@ def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(mo
         assert warm == f"ce@{fastest}", (v, warm)
 
 
+def _plain(monkeypatch, certifies):
+    """v_min and the speeds asked by the search without a guess."""
+    asked = _answers(monkeypatch, certifies)
+    return search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01).v_min, list(asked)
+
+
 @pytest.mark.parametrize("threshold", [0.61, 0.8438, 0.9987, 1.5, 1.95])
 @pytest.mark.parametrize("guess", [0.3, 0.6, 0.95, 0.9987, 1.0, 1.3, 1.96, 2.5])
-def test_search_from_a_guess_brackets_a_monotone_threshold_within_tol(monkeypatch, threshold, guess):
-    """From any guess (inside, outside or at the ends of the bracket) the search finds the threshold
-    within tol, with every failed speed below v_min and one of them within tol of it."""
+def test_search_from_a_guess_finds_the_bisections_answer(monkeypatch, threshold, guess):
+    """From any guess (inside, outside or at the ends of the bracket) the search finds the speed the search
+    without a guess finds (monotone answers), with every failed speed below v_min and one within tol of it."""
+    want, _ = _plain(monkeypatch, lambda v: v >= threshold)
     asked = _answers(monkeypatch, lambda v: v >= threshold)
     r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=guess)
-    assert r.v_min is not None and threshold <= r.v_min <= threshold + 0.01
+    assert r.v_min == want
     by_v = {t.v_sing: t.verdict for t in r.trials}
     assert all((v is Verdict.MODE_CHANGED) == (s >= r.v_min) for s, v in by_v.items())
     below = [s for s in by_v if s < r.v_min]
     assert below and r.v_min - max(below) <= 0.01
-    assert asked[0] == round(min(max(guess, 0.6), 1.96), 6) and len(asked) == len(set(asked))
-    # doubling away from the guess, then bisection: about 2 log2(distance / tol) questions
+    assert len(asked) == len(set(asked))
+    # steps doubling away from the guess, then bisection: about 2 log2(distance / tol) questions
     far = max(abs(threshold - min(max(guess, 0.6), 1.96)), 0.01)
-    assert len(asked) <= 2 * math.ceil(math.log2(far / 0.01)) + 3
+    assert len(asked) <= 2 * math.ceil(math.log2(far / 0.01)) + 5
 
 
-def test_a_guess_within_tol_asks_two_speeds(monkeypatch):
-    """The repeated-task case: last task's v_min as the guess, the answer moved by less than tol."""
-    asked = _answers(monkeypatch, lambda v: v >= 0.9680)
-    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=0.9690)
-    # one step down is on the 1e-6 m/s grid, no farther than tol in floating point
-    assert r.v_min == 0.969 and asked == [0.969, 0.959001]
-    asked.clear()
-    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=0.9670)
-    assert r.v_min == 0.976999 and asked == [0.967, 0.976999]
+@pytest.mark.parametrize("threshold", [0.6105, 0.8438, 0.9680, 1.0624, 1.5, 1.9555])
+def test_a_guess_in_the_answers_cell_asks_its_two_ends(monkeypatch, threshold):
+    """The repeated-task case (a guess near the answer): a guess inside the bisection's last bracket asks
+    only that bracket's two ends; one a cell away, at most two speeds more."""
+    want, plain = _plain(monkeypatch, lambda v: v >= threshold)
+    v_fail = max(v for v in plain if v < want)
+    assert want - v_fail <= 0.01 and len(plain) >= 8
+    cell = want - v_fail
+    for guess, most in ((0.5 * (v_fail + want), 2), (want, 2), (want + 0.5 * cell, 4), (v_fail - 0.5 * cell, 4)):
+        asked = _answers(monkeypatch, lambda v: v >= threshold)
+        r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=guess)
+        assert r.v_min == want and len(asked) <= most, (guess, asked)
+        if most == 2:
+            assert asked == [want, v_fail]
 
 
 def test_search_from_a_guess_at_the_ends(monkeypatch):
