@@ -27,6 +27,7 @@ from crosscert.verifier.settings import Verdict
 from .acceleration import AccelerationAssumption, robot_a_max_assumption
 from .certify.crossing import CrossingCertificate, certify_crossing
 from .progress import suffixed
+from .refute import verified_counterexample
 
 __all__ = ["ComparisonOutcome", "AtRobotAMax", "certify_at_robot_a_max", "compares", "speed_guess"]
 
@@ -139,11 +140,15 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
     start = max(float(v_low), cert.v_min) if covers and cert.v_min < top else float(v_low)
     known = cert.refutation_bound if covers else None
     scan = np.arange(known, top, 0.1) if refute and known is not None else None
+    # ...and the counterexample found there starts every scan speed's search (a start, verified as any)
+    warm = None if scan is None else next((verified_counterexample(r) for r in cert.refutation
+                                           if r.speed == known and r.verified), None)
     bounds = replace(cert.bounds, a_max=ref.values)
     other = certify_crossing(robot, task, bounds, v_low=start, v_high=v_high, tol=tol, monte_carlo_runs=0,
                              refute=refute, refute_speeds=scan, executor=executor, seed=seed,
                              progress=suffixed(progress, " at the robot's a_max"),
-                             kin=kin, imodel=imodel, bounce=False, v_guess=speed_guess(cert.v_min, used, ref))
+                             kin=kin, imodel=imodel, bounce=False, v_guess=speed_guess(cert.v_min, used, ref),
+                             refute_warm=warm)
     bound = other.refutation_bound
     if known is not None and (bound is None or bound < known):
         # a verified counterexample under the default's bounds satisfies the robot's wider ones

@@ -212,6 +212,7 @@ class RefuteOptions:
     in_background: bool = True
     executor: Executor | None = None
     bounce: bool = True
+    warm: object = None  # a verified counterexample starting the scan's searches (planner.refute.Counterexample)
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,7 +232,7 @@ class _Job:
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=V_LOW, v_high=None,
                      tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
                      executor: Executor | None = None, seed=0, progress=None, kin=None,
-                     imodel=None, bounce: bool = True, v_guess=None) -> CrossingCertificate:
+                     imodel=None, bounce: bool = True, v_guess=None, refute_warm=None) -> CrossingCertificate:
     """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
 
     The steps: the speed search (:func:`~planner.certify.plan.search_v_min`), whose run at ``v_min``
@@ -261,6 +262,10 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         search and the Monte Carlo run go on (default: a
         :class:`~planner.worker.SubprocessExecutor` made for this call; a given one is not shut down)
         or here, afterwards; also the bounces of the task at ``v_min`` (:mod:`planner.bounce`).
+    refute_warm : planner.refute.Counterexample, optional
+        A verified counterexample of a neighbouring speed under bounds these bounds cover: the start of
+        the first attempt of every scan speed's search (:func:`refute_speed`'s ``warm``; a start only,
+        every candidate is verified as usual).
     seed : int
         Seed of the Monte Carlo executions and of the counterexample starts.
     progress : planner.progress.Progress or callable, optional
@@ -270,7 +275,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         The robot's kinematic and interval models (built when absent).
     """
     t0 = time.perf_counter()
-    opts = RefuteOptions(refute, refute_speeds, refute_in_background, executor, bounce)
+    opts = RefuteOptions(refute, refute_speeds, refute_in_background, executor, bounce, refute_warm)
     job = _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, threads=not (refute and refute_in_background),
                    v_guess=v_guess)
     refuter, starts = _start_refuter(job, opts, seed)
@@ -363,7 +368,8 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
     except (TypeError, ValueError):
         raise InputError(f"refute_speeds must be numbers (m/s), got {opts.speeds!r}") from None
     pool = (opts.executor or SubprocessExecutor()) if opts.in_background else None
-    refuter = Refuter(robot, job.task, job.b, job.m0, starts, job.kin, pool, own_executor=opts.executor is None)
+    refuter = Refuter(robot, job.task, job.b, job.m0, starts, job.kin, pool, own_executor=opts.executor is None,
+                      warm=opts.warm)
     refuter.submit(scan)
     return refuter, starts
 
@@ -538,10 +544,14 @@ class Refuter:
         Where searches run in the background (None: here, on demand).
     own_executor : bool
         Shut ``executor`` down in :meth:`close`.
+    warm : planner.refute.Counterexample or None
+        The start of every search not given one of its own (:func:`refute_speed`'s ``warm``).
     """
 
-    def __init__(self, robot, task, b, m0, starts, kin, executor: Executor | None, *, own_executor: bool = False):
+    def __init__(self, robot, task, b, m0, starts, kin, executor: Executor | None, *, own_executor: bool = False,
+                 warm=None):
         self._args = (robot, task, b, m0, starts)
+        self._warm = warm
         self._kin = kin
         self._executor = executor
         self._own = own_executor
@@ -558,7 +568,7 @@ class Refuter:
             if self._executor is not None:
                 for v in speeds:
                     if v not in self._futures:
-                        self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+                        self._futures[v] = self._executor.submit(refute_speed, *self._args, v, warm=self._warm)
 
     def drop_from(self, v_top) -> None:
         """Forget the speeds at or above ``v_top`` (searches not started are cancelled)."""
@@ -583,6 +593,7 @@ class Refuter:
 
         ``warm`` (a verified counterexample at a neighbouring speed) starts a search not yet queued.
         """
+        warm = self._warm if warm is None else warm
         with self._lock:
             self._speeds.add(v)
         if v not in self._rows:
