@@ -109,7 +109,7 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
 
     def fake(robot, task, b, m0, starts, v, kin=None, warm=None):
         started.append(v)
-        if v == 0.3:
+        if len(started) == 1:
             gate.wait(10)  # hold the first search until the ceiling is set
         return _Row(v, v <= 0.84)
 
@@ -118,42 +118,94 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
     with ThreadPoolExecutor(max_workers=1) as pool:
         ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
         ref.submit(scan)
-        ref.drop_from(0.99)  # the speed search certified 0.99 while 0.3 was running
+        ref.drop_from(0.99)  # the speed search certified 0.99 while the first search was running
         gate.set()
         bound, rows = refutation_search(ref, 0.99, 0.01)
         ref.close()
-    assert all(v < 0.99 for v in started), started
-    assert started[:7] == scan[:7]  # increasing order
+    assert all(v < 0.99 for v in started[1:]), started
     assert 0.83 <= bound <= 0.84 and all(r.speed < 0.99 for r in rows)
     assert len(started) == len(set(started))
 
 
-def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(monkeypatch):
-    """The scan's searches start cold; each bisection step gets the counterexample of the fastest
-    refuted speed so far (deterministic: it comes from the rows, not from what the worker did last)."""
-    calls = []
+def _refuting(monkeypatch, refuted, log=None):
+    """refute_speed answering ``refuted(v)``, each row with a counterexample named after its speed."""
 
     class _Attempt:
         def __init__(self, v):
             self.verified, self.counterexample = True, f"ce@{v}"
 
     def fake(robot, task, b, m0, starts, v, kin=None, warm=None):
-        calls.append((v, warm))
-        row = _Row(v, v <= 0.84)
+        if log is not None:
+            log.append((v, warm))
+        row = _Row(v, refuted(v))
         row.attempts = (_Attempt(v),) if row.verified else ()
         return row
 
     monkeypatch.setattr(crossing_mod, "refute_speed", fake)
+
+
+def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(monkeypatch):
+    """The scan's searches start cold; each bisection step gets the counterexample of the fastest
+    refuted speed so far (deterministic: it comes from the rows, not from what the worker did last)."""
+    calls = []
+    _refuting(monkeypatch, lambda v: v <= 0.84, calls)
     ref = Refuter(DEXTAR, None, None, 1, [], None, None)
     ref.submit([0.5, 0.6, 0.7, 0.8, 0.9])
     bound, _rows = refutation_search(ref, 0.99, 0.01)
     assert 0.83 <= bound <= 0.84
-    assert [c for c in calls[:5]] == [(v, None) for v in (0.5, 0.6, 0.7, 0.8, 0.9)]
-    assert len(calls) > 5
-    for i in range(5, len(calls)):
+    # the scan's bisection: the middle speed, then up while refuted
+    assert calls[:3] == [(0.7, None), (0.8, None), (0.9, None)]
+    assert len(calls) > 3
+    for i in range(3, len(calls)):
         v, warm = calls[i]
         fastest = max(u for u, _w in calls[:i] if u <= 0.84)  # the fastest refuted speed searched before
         assert warm == f"ce@{fastest}", (v, warm)
+
+
+@pytest.mark.parametrize("threshold", [0.25, 0.31, 0.55, 0.84, 0.97, 1.5])
+def test_the_scan_is_bisected_to_the_bracket_searching_every_speed_finds(monkeypatch, threshold):
+    """Refuted up to a threshold: the scan's bisection finds the bracket (fastest refuted scan speed, the
+    next one) that searching every scan speed finds, in about log2 of the scan's length searches, and so
+    the same bound; below the slowest scan speed nothing is refuted and no bound is given."""
+    calls = []
+    _refuting(monkeypatch, lambda v: v <= threshold, calls)
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(12)]  # 0.3 .. 1.4
+    top = 1.35
+    every = [v for v in scan if v < top]
+    refuted = [v for v in every if v <= threshold]
+    ref = Refuter(DEXTAR, None, None, 1, [], None, None)
+    ref.submit(scan)
+    ref.drop_from(top)
+    bound, rows = refutation_search(ref, top, 0.01)
+    scanned = [v for v, _w in calls if v in scan]
+    assert len(scanned) <= math.ceil(math.log2(len(every) + 1)) and len(scanned) < len(every)
+    if not refuted:
+        assert bound is None and scanned[-1] == every[0]
+        return
+    assert max(refuted) <= bound <= min(threshold, top) and bound > min(threshold, top) - 0.01
+    assert [r.speed for r in rows] == sorted(v for v, _w in calls)
+
+
+def test_searches_started_ahead_change_neither_rows_nor_bound(monkeypatch):
+    """The searches started while the speed search runs are a guess of what the final search asks: with
+    the ceiling moving down at any moment, the final rows and bound are those of a search run here."""
+    _refuting(monkeypatch, lambda v: v <= 0.84 or 1.05 <= v <= 1.1)  # not monotone either
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
+    alone = Refuter(DEXTAR, None, None, 1, [], None, None)
+    alone.submit(scan)
+    alone.drop_from(0.99)
+    want = refutation_search(alone, 0.99, 0.01)
+    for pause in (0.0, 0.001, 0.01):
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
+            ref.submit(scan)
+            for top in (1.6, 1.3, 1.2, 0.99):  # the speed search certifying, at its own pace
+                threading.Event().wait(pause)
+                ref.drop_from(top)
+            got = refutation_search(ref, 0.99, 0.01)
+            ref.close()
+        assert got[0] == want[0] and [(r.speed, r.verified) for r in got[1]] == [(r.speed, r.verified)
+                                                                              for r in want[1]]
 
 
 def _plain(monkeypatch, certifies):

@@ -15,7 +15,7 @@ import logging
 import math
 import time
 import threading
-from concurrent.futures import CancelledError, Executor, Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -526,13 +526,18 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
 
 
 class Refuter:
-    """Counterexample searches by speed: submitted to an executor, or run here when asked.
+    """Counterexample searches by speed: on an executor, or run here when asked.
 
-    The speed search calls :meth:`drop_from` with every speed it certifies
-    (a certified speed cannot be refuted): searches at or above it that have
-    not started are cancelled, so the worker's time goes to the speeds that
-    can still bound ``v_min`` from below.  Which speeds below the final
-    ``v_min`` are searched does not depend on timing, so neither does the result.
+    The coarse scan's speeds (:meth:`submit`) are searched in the order the
+    scan's bisection of :func:`refutation_search` asks them, one at a time on
+    the executor while the speed search runs, with the lowest speed the speed
+    search has certified so far as the top (:meth:`drop_from`: a certified
+    speed cannot be refuted, and no search at or above it starts).  What runs
+    ahead of time is only a guess of what the final search asks: the final
+    search, with the final ``v_min`` as its top, asks its own speeds, takes the
+    rows of those already searched (each speed's search is the same whenever
+    it runs) and searches the others then; so neither the rows it reports nor
+    the bound depend on timing.
 
     Parameters
     ----------
@@ -556,27 +561,28 @@ class Refuter:
         self._executor = executor
         self._own = own_executor
         self._closed = False  # after close(): no search starts any more (an interrupted certification ends)
-        self._futures: dict[float, Future] = {}
-        self._speeds: set = set()
+        self._futures: dict = {}  # (speed, start's key) -> Future
+        self._scan: set = set()
+        self._top = math.inf  # the slowest speed certified so far
+        self._ahead = False  # a search started ahead of time is running
         self._rows: dict = {}
         self._lock = threading.Lock()  # drop_from comes from the search, result from the helper thread
 
     def submit(self, speeds) -> None:
-        """Queue searches at ``speeds`` (m/s) on the executor."""
+        """Add ``speeds`` (m/s) to the coarse scan; with an executor, start searching the scan's first question."""
         with self._lock:
-            self._speeds.update(speeds)
-            if self._executor is not None:
-                for v in speeds:
-                    if v not in self._futures:
-                        self._futures[v] = self._executor.submit(refute_speed, *self._args, v, warm=self._warm)
+            self._scan.update(speeds)
+        self._search_ahead()
 
     def drop_from(self, v_top) -> None:
-        """Forget the speeds at or above ``v_top`` (searches not started are cancelled)."""
+        """Forget the scan speeds at or above ``v_top`` (their searches not started are cancelled)."""
         with self._lock:
-            self._speeds = {v for v in self._speeds if v < v_top}
-            for v, f in self._futures.items():
-                if v >= v_top:
-                    f.cancel()
+            self._scan = {v for v in self._scan if v < v_top}
+            self._top = min(self._top, v_top)
+            above = [f for (v, _key), f in self._futures.items() if v >= v_top]
+        for f in above:  # outside the lock: a cancelled future runs its callbacks here
+            f.cancel()
+        self._search_ahead()
 
     @property
     def executor(self) -> Executor | None:
@@ -584,27 +590,53 @@ class Refuter:
         return self._executor
 
     def speeds(self) -> list:
-        """The speeds still wanted, sorted."""
+        """The scan speeds still wanted, sorted."""
         with self._lock:
-            return sorted(self._speeds)
+            return sorted(self._scan)
 
-    def result(self, v, warm=None):
+    def _search_ahead(self) -> None:
+        """Start the next scan speed the scan's bisection asks with today's top, unless one is running."""
+        with self._lock:
+            if self._executor is None or self._closed or self._ahead:
+                return
+
+            def answer(v):
+                f = self._futures.get((v, None))
+                if f is None or not f.done() or f.cancelled() or f.exception() is not None:
+                    return None
+                return f.result().verified
+
+            v = _scan_question(sorted(u for u in self._scan if u < self._top), answer)
+            if isinstance(v, tuple) or (v, None) in self._futures and not self._futures[(v, None)].cancelled():
+                return  # every answer known, or the needed search failed (result() deals with that)
+            self._ahead = True
+            future = self._futures[(v, None)] = self._executor.submit(refute_speed, *self._args, v, warm=self._warm)
+        future.add_done_callback(self._ahead_done)
+
+    def _ahead_done(self, future) -> None:
+        with self._lock:
+            self._ahead = False
+        if not future.cancelled() and future.exception() is None:
+            self._search_ahead()
+
+    def result(self, v, warm=None, key=None):
         """The search at speed ``v``: the executor's result, or a run here if the executor failed.
 
-        ``warm`` (a verified counterexample at a neighbouring speed) starts a search not yet queued.
+        ``warm`` (a verified counterexample at a neighbouring speed, named by ``key``: the same key, the
+        same start) starts the search; without it, the refuter's own.
         """
-        warm = self._warm if warm is None else warm
-        with self._lock:
-            self._speeds.add(v)
-        if v not in self._rows:
+        if warm is None:
+            warm, key = self._warm, None
+        if (v, key) not in self._rows:
             if self._closed:
                 raise CancelledError("the counterexample searches were stopped")
             row = None
             if self._executor is not None:
                 with self._lock:
-                    future = self._futures.get(v)
+                    future = self._futures.get((v, key))
                     if future is None or future.cancelled():
-                        future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v, warm=warm)
+                        future = self._futures[(v, key)] = self._executor.submit(refute_speed, *self._args, v,
+                                                                                 warm=warm)
                 try:
                     row = future.result()
                 except Exception as exc:
@@ -618,8 +650,9 @@ class Refuter:
                     self._stop_executor()
                     self._executor = None
                     self._kin = None
-            self._rows[v] = row if row is not None else refute_speed(*self._args, v, kin=self._kin, warm=warm)
-        return self._rows[v]
+            self._rows[(v, key)] = row if row is not None else refute_speed(*self._args, v, kin=self._kin,
+                                                                            warm=warm)
+        return self._rows[(v, key)]
 
     def close(self) -> None:
         """Cancel what has not started, start nothing more; shut the executor down if this object made it."""
@@ -635,32 +668,62 @@ class Refuter:
             self._executor.shutdown(wait=False, cancel_futures=True)
 
 
+def _scan_question(speeds: list, refuted):
+    """The scan's bisection over ``speeds`` (sorted) with answers ``refuted(v)`` (True, False or None: not known).
+
+    Returns ``(lo, hi)``, the indices of the fastest refuted speed (-1: none) and of the slowest speed
+    not refuted above it (``len(speeds)``: none, the top), when every answer needed is known; else the
+    first speed whose answer is needed.  The slowest speed is asked before none is declared refuted.
+    """
+    lo, hi = -1, len(speeds)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        answer = refuted(speeds[mid])
+        if answer is None:
+            return speeds[mid]
+        lo, hi = (mid, hi) if answer else (lo, mid)
+    return lo, hi
+
+
 def refutation_search(refuter: Refuter, v_top, tol):
     """Refutation bound below ``v_top``: the largest speed with a verified counterexample.
 
-    The coarse scan submitted to ``refuter`` (0.1 m/s from 0.3 m/s, or the
-    caller's speeds) below ``v_top``, then bisection between the fastest
-    refuted and the slowest non-refuted speed above it, to ``tol``, each
-    step warm-started from the fastest refuted speed's counterexample.  Each
-    speed is searched against its own plan's readings and ``a_max`` (the
-    bounds its certificate would use); a failed search proves nothing (the
-    NLP is non-convex).
+    The coarse scan's speeds (0.1 m/s from 0.3 m/s, or the caller's) below
+    ``v_top`` are bisected (a speed refuted, the next faster not) rather
+    than all searched, then the speeds between the fastest refuted and the
+    slowest non-refuted speed above it (or ``v_top``) are bisected to
+    ``tol``, each step warm-started from the fastest refuted speed's
+    counterexample.  Each speed is searched against its own plan's readings
+    and ``a_max`` (the bounds its certificate would use); a failed search
+    proves nothing (the NLP is non-convex).  Both bisections presume that a
+    counterexample exists below a refuted speed; when that fails, the bound
+    is still a speed with a verified counterexample, only a faster refuted
+    speed may have been missed.
 
     Returns
     -------
     bound : float or None
-    rows : list of planner.refute.SpeedRefutation (sorted by speed)
+    rows : list of planner.refute.SpeedRefutation (sorted by speed): the speeds searched
     """
-    rows = {v: refuter.result(v) for v in refuter.speeds() if v < v_top}
-    while True:
-        ordered = sorted(rows)
-        refuted = [v for v in ordered if rows[v].verified]
-        if not refuted:
-            return None, [rows[v] for v in ordered]
-        v_ok = max(refuted)
-        above = [v for v in ordered if v > v_ok]
-        v_no = min(above) if above else v_top
-        if v_no - v_ok <= tol:
-            return v_ok, [rows[v] for v in ordered]
+    speeds = [v for v in refuter.speeds() if v < v_top]
+    rows = {}
+
+    def refuted(v) -> bool:
+        rows[v] = refuter.result(v)
+        return bool(rows[v].verified)
+
+    lo, hi = _scan_question(speeds, refuted)
+    if lo < 0:
+        return None, [rows[v] for v in sorted(rows)]
+    v_ok = speeds[lo]
+    v_no = speeds[hi] if hi < len(speeds) else v_top
+    while v_no - v_ok > tol:
         mid = round(0.5 * (v_ok + v_no), 6)
-        rows[mid] = refuter.result(mid, warm=refute.verified_counterexample(rows[v_ok]))
+        if mid in (v_ok, v_no):  # tol below the rounding of speeds
+            break
+        rows[mid] = refuter.result(mid, warm=refute.verified_counterexample(rows[v_ok]), key=v_ok)
+        if rows[mid].verified:
+            v_ok = mid
+        else:
+            v_no = mid
+    return v_ok, [rows[v] for v in sorted(rows)]
