@@ -118,6 +118,7 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
     with ThreadPoolExecutor(max_workers=1) as pool:
         ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
         ref.submit(scan)
+        ref.failed_at(1.5)  # (stand-in answers) the speed search failed at 1.5: searches start ahead
         ref.drop_from(0.99)  # the speed search certified 0.99 while the first search was running
         gate.set()
         bound, rows = refutation_search(ref, 0.99, 0.01)
@@ -199,13 +200,39 @@ def test_searches_started_ahead_change_neither_rows_nor_bound(monkeypatch):
         with ThreadPoolExecutor(max_workers=1) as pool:
             ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
             ref.submit(scan)
-            for top in (1.6, 1.3, 1.2, 0.99):  # the speed search certifying, at its own pace
+            for top, failed in ((1.6, 0.7), (1.3, 1.0), (1.2, 0.98), (0.99, 0.985)):  # the speed search, at its pace
                 threading.Event().wait(pause)
                 ref.drop_from(top)
+                ref.failed_at(failed)
             got = refutation_search(ref, 0.99, 0.01)
             ref.close()
         assert got[0] == want[0] and [(r.speed, r.verified) for r in got[1]] == [(r.speed, r.verified)
                                                                               for r in want[1]]
+
+
+def test_searches_ahead_are_those_of_the_final_search(monkeypatch):
+    """Started once the speed search failed a speed, the searches ahead are the scan speeds the final search
+    asks when no scan speed lies between that failure and v_min: it then starts none of its own, and the
+    speeds the speed search has not yet passed below are not searched ahead at all."""
+    calls = []
+    _refuting(monkeypatch, lambda v: v <= 0.84, calls)
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
+        ref.submit(scan)
+        ref.drop_from(1.96)
+        ref.drop_from(1.28)
+        ref.failed_at(0.94)  # the benchmark's third question
+        for _ in range(1000):  # let the searches ahead finish
+            if not ref._ahead:
+                break
+            threading.Event().wait(0.01)
+        ahead = [v for v, _w in calls]
+        ref.drop_from(0.961)
+        bound, rows = refutation_search(ref, 0.961, 0.01)
+        ref.close()
+    assert ahead == [0.6, 0.8, 0.9]  # the bisection of 0.3 .. 0.9, no speed above the failure
+    assert [v for v, _w in calls if v in scan] == ahead and 0.83 <= bound <= 0.84
 
 
 def _plain(monkeypatch, certifies):

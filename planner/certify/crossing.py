@@ -375,7 +375,8 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
 
 
 def _search(job: _Job, refuter, progress):
-    """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above)."""
+    """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above),
+    a failed one tells it which scan speeds are surely below ``v_min`` (searched ahead of time)."""
     br = job.bracket
     # the bisection asks v_high, then halves the bracket down to tol, then maybe v_low itself; from a
     # guess, typically the guess and one speed tol away (the bar's size is an estimate)
@@ -383,8 +384,11 @@ def _search(job: _Job, refuter, progress):
     enter(progress, Phase.SEARCH, size, unit="speed")
 
     def observe(t):
-        if refuter is not None and t.verdict is Verdict.MODE_CHANGED:
-            refuter.drop_from(t.v_sing)
+        if refuter is not None:
+            if t.verdict is Verdict.MODE_CHANGED:
+                refuter.drop_from(t.v_sing)
+            else:
+                refuter.failed_at(t.v_sing)
         if progress is not None:
             progress(1)
 
@@ -501,6 +505,15 @@ _MODELS: dict = {}
 REFUTE_CPU_TIME = 2.0
 
 
+def load_model(robot) -> None:
+    """Build (and keep) the robot's ``KinematicModel`` in this process for :func:`refute_speed`.
+
+    Keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes.
+    """
+    if robot not in _MODELS:
+        _MODELS[robot] = KinematicModel(robot)
+
+
 def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
 
@@ -510,10 +523,8 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     counterexample at a neighbouring speed, the start of the first attempt (:func:`refute.refutation_bound`).
     """
     if kin is None:
-        # keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes
-        kin = _MODELS.get(robot)
-        if kin is None:
-            kin = _MODELS[robot] = KinematicModel(robot)
+        load_model(robot)
+        kin = _MODELS[robot]
     try:
         plan = plan_crossing(kin, task, v, b)
     except (InputError, SimulationError) as exc:
@@ -530,9 +541,11 @@ class Refuter:
 
     The coarse scan's speeds (:meth:`submit`) are searched in the order the
     scan's bisection of :func:`refutation_search` asks them, one at a time on
-    the executor while the speed search runs, with the lowest speed the speed
-    search has certified so far as the top (:meth:`drop_from`: a certified
-    speed cannot be refuted, and no search at or above it starts).  What runs
+    the executor while the speed search runs, over the scan speeds up to the
+    fastest speed the speed search has failed so far (:meth:`failed_at`:
+    ``v_min`` lies above it) and below the slowest it has certified
+    (:meth:`drop_from`: a certified speed cannot be refuted, and no search at
+    or above it starts).  What runs
     ahead of time is only a guess of what the final search asks: the final
     search, with the final ``v_min`` as its top, asks its own speeds, takes the
     rows of those already searched (each speed's search is the same whenever
@@ -564,15 +577,28 @@ class Refuter:
         self._futures: dict = {}  # (speed, start's key) -> Future
         self._scan: set = set()
         self._top = math.inf  # the slowest speed certified so far
-        self._ahead = False  # a search started ahead of time is running
+        self._below = -math.inf  # the fastest speed the speed search failed so far: v_min lies above it
+        self._ahead = False  # a search started ahead of time (or the model's loading) is running
+        self._loaded = False  # the model's loading was asked of the executor
         self._rows: dict = {}
         self._lock = threading.Lock()  # drop_from comes from the search, result from the helper thread
 
     def submit(self, speeds) -> None:
-        """Add ``speeds`` (m/s) to the coarse scan; with an executor, start searching the scan's first question."""
+        """Add ``speeds`` (m/s) to the coarse scan; with an executor, start searching the scan's first question.
+
+        The first question is chosen once the executor has built the robot's model (:func:`load_model`), under
+        the top the speed search has reached by then: its fastest speeds certify while the worker starts.
+        """
         with self._lock:
             self._scan.update(speeds)
-        self._search_ahead()
+            start = self._executor is not None and not self._loaded and not self._closed
+            if start:
+                self._ahead = self._loaded = True
+                future = self._executor.submit(load_model, self._args[0])
+        if start:
+            future.add_done_callback(self._ahead_done)
+        else:
+            self._search_ahead()
 
     def drop_from(self, v_top) -> None:
         """Forget the scan speeds at or above ``v_top`` (their searches not started are cancelled)."""
@@ -582,6 +608,13 @@ class Refuter:
             above = [f for (v, _key), f in self._futures.items() if v >= v_top]
         for f in above:  # outside the lock: a cancelled future runs its callbacks here
             f.cancel()
+        self._search_ahead()
+
+    def failed_at(self, v) -> None:
+        """The speed search failed at ``v``: the final ``v_min`` lies above it, so every scan speed up to it
+        will be below the final search's top."""
+        with self._lock:
+            self._below = max(self._below, v)
         self._search_ahead()
 
     @property
@@ -606,7 +639,9 @@ class Refuter:
                     return None
                 return f.result().verified
 
-            v = _scan_question(sorted(u for u in self._scan if u < self._top), answer)
+            # the speeds surely below the final top (up to the search's fastest failure): the final search
+            # bisects the same ones unless a scan speed lies between that failure and v_min
+            v = _scan_question(sorted(u for u in self._scan if u < self._top and u <= self._below), answer)
             if isinstance(v, tuple) or (v, None) in self._futures and not self._futures[(v, None)].cancelled():
                 return  # every answer known, or the needed search failed (result() deals with that)
             self._ahead = True
