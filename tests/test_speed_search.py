@@ -211,9 +211,10 @@ def test_searches_started_ahead_change_neither_rows_nor_bound(monkeypatch):
 
 
 def test_searches_ahead_are_those_of_the_final_search(monkeypatch):
-    """Started once the speed search failed a speed, the searches ahead are the scan speeds the final search
-    asks when no scan speed lies between that failure and v_min: it then starts none of its own, and the
-    speeds the speed search has not yet passed below are not searched ahead at all."""
+    """Started once the speed search failed a speed, the searches ahead are those the final search asks
+    when no scan speed lies between that failure and v_min (the scan's bisection, then the steps of a
+    bracket below the failure): it then starts none of its own, and no speed above the failure is
+    searched ahead."""
     calls = []
     _refuting(monkeypatch, lambda v: v <= 0.84, calls)
     scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
@@ -231,8 +232,10 @@ def test_searches_ahead_are_those_of_the_final_search(monkeypatch):
         ref.drop_from(0.961)
         bound, rows = refutation_search(ref, 0.961, 0.01)
         ref.close()
-    assert ahead == [0.6, 0.8, 0.9]  # the bisection of 0.3 .. 0.9, no speed above the failure
-    assert [v for v, _w in calls if v in scan] == ahead and 0.83 <= bound <= 0.84
+    # the scan's bisection of 0.3 .. 0.9 (no speed above the failure), then the steps between 0.8 and 0.9
+    assert ahead[:3] == [0.6, 0.8, 0.9] and all(0.8 < v < 0.9 for v in ahead[3:]) and len(ahead) > 3
+    assert [v for v, _w in calls] == ahead and 0.83 <= bound <= 0.84  # the final search started none
+    assert [r.speed for r in rows] == sorted(ahead)
 
 
 def _plain(monkeypatch, certifies):

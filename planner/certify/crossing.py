@@ -369,7 +369,7 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
         raise InputError(f"refute_speeds must be numbers (m/s), got {opts.speeds!r}") from None
     pool = (opts.executor or SubprocessExecutor()) if opts.in_background else None
     refuter = Refuter(robot, job.task, job.b, job.m0, starts, job.kin, pool, own_executor=opts.executor is None,
-                      warm=opts.warm)
+                      warm=opts.warm, tol=job.bracket.tol)
     refuter.submit(scan)
     return refuter, starts
 
@@ -564,11 +564,14 @@ class Refuter:
         Shut ``executor`` down in :meth:`close`.
     warm : planner.refute.Counterexample or None
         The start of every search not given one of its own (:func:`refute_speed`'s ``warm``).
+    tol : float
+        Resolution of the bound, m/s (of the searches ahead; :func:`refutation_search` is given its own).
     """
 
     def __init__(self, robot, task, b, m0, starts, kin, executor: Executor | None, *, own_executor: bool = False,
-                 warm=None):
+                 warm=None, tol: float = 0.01):
         self._args = (robot, task, b, m0, starts)
+        self._tol = tol
         self._warm = warm
         self._kin = kin
         self._executor = executor
@@ -628,24 +631,40 @@ class Refuter:
             return sorted(self._scan)
 
     def _search_ahead(self) -> None:
-        """Start the next scan speed the scan's bisection asks with today's top, unless one is running."""
+        """Start the next search the final search will ask (as far as known now), unless one is running.
+
+        The scan's bisection over the scan speeds up to the search's fastest failure (they are below the
+        final top: the final search bisects the same ones unless a scan speed lies between that failure and
+        ``v_min``), then the bisection between its bracket when the bracket's upper end is such a scan
+        speed (its questions then do not depend on the final top).
+        """
         with self._lock:
             if self._executor is None or self._closed or self._ahead:
                 return
 
-            def answer(v):
-                f = self._futures.get((v, None))
+            def row(v, key):
+                f = self._futures.get((v, key))
                 if f is None or not f.done() or f.cancelled() or f.exception() is not None:
                     return None
-                return f.result().verified
+                return f.result()
 
-            # the speeds surely below the final top (up to the search's fastest failure): the final search
-            # bisects the same ones unless a scan speed lies between that failure and v_min
-            v = _scan_question(sorted(u for u in self._scan if u < self._top and u <= self._below), answer)
-            if isinstance(v, tuple) or (v, None) in self._futures and not self._futures[(v, None)].cancelled():
-                return  # every answer known, or the needed search failed (result() deals with that)
+            speeds = sorted(u for u in self._scan if u < self._top and u <= self._below)
+            found = _scan_question(speeds, lambda v: None if row(v, None) is None else bool(row(v, None).verified))
+            if not isinstance(found, tuple):
+                v, key, warm = found, None, self._warm
+            else:
+                lo, hi = found
+                if lo < 0 or hi >= len(speeds):
+                    return  # nothing refuted, or the bracket ends at the final top: not known yet
+                step = _fine_question((speeds[lo], None), speeds[hi], self._tol, row)
+                if step[0] is None:
+                    return
+                v, key = step
+                warm = refute.verified_counterexample(row(*key))
+            if (v, key) in self._futures and not self._futures[(v, key)].cancelled():
+                return  # the needed search failed on the executor: result() deals with that
             self._ahead = True
-            future = self._futures[(v, None)] = self._executor.submit(refute_speed, *self._args, v, warm=self._warm)
+            future = self._futures[(v, key)] = self._executor.submit(refute_speed, *self._args, v, warm=warm)
         future.add_done_callback(self._ahead_done)
 
     def _ahead_done(self, future) -> None:
@@ -661,7 +680,7 @@ class Refuter:
         same start) starts the search; without it, the refuter's own.
         """
         if warm is None:
-            warm, key = self._warm, None
+            warm = self._warm
         if (v, key) not in self._rows:
             if self._closed:
                 raise CancelledError("the counterexample searches were stopped")
@@ -720,6 +739,26 @@ def _scan_question(speeds: list, refuted):
     return lo, hi
 
 
+def _fine_question(ok: tuple, v_no: float, tol: float, row) -> tuple:
+    """The bisection between the fastest refuted speed and ``v_no`` to ``tol`` with rows ``row(v, key)`` (None:
+    not known), each step keyed by the chain of refuted speeds that starts it: ``ok = (speed, its key)``.
+
+    Returns ``(speed, key)``, the first step whose row is needed, or ``(None, ok)`` with the final ``ok``.
+    """
+    while v_no - ok[0] > tol:
+        mid = round(0.5 * (ok[0] + v_no), 6)
+        if mid in (ok[0], v_no):  # tol below the rounding of speeds
+            break
+        r = row(mid, ok)
+        if r is None:
+            return mid, ok
+        if r.verified:
+            ok = (mid, ok)
+        else:
+            v_no = mid
+    return None, ok
+
+
 def refutation_search(refuter: Refuter, v_top, tol):
     """Refutation bound below ``v_top``: the largest speed with a verified counterexample.
 
@@ -750,15 +789,12 @@ def refutation_search(refuter: Refuter, v_top, tol):
     lo, hi = _scan_question(speeds, refuted)
     if lo < 0:
         return None, [rows[v] for v in sorted(rows)]
-    v_ok = speeds[lo]
-    v_no = speeds[hi] if hi < len(speeds) else v_top
-    while v_no - v_ok > tol:
-        mid = round(0.5 * (v_ok + v_no), 6)
-        if mid in (v_ok, v_no):  # tol below the rounding of speeds
-            break
-        rows[mid] = refuter.result(mid, warm=refute.verified_counterexample(rows[v_ok]), key=v_ok)
-        if rows[mid].verified:
-            v_ok = mid
-        else:
-            v_no = mid
-    return v_ok, [rows[v] for v in sorted(rows)]
+    keyed = {(v, None): r for v, r in rows.items()}
+
+    def step(v, key):
+        # each step starts from the counterexample of the fastest refuted speed before it (named by its chain)
+        keyed[(v, key)] = rows[v] = refuter.result(v, warm=refute.verified_counterexample(keyed[key]), key=key)
+        return rows[v]
+
+    _none, ok = _fine_question((speeds[lo], None), speeds[hi] if hi < len(speeds) else v_top, tol, step)
+    return ok[0], [rows[v] for v in sorted(rows)]
