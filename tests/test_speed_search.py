@@ -302,3 +302,26 @@ def test_bad_guess_is_refused(monkeypatch):
     _answers(monkeypatch, lambda v: True)
     with pytest.raises(InputError, match="v_guess"):
         search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, v_guess=-1.0)
+
+
+def test_the_speed_search_tells_the_refuter_each_answer(monkeypatch):
+    """A certified speed caps the counterexample searches, a failed one lets them start ahead of time."""
+    told = []
+
+    class _Refuter:
+        def drop_from(self, v):
+            told.append(("certified", v))
+
+        def failed_at(self, v):
+            told.append(("failed", v))
+
+    def fake_search(kin, imodel, task, b, v_low, v_high, *, observe, **kw):
+        for v, ok in ((1.9, True), (0.9, False), (1.2, True)):
+            observe(certify_mod.SpeedTrial(v, Verdict.MODE_CHANGED if ok else Verdict.UNKNOWN, 0.0, 0.0, None,
+                                           Verdict.UNKNOWN))
+
+    monkeypatch.setattr(crossing_mod, "search_v_min", fake_search)
+    job = SimpleNamespace(bracket=crossing_mod.SpeedBracket(0.6, 1.96, 0.01), kin=None, imodel=None, task=None,
+                          b=None, threads=False)
+    crossing_mod._search(job, _Refuter(), None)
+    assert told == [("certified", 1.9), ("failed", 0.9), ("certified", 1.2)]
