@@ -449,8 +449,9 @@ def _confirm(job: _Job, run, runs: int, seed, progress, pool=None):
     """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs).
 
     With the background worker ``pool``, a share of the executions (:data:`MC_BESIDE_SHARE`) runs there:
-    it has only the refutation bisection and the bounce floor left, a few seconds of work (0.2 of 50
-    executions balanced the two processes on the benchmark task, benchmarks/README.md).
+    it has only the bounce floor left (and whatever counterexample searches it could not start ahead of
+    time), a few seconds of work (0.2 of 50 executions still balanced the two processes on the benchmark
+    task once the refutation search ran ahead, benchmarks/README.md).
     """
     if run is None or not runs:
         return None
