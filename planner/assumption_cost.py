@@ -95,7 +95,7 @@ def speed_guess(v_min: float, used: AccelerationAssumption, ref: AccelerationAss
     A motion at speed ``v`` turning back at the locus needs ``v**2 / (2 a)`` of room, so the slowest speed whose
     turn-backs the tracker can rule out grows like ``sqrt(a)``: ``v_min`` times the square root of the largest
     ratio of the robot's bound to the certificate's over the axes (dimensionless: each ratio is in one unit).
-    On the DexTAR benchmark task it gives 1.0588 m/s for the 1.0624 m/s found (docs/planning.md).
+    On the benchmark task of docs/planning.md it gives 1.0588 m/s for the 1.0624 m/s found.
     """
     ratio = max(r / u for r, u in zip(ref.values, used.values))
     return float(v_min) * math.sqrt(max(ratio, 1e-12))
