@@ -109,7 +109,7 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
 
     def fake(robot, task, b, m0, starts, v, kin=None, warm=None):
         started.append(v)
-        if v == 0.3:
+        if len(started) == 1:
             gate.wait(10)  # hold the first search until the ceiling is set
         return _Row(v, v <= 0.84)
 
@@ -118,71 +118,165 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
     with ThreadPoolExecutor(max_workers=1) as pool:
         ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
         ref.submit(scan)
-        ref.drop_from(0.99)  # the speed search certified 0.99 while 0.3 was running
+        ref.failed_at(1.5)  # (stand-in answers) the speed search failed at 1.5: searches start ahead
+        ref.drop_from(0.99)  # the speed search certified 0.99 while the first search was running
         gate.set()
         bound, rows = refutation_search(ref, 0.99, 0.01)
         ref.close()
-    assert all(v < 0.99 for v in started), started
-    assert started[:7] == scan[:7]  # increasing order
+    assert all(v < 0.99 for v in started[1:]), started
     assert 0.83 <= bound <= 0.84 and all(r.speed < 0.99 for r in rows)
     assert len(started) == len(set(started))
 
 
-def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(monkeypatch):
-    """The scan's searches start cold; each bisection step gets the counterexample of the fastest
-    refuted speed so far (deterministic: it comes from the rows, not from what the worker did last)."""
-    calls = []
+def _refuting(monkeypatch, refuted, log=None):
+    """refute_speed answering ``refuted(v)``, each row with a counterexample named after its speed."""
 
     class _Attempt:
         def __init__(self, v):
             self.verified, self.counterexample = True, f"ce@{v}"
 
     def fake(robot, task, b, m0, starts, v, kin=None, warm=None):
-        calls.append((v, warm))
-        row = _Row(v, v <= 0.84)
+        if log is not None:
+            log.append((v, warm))
+        row = _Row(v, refuted(v))
         row.attempts = (_Attempt(v),) if row.verified else ()
         return row
 
     monkeypatch.setattr(crossing_mod, "refute_speed", fake)
+
+
+def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(monkeypatch):
+    """The scan's searches start cold; each bisection step gets the counterexample of the fastest
+    refuted speed so far (deterministic: it comes from the rows, not from what the worker did last)."""
+    calls = []
+    _refuting(monkeypatch, lambda v: v <= 0.84, calls)
     ref = Refuter(DEXTAR, None, None, 1, [], None, None)
     ref.submit([0.5, 0.6, 0.7, 0.8, 0.9])
     bound, _rows = refutation_search(ref, 0.99, 0.01)
     assert 0.83 <= bound <= 0.84
-    assert [c for c in calls[:5]] == [(v, None) for v in (0.5, 0.6, 0.7, 0.8, 0.9)]
-    assert len(calls) > 5
-    for i in range(5, len(calls)):
+    # the scan's bisection: the middle speed, then up while refuted
+    assert calls[:3] == [(0.7, None), (0.8, None), (0.9, None)]
+    assert len(calls) > 3
+    for i in range(3, len(calls)):
         v, warm = calls[i]
         fastest = max(u for u, _w in calls[:i] if u <= 0.84)  # the fastest refuted speed searched before
         assert warm == f"ce@{fastest}", (v, warm)
 
 
+@pytest.mark.parametrize("threshold", [0.25, 0.31, 0.55, 0.84, 0.97, 1.5])
+def test_the_scan_is_bisected_to_the_bracket_searching_every_speed_finds(monkeypatch, threshold):
+    """Refuted up to a threshold: the scan's bisection finds the bracket (fastest refuted scan speed, the
+    next one) that searching every scan speed finds, in about log2 of the scan's length searches, and so
+    the same bound; below the slowest scan speed nothing is refuted and no bound is given."""
+    calls = []
+    _refuting(monkeypatch, lambda v: v <= threshold, calls)
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(12)]  # 0.3 .. 1.4
+    top = 1.35
+    every = [v for v in scan if v < top]
+    refuted = [v for v in every if v <= threshold]
+    ref = Refuter(DEXTAR, None, None, 1, [], None, None)
+    ref.submit(scan)
+    ref.drop_from(top)
+    bound, rows = refutation_search(ref, top, 0.01)
+    scanned = [v for v, _w in calls if v in scan]
+    assert len(scanned) <= math.ceil(math.log2(len(every) + 1)) and len(scanned) < len(every)
+    if not refuted:
+        assert bound is None and scanned[-1] == every[0]
+        return
+    assert max(refuted) <= bound <= min(threshold, top) and bound > min(threshold, top) - 0.01
+    assert [r.speed for r in rows] == sorted(v for v, _w in calls)
+
+
+def test_searches_started_ahead_change_neither_rows_nor_bound(monkeypatch):
+    """The searches started while the speed search runs are a guess of what the final search asks: with
+    the ceiling moving down at any moment, the final rows and bound are those of a search run here."""
+    _refuting(monkeypatch, lambda v: v <= 0.84 or 1.05 <= v <= 1.1)  # not monotone either
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
+    alone = Refuter(DEXTAR, None, None, 1, [], None, None)
+    alone.submit(scan)
+    alone.drop_from(0.99)
+    want = refutation_search(alone, 0.99, 0.01)
+    for pause in (0.0, 0.001, 0.01):
+        with ThreadPoolExecutor(max_workers=1) as pool:
+            ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
+            ref.submit(scan)
+            for top, failed in ((1.6, 0.7), (1.3, 1.0), (1.2, 0.98), (0.99, 0.985)):  # the speed search, at its pace
+                threading.Event().wait(pause)
+                ref.drop_from(top)
+                ref.failed_at(failed)
+            got = refutation_search(ref, 0.99, 0.01)
+            ref.close()
+        assert got[0] == want[0] and [(r.speed, r.verified) for r in got[1]] == [(r.speed, r.verified)
+                                                                              for r in want[1]]
+
+
+def test_searches_ahead_are_those_of_the_final_search(monkeypatch):
+    """Started once the speed search failed a speed, the searches ahead are those the final search asks
+    when no scan speed lies between that failure and v_min (the scan's bisection, then the steps of a
+    bracket below the failure): it then starts none of its own, and no speed above the failure is
+    searched ahead."""
+    calls = []
+    _refuting(monkeypatch, lambda v: v <= 0.84, calls)
+    scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
+        ref.submit(scan)
+        ref.drop_from(1.96)
+        ref.drop_from(1.28)
+        ref.failed_at(0.94)  # the benchmark's third question
+        for _ in range(1000):  # let the searches ahead finish
+            if not ref._ahead:
+                break
+            threading.Event().wait(0.01)
+        ahead = [v for v, _w in calls]
+        ref.drop_from(0.961)
+        bound, rows = refutation_search(ref, 0.961, 0.01)
+        ref.close()
+    # the scan's bisection of 0.3 .. 0.9 (no speed above the failure), then the steps between 0.8 and 0.9
+    assert ahead[:3] == [0.6, 0.8, 0.9] and all(0.8 < v < 0.9 for v in ahead[3:]) and len(ahead) > 3
+    assert [v for v, _w in calls] == ahead and 0.83 <= bound <= 0.84  # the final search started none
+    assert [r.speed for r in rows] == sorted(ahead)
+
+
+def _plain(monkeypatch, certifies):
+    """v_min and the speeds asked by the search without a guess."""
+    asked = _answers(monkeypatch, certifies)
+    return search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01).v_min, list(asked)
+
+
 @pytest.mark.parametrize("threshold", [0.61, 0.8438, 0.9987, 1.5, 1.95])
 @pytest.mark.parametrize("guess", [0.3, 0.6, 0.95, 0.9987, 1.0, 1.3, 1.96, 2.5])
-def test_search_from_a_guess_brackets_a_monotone_threshold_within_tol(monkeypatch, threshold, guess):
-    """From any guess (inside, outside or at the ends of the bracket) the search finds the threshold
-    within tol, with every failed speed below v_min and one of them within tol of it."""
+def test_search_from_a_guess_finds_the_bisections_answer(monkeypatch, threshold, guess):
+    """From any guess (inside, outside or at the ends of the bracket) the search finds the speed the search
+    without a guess finds (monotone answers), with every failed speed below v_min and one within tol of it."""
+    want, _ = _plain(monkeypatch, lambda v: v >= threshold)
     asked = _answers(monkeypatch, lambda v: v >= threshold)
     r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=guess)
-    assert r.v_min is not None and threshold <= r.v_min <= threshold + 0.01
+    assert r.v_min == want
     by_v = {t.v_sing: t.verdict for t in r.trials}
     assert all((v is Verdict.MODE_CHANGED) == (s >= r.v_min) for s, v in by_v.items())
     below = [s for s in by_v if s < r.v_min]
     assert below and r.v_min - max(below) <= 0.01
-    assert asked[0] == round(min(max(guess, 0.6), 1.96), 6) and len(asked) == len(set(asked))
-    # doubling away from the guess, then bisection: about 2 log2(distance / tol) questions
+    assert len(asked) == len(set(asked))
+    # steps doubling away from the guess, then bisection: about 2 log2(distance / tol) questions
     far = max(abs(threshold - min(max(guess, 0.6), 1.96)), 0.01)
-    assert len(asked) <= 2 * math.ceil(math.log2(far / 0.01)) + 3
+    assert len(asked) <= 2 * math.ceil(math.log2(far / 0.01)) + 5
 
 
-def test_a_guess_within_tol_asks_two_speeds(monkeypatch):
-    """The repeated-task case: last task's v_min as the guess, the answer moved by less than tol."""
-    asked = _answers(monkeypatch, lambda v: v >= 0.9680)
-    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=0.9690)
-    # one step down is on the 1e-6 m/s grid, no farther than tol in floating point
-    assert r.v_min == 0.969 and asked == [0.969, 0.959001]
-    asked.clear()
-    r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=0.9670)
-    assert r.v_min == 0.976999 and asked == [0.967, 0.976999]
+@pytest.mark.parametrize("threshold", [0.6105, 0.8438, 0.9680, 1.0624, 1.5, 1.9555])
+def test_a_guess_in_the_answers_cell_asks_its_two_ends(monkeypatch, threshold):
+    """The repeated-task case (a guess near the answer): a guess inside the bisection's last bracket asks
+    only that bracket's two ends; one a cell away, at most two speeds more."""
+    want, plain = _plain(monkeypatch, lambda v: v >= threshold)
+    v_fail = max(v for v in plain if v < want)
+    assert want - v_fail <= 0.01 and len(plain) >= 8
+    cell = want - v_fail
+    for guess, most in ((0.5 * (v_fail + want), 2), (want, 2), (want + 0.5 * cell, 4), (v_fail - 0.5 * cell, 4)):
+        asked = _answers(monkeypatch, lambda v: v >= threshold)
+        r = search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, tol=0.01, v_guess=guess)
+        assert r.v_min == want and len(asked) <= most, (guess, asked)
+        if most == 2:
+            assert asked == [want, v_fail]
 
 
 def test_search_from_a_guess_at_the_ends(monkeypatch):
@@ -208,3 +302,26 @@ def test_bad_guess_is_refused(monkeypatch):
     _answers(monkeypatch, lambda v: True)
     with pytest.raises(InputError, match="v_guess"):
         search_v_min(KIN, None, None, PlanningBounds(), 0.6, 1.96, v_guess=-1.0)
+
+
+def test_the_speed_search_tells_the_refuter_each_answer(monkeypatch):
+    """A certified speed caps the counterexample searches, a failed one lets them start ahead of time."""
+    told = []
+
+    class _Refuter:
+        def drop_from(self, v):
+            told.append(("certified", v))
+
+        def failed_at(self, v):
+            told.append(("failed", v))
+
+    def fake_search(kin, imodel, task, b, v_low, v_high, *, observe, **kw):
+        for v, ok in ((1.9, True), (0.9, False), (1.2, True)):
+            observe(certify_mod.SpeedTrial(v, Verdict.MODE_CHANGED if ok else Verdict.UNKNOWN, 0.0, 0.0, None,
+                                           Verdict.UNKNOWN))
+
+    monkeypatch.setattr(crossing_mod, "search_v_min", fake_search)
+    job = SimpleNamespace(bracket=crossing_mod.SpeedBracket(0.6, 1.96, 0.01), kin=None, imodel=None, task=None,
+                          b=None, threads=False)
+    crossing_mod._search(job, _Refuter(), None)
+    assert told == [("certified", 1.9), ("failed", 0.9), ("certified", 1.2)]

@@ -15,7 +15,7 @@ import logging
 import math
 import time
 import threading
-from concurrent.futures import CancelledError, Executor, Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -212,6 +212,7 @@ class RefuteOptions:
     in_background: bool = True
     executor: Executor | None = None
     bounce: bool = True
+    warm: object = None  # a verified counterexample starting the scan's searches (planner.refute.Counterexample)
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,7 +232,7 @@ class _Job:
 def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = None, *, v_low=V_LOW, v_high=None,
                      tol=0.01, monte_carlo_runs=50, refute=True, refute_speeds=None, refute_in_background=True,
                      executor: Executor | None = None, seed=0, progress=None, kin=None,
-                     imodel=None, bounce: bool = True, v_guess=None) -> CrossingCertificate:
+                     imodel=None, bounce: bool = True, v_guess=None, refute_warm=None) -> CrossingCertificate:
     """Minimal certified crossing speed for ``task``, its proof and its refutation bound.
 
     The steps: the speed search (:func:`~planner.certify.plan.search_v_min`), whose run at ``v_min``
@@ -261,6 +262,10 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         search and the Monte Carlo run go on (default: a
         :class:`~planner.worker.SubprocessExecutor` made for this call; a given one is not shut down)
         or here, afterwards; also the bounces of the task at ``v_min`` (:mod:`planner.bounce`).
+    refute_warm : planner.refute.Counterexample, optional
+        A verified counterexample of a neighbouring speed under bounds these bounds cover: the start of
+        the first attempt of every scan speed's search (:func:`refute_speed`'s ``warm``; a start only,
+        every candidate is verified as usual).
     seed : int
         Seed of the Monte Carlo executions and of the counterexample starts.
     progress : planner.progress.Progress or callable, optional
@@ -270,7 +275,7 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         The robot's kinematic and interval models (built when absent).
     """
     t0 = time.perf_counter()
-    opts = RefuteOptions(refute, refute_speeds, refute_in_background, executor, bounce)
+    opts = RefuteOptions(refute, refute_speeds, refute_in_background, executor, bounce, refute_warm)
     job = _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, threads=not (refute and refute_in_background),
                    v_guess=v_guess)
     refuter, starts = _start_refuter(job, opts, seed)
@@ -363,13 +368,15 @@ def _start_refuter(job: _Job, opts: RefuteOptions, seed) -> tuple:
     except (TypeError, ValueError):
         raise InputError(f"refute_speeds must be numbers (m/s), got {opts.speeds!r}") from None
     pool = (opts.executor or SubprocessExecutor()) if opts.in_background else None
-    refuter = Refuter(robot, job.task, job.b, job.m0, starts, job.kin, pool, own_executor=opts.executor is None)
+    refuter = Refuter(robot, job.task, job.b, job.m0, starts, job.kin, pool, own_executor=opts.executor is None,
+                      warm=opts.warm, tol=job.bracket.tol)
     refuter.submit(scan)
     return refuter, starts
 
 
 def _search(job: _Job, refuter, progress):
-    """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above)."""
+    """The speed search; a certified speed is the refutation's ceiling (no counterexample is searched at or above),
+    a failed one tells it which scan speeds are surely below ``v_min`` (searched ahead of time)."""
     br = job.bracket
     # the bisection asks v_high, then halves the bracket down to tol, then maybe v_low itself; from a
     # guess, typically the guess and one speed tol away (the bar's size is an estimate)
@@ -377,8 +384,11 @@ def _search(job: _Job, refuter, progress):
     enter(progress, Phase.SEARCH, size, unit="speed")
 
     def observe(t):
-        if refuter is not None and t.verdict is Verdict.MODE_CHANGED:
-            refuter.drop_from(t.v_sing)
+        if refuter is not None:
+            if t.verdict is Verdict.MODE_CHANGED:
+                refuter.drop_from(t.v_sing)
+            else:
+                refuter.failed_at(t.v_sing)
         if progress is not None:
             progress(1)
 
@@ -439,8 +449,9 @@ def _confirm(job: _Job, run, runs: int, seed, progress, pool=None):
     """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs).
 
     With the background worker ``pool``, a share of the executions (:data:`MC_BESIDE_SHARE`) runs there:
-    it has only the refutation bisection and the bounce floor left, a few seconds of work (0.2 of 50
-    executions balanced the two processes on the benchmark task, benchmarks/README.md).
+    it has only the bounce floor left (and whatever counterexample searches it could not start ahead of
+    time), a few seconds of work (0.2 of 50 executions still balanced the two processes on the benchmark
+    task once the refutation search ran ahead, benchmarks/README.md).
     """
     if run is None or not runs:
         return None
@@ -495,6 +506,15 @@ _MODELS: dict = {}
 REFUTE_CPU_TIME = 2.0
 
 
+def load_model(robot) -> None:
+    """Build (and keep) the robot's ``KinematicModel`` in this process for :func:`refute_speed`.
+
+    Keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes.
+    """
+    if robot not in _MODELS:
+        _MODELS[robot] = KinematicModel(robot)
+
+
 def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
 
@@ -504,10 +524,8 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     counterexample at a neighbouring speed, the start of the first attempt (:func:`refute.refutation_bound`).
     """
     if kin is None:
-        # keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes
-        kin = _MODELS.get(robot)
-        if kin is None:
-            kin = _MODELS[robot] = KinematicModel(robot)
+        load_model(robot)
+        kin = _MODELS[robot]
     try:
         plan = plan_crossing(kin, task, v, b)
     except (InputError, SimulationError) as exc:
@@ -520,13 +538,20 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
 
 
 class Refuter:
-    """Counterexample searches by speed: submitted to an executor, or run here when asked.
+    """Counterexample searches by speed: on an executor, or run here when asked.
 
-    The speed search calls :meth:`drop_from` with every speed it certifies
-    (a certified speed cannot be refuted): searches at or above it that have
-    not started are cancelled, so the worker's time goes to the speeds that
-    can still bound ``v_min`` from below.  Which speeds below the final
-    ``v_min`` are searched does not depend on timing, so neither does the result.
+    The coarse scan's speeds (:meth:`submit`) are searched in the order the
+    scan's bisection of :func:`refutation_search` asks them, one at a time on
+    the executor while the speed search runs, over the scan speeds up to the
+    fastest speed the speed search has failed so far (:meth:`failed_at`:
+    ``v_min`` lies above it) and below the slowest it has certified
+    (:meth:`drop_from`: a certified speed cannot be refuted, and no search at
+    or above it starts).  What runs
+    ahead of time is only a guess of what the final search asks: the final
+    search, with the final ``v_min`` as its top, asks its own speeds, takes the
+    rows of those already searched (each speed's search is the same whenever
+    it runs) and searches the others then; so neither the rows it reports nor
+    the bound depend on timing.
 
     Parameters
     ----------
@@ -538,35 +563,63 @@ class Refuter:
         Where searches run in the background (None: here, on demand).
     own_executor : bool
         Shut ``executor`` down in :meth:`close`.
+    warm : planner.refute.Counterexample or None
+        The start of every search not given one of its own (:func:`refute_speed`'s ``warm``).
+    tol : float
+        Resolution of the bound, m/s (of the searches ahead; :func:`refutation_search` is given its own).
     """
 
-    def __init__(self, robot, task, b, m0, starts, kin, executor: Executor | None, *, own_executor: bool = False):
+    def __init__(self, robot, task, b, m0, starts, kin, executor: Executor | None, *, own_executor: bool = False,
+                 warm=None, tol: float = 0.01):
         self._args = (robot, task, b, m0, starts)
+        self._tol = tol
+        self._warm = warm
         self._kin = kin
         self._executor = executor
         self._own = own_executor
         self._closed = False  # after close(): no search starts any more (an interrupted certification ends)
-        self._futures: dict[float, Future] = {}
-        self._speeds: set = set()
+        self._futures: dict = {}  # (speed, start's key) -> Future
+        self._scan: set = set()
+        self._top = math.inf  # the slowest speed certified so far
+        self._below = -math.inf  # the fastest speed the speed search failed so far: v_min lies above it
+        self._ahead = False  # a search started ahead of time (or the model's loading) is running
+        self._loaded = False  # the model's loading was asked of the executor
         self._rows: dict = {}
         self._lock = threading.Lock()  # drop_from comes from the search, result from the helper thread
 
     def submit(self, speeds) -> None:
-        """Queue searches at ``speeds`` (m/s) on the executor."""
+        """Add ``speeds`` (m/s) to the coarse scan; with an executor, start searching the scan's first question.
+
+        The first question is chosen once the executor has built the robot's model (:func:`load_model`), under
+        the top the speed search has reached by then: its fastest speeds certify while the worker starts.
+        """
         with self._lock:
-            self._speeds.update(speeds)
-            if self._executor is not None:
-                for v in speeds:
-                    if v not in self._futures:
-                        self._futures[v] = self._executor.submit(refute_speed, *self._args, v)
+            self._scan.update(speeds)
+            start = self._executor is not None and not self._loaded and not self._closed
+            if start:
+                self._ahead = self._loaded = True
+                future = self._executor.submit(load_model, self._args[0])
+        if start:
+            future.add_done_callback(self._ahead_done)
+        else:
+            self._search_ahead()
 
     def drop_from(self, v_top) -> None:
-        """Forget the speeds at or above ``v_top`` (searches not started are cancelled)."""
+        """Forget the scan speeds at or above ``v_top`` (their searches not started are cancelled)."""
         with self._lock:
-            self._speeds = {v for v in self._speeds if v < v_top}
-            for v, f in self._futures.items():
-                if v >= v_top:
-                    f.cancel()
+            self._scan = {v for v in self._scan if v < v_top}
+            self._top = min(self._top, v_top)
+            above = [f for (v, _key), f in self._futures.items() if v >= v_top]
+        for f in above:  # outside the lock: a cancelled future runs its callbacks here
+            f.cancel()
+        self._search_ahead()
+
+    def failed_at(self, v) -> None:
+        """The speed search failed at ``v``: the final ``v_min`` lies above it, so every scan speed up to it
+        will be below the final search's top."""
+        with self._lock:
+            self._below = max(self._below, v)
+        self._search_ahead()
 
     @property
     def executor(self) -> Executor | None:
@@ -574,26 +627,71 @@ class Refuter:
         return self._executor
 
     def speeds(self) -> list:
-        """The speeds still wanted, sorted."""
+        """The scan speeds still wanted, sorted."""
         with self._lock:
-            return sorted(self._speeds)
+            return sorted(self._scan)
 
-    def result(self, v, warm=None):
-        """The search at speed ``v``: the executor's result, or a run here if the executor failed.
+    def _search_ahead(self) -> None:
+        """Start the next search the final search will ask (as far as known now), unless one is running.
 
-        ``warm`` (a verified counterexample at a neighbouring speed) starts a search not yet queued.
+        The scan's bisection over the scan speeds up to the search's fastest failure (they are below the
+        final top: the final search bisects the same ones unless a scan speed lies between that failure and
+        ``v_min``), then the bisection between its bracket when the bracket's upper end is such a scan
+        speed (its questions then do not depend on the final top).
         """
         with self._lock:
-            self._speeds.add(v)
-        if v not in self._rows:
+            if self._executor is None or self._closed or self._ahead:
+                return
+
+            def row(v, key):
+                f = self._futures.get((v, key))
+                if f is None or not f.done() or f.cancelled() or f.exception() is not None:
+                    return None
+                return f.result()
+
+            speeds = sorted(u for u in self._scan if u < self._top and u <= self._below)
+            found = _scan_question(speeds, lambda v: None if row(v, None) is None else bool(row(v, None).verified))
+            if not isinstance(found, tuple):
+                v, key, warm = found, None, self._warm
+            else:
+                lo, hi = found
+                if lo < 0 or hi >= len(speeds):
+                    return  # nothing refuted, or the bracket ends at the final top: not known yet
+                step = _fine_question((speeds[lo], None), speeds[hi], self._tol, row)
+                if step[0] is None:
+                    return
+                v, key = step
+                warm = refute.verified_counterexample(row(*key))
+            if (v, key) in self._futures and not self._futures[(v, key)].cancelled():
+                return  # the needed search failed on the executor: result() deals with that
+            self._ahead = True
+            future = self._futures[(v, key)] = self._executor.submit(refute_speed, *self._args, v, warm=warm)
+        future.add_done_callback(self._ahead_done)
+
+    def _ahead_done(self, future) -> None:
+        with self._lock:
+            self._ahead = False
+        if not future.cancelled() and future.exception() is None:
+            self._search_ahead()
+
+    def result(self, v, warm=None, key=None):
+        """The search at speed ``v``: the executor's result, or a run here if the executor failed.
+
+        ``warm`` (a verified counterexample at a neighbouring speed, named by ``key``: the same key, the
+        same start) starts the search; without it, the refuter's own.
+        """
+        if warm is None:
+            warm = self._warm
+        if (v, key) not in self._rows:
             if self._closed:
                 raise CancelledError("the counterexample searches were stopped")
             row = None
             if self._executor is not None:
                 with self._lock:
-                    future = self._futures.get(v)
+                    future = self._futures.get((v, key))
                     if future is None or future.cancelled():
-                        future = self._futures[v] = self._executor.submit(refute_speed, *self._args, v, warm=warm)
+                        future = self._futures[(v, key)] = self._executor.submit(refute_speed, *self._args, v,
+                                                                                 warm=warm)
                 try:
                     row = future.result()
                 except Exception as exc:
@@ -607,8 +705,9 @@ class Refuter:
                     self._stop_executor()
                     self._executor = None
                     self._kin = None
-            self._rows[v] = row if row is not None else refute_speed(*self._args, v, kin=self._kin, warm=warm)
-        return self._rows[v]
+            self._rows[(v, key)] = row if row is not None else refute_speed(*self._args, v, kin=self._kin,
+                                                                            warm=warm)
+        return self._rows[(v, key)]
 
     def close(self) -> None:
         """Cancel what has not started, start nothing more; shut the executor down if this object made it."""
@@ -624,32 +723,79 @@ class Refuter:
             self._executor.shutdown(wait=False, cancel_futures=True)
 
 
+def _scan_question(speeds: list, refuted):
+    """The scan's bisection over ``speeds`` (sorted) with answers ``refuted(v)`` (True, False or None: not known).
+
+    Returns ``(lo, hi)``, the indices of the fastest refuted speed (-1: none) and of the slowest speed
+    not refuted above it (``len(speeds)``: none, the top), when every answer needed is known; else the
+    first speed whose answer is needed.  The slowest speed is asked before none is declared refuted.
+    """
+    lo, hi = -1, len(speeds)
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        answer = refuted(speeds[mid])
+        if answer is None:
+            return speeds[mid]
+        lo, hi = (mid, hi) if answer else (lo, mid)
+    return lo, hi
+
+
+def _fine_question(ok: tuple, v_no: float, tol: float, row) -> tuple:
+    """The bisection between the fastest refuted speed and ``v_no`` to ``tol`` with rows ``row(v, key)`` (None:
+    not known), each step keyed by the chain of refuted speeds that starts it: ``ok = (speed, its key)``.
+
+    Returns ``(speed, key)``, the first step whose row is needed, or ``(None, ok)`` with the final ``ok``.
+    """
+    while v_no - ok[0] > tol:
+        mid = round(0.5 * (ok[0] + v_no), 6)
+        if mid in (ok[0], v_no):  # tol below the rounding of speeds
+            break
+        r = row(mid, ok)
+        if r is None:
+            return mid, ok
+        if r.verified:
+            ok = (mid, ok)
+        else:
+            v_no = mid
+    return None, ok
+
+
 def refutation_search(refuter: Refuter, v_top, tol):
     """Refutation bound below ``v_top``: the largest speed with a verified counterexample.
 
-    The coarse scan submitted to ``refuter`` (0.1 m/s from 0.3 m/s, or the
-    caller's speeds) below ``v_top``, then bisection between the fastest
-    refuted and the slowest non-refuted speed above it, to ``tol``, each
-    step warm-started from the fastest refuted speed's counterexample.  Each
-    speed is searched against its own plan's readings and ``a_max`` (the
-    bounds its certificate would use); a failed search proves nothing (the
-    NLP is non-convex).
+    The coarse scan's speeds (0.1 m/s from 0.3 m/s, or the caller's) below
+    ``v_top`` are bisected (a speed refuted, the next faster not) rather
+    than all searched, then the speeds between the fastest refuted and the
+    slowest non-refuted speed above it (or ``v_top``) are bisected to
+    ``tol``, each step warm-started from the fastest refuted speed's
+    counterexample.  Each speed is searched against its own plan's readings
+    and ``a_max`` (the bounds its certificate would use); a failed search
+    proves nothing (the NLP is non-convex).  Both bisections presume that a
+    counterexample exists below a refuted speed; when that fails, the bound
+    is still a speed with a verified counterexample, only a faster refuted
+    speed may have been missed.
 
     Returns
     -------
     bound : float or None
-    rows : list of planner.refute.SpeedRefutation (sorted by speed)
+    rows : list of planner.refute.SpeedRefutation (sorted by speed): the speeds searched
     """
-    rows = {v: refuter.result(v) for v in refuter.speeds() if v < v_top}
-    while True:
-        ordered = sorted(rows)
-        refuted = [v for v in ordered if rows[v].verified]
-        if not refuted:
-            return None, [rows[v] for v in ordered]
-        v_ok = max(refuted)
-        above = [v for v in ordered if v > v_ok]
-        v_no = min(above) if above else v_top
-        if v_no - v_ok <= tol:
-            return v_ok, [rows[v] for v in ordered]
-        mid = round(0.5 * (v_ok + v_no), 6)
-        rows[mid] = refuter.result(mid, warm=refute.verified_counterexample(rows[v_ok]))
+    speeds = [v for v in refuter.speeds() if v < v_top]
+    rows = {}
+
+    def refuted(v) -> bool:
+        rows[v] = refuter.result(v)
+        return bool(rows[v].verified)
+
+    lo, hi = _scan_question(speeds, refuted)
+    if lo < 0:
+        return None, [rows[v] for v in sorted(rows)]
+    keyed = {(v, None): r for v, r in rows.items()}
+
+    def step(v, key):
+        # each step starts from the counterexample of the fastest refuted speed before it (named by its chain)
+        keyed[(v, key)] = rows[v] = refuter.result(v, warm=refute.verified_counterexample(keyed[key]), key=key)
+        return rows[v]
+
+    _none, ok = _fine_question((speeds[lo], None), speeds[hi] if hi < len(speeds) else v_top, tol, step)
+    return ok[0], [rows[v] for v in sorted(rows)]

@@ -48,6 +48,7 @@ on executions checked to be admissible.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 
@@ -261,16 +262,18 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
     still certified (its own run certified it); only a slower certified
     speed may have been missed.
 
-    With ``v_guess`` (m/s, e.g. the ``v_min`` of a nearby task) the bracket
-    is found around it instead: the guess is asked first, then speeds
-    ``tol``, ``2 tol``, ``4 tol``... away from it, downwards while they
-    certify, upwards while they fail (capped at ``v_low`` and ``v_high``),
-    and the bracket so found is bisected as above.  A guess within ``tol`` of
-    the answer takes 2-3 questions instead of about 9; the result keeps the
-    same guarantee (certified by its own run, every tried speed above it
-    certified, a failed one within ``tol`` below it unless it is ``v_low``).
-    It need not be the speed the bisection of ``[v_low, v_high]`` finds when
-    certification is not monotone, or within ``tol`` of it.
+    With ``v_guess`` (m/s, e.g. the ``v_min`` of a nearby task) the same
+    bisection runs with the answers it has not asked predicted from the
+    guess (certified at or above it) and from the answers asked so far; only
+    the two ends of the bracket it ends on are asked, and the guess moves
+    ``tol``, ``2 tol``, ``4 tol``... when one of them is answered against its
+    prediction (:func:`_search_from_guess`).  A guess in the answer's cell of
+    the bisection's grid takes 2 questions instead of about 9, one a few
+    cells away 3-5.  The result keeps the same guarantee (certified by its
+    own run, every tried speed above it certified, a failed one within
+    ``tol`` below it unless it is ``v_low``), and lies on the bisection's
+    grid: when certification is monotone it is the speed the search without
+    a guess finds.
 
     ``observe(trial)`` (optional) is called with each :class:`SpeedTrial` as
     it completes (:func:`~planner.certify.crossing.certify_crossing` passes certified speeds to the counterexample
@@ -292,66 +295,65 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
                 observe(runs[v].trial())
         return runs[v].verdict is Verdict.MODE_CHANGED
 
-    lowest = round(float(v_low), 6)
+    lowest, highest = round(float(v_low), 6), round(float(v_high), 6)
     if v_guess is None:
-        v_cert, v_fail = round(float(v_high), 6), lowest
-        found = certified(v_cert)
+        _fail, v_min = _bisect(certified, lowest, highest, tol)
     else:
-        v_cert, v_fail, found = _bracket_around(certified, V.positive("v_guess", v_guess), v_low, v_high, tol)
-    if not found:
-        v_min = None
-    else:
-        while v_cert - v_fail > tol:
-            mid = round(0.5 * (v_fail + v_cert), 6)
-            if mid in (v_fail, v_cert):  # tol below the rounding of speeds
-                break
-            if certified(mid):
-                v_cert = mid
-            else:
-                v_fail = mid
-        if v_fail == lowest and certified(v_fail):  # no question failed: v_low itself
-            v_cert = v_fail
-        v_min = v_cert
+        v_min = _search_from_guess(certified, runs, V.positive("v_guess", v_guess), lowest, highest, tol)
     return SpeedSearch(v_min, tuple(runs[v].trial() for v in sorted(runs)), runs)
 
 
-def _bracket_around(certified, guess: float, v_low: float, v_high: float, tol: float) -> tuple:
-    """``(v_cert, v_fail, found)``: a bracket of :func:`search_v_min` found by steps doubling away from ``guess``.
-
-    ``certified(v)`` asks (and remembers) one speed.  ``v_fail`` is ``v_low`` when it was not asked
-    (presumed uncertified, as in the bisection); ``found`` is false when ``v_high`` was asked and failed.
-    """
-    lowest, highest = round(float(v_low), 6), round(float(v_high), 6)
-    g = round(min(max(float(guess), lowest), highest), 6)
-    step = tol
-    if certified(g):
-        v_cert = g
-        while v_cert > lowest:  # downwards while certified; the first failure ends the bracket
-            v = max(lowest, _away(v_cert, -step))
-            if v == v_cert:
-                break
-            if not certified(v):
-                return v_cert, v, True
-            v_cert, step = v, 2.0 * step
-        return v_cert, lowest, True
-    v_fail = g
-    while v_fail < highest:  # upwards while failing; the first certified speed ends the bracket
-        v = min(highest, _away(v_fail, step))
-        if v == v_fail:
+def _bisect(answer, lowest: float, highest: float, tol: float) -> tuple:
+    """``(v_fail, v_cert)`` of the bisection of :func:`search_v_min` with answers ``answer(v)``; ``v_cert`` is
+    None when ``highest`` does not certify.  ``v_fail`` is ``lowest`` (presumed) when no question failed."""
+    v_cert, v_fail = highest, lowest
+    if not answer(v_cert):
+        return v_fail, None
+    while v_cert - v_fail > tol:
+        mid = round(0.5 * (v_fail + v_cert), 6)
+        if mid in (v_fail, v_cert):  # tol below the rounding of speeds
             break
-        if certified(v):
-            return v, v_fail, True
-        v_fail, step = v, 2.0 * step
-    return highest, v_fail, False
+        if answer(mid):
+            v_cert = mid
+        else:
+            v_fail = mid
+    if v_fail == lowest and answer(v_fail):  # no question failed: v_low itself
+        v_cert = v_fail
+    return v_fail, v_cert
 
 
-def _away(v: float, step: float) -> float:
-    """The speed ``step`` m/s from ``v``, on the search's 1e-6 m/s grid and no farther than ``|step|`` in
-    floating point (so that a bracket of one step ends the bisection)."""
-    w = round(v + step, 6)
-    while abs(w - v) > abs(step):
-        w = round(w - 1e-6 if step > 0 else w + 1e-6, 6)
-    return w
+def _search_from_guess(certified, runs: dict, guess: float, lowest: float, highest: float, tol: float):
+    """``v_min`` of :func:`search_v_min` from ``guess``: its bisection, asking only where the answer is open.
+
+    Until a failed speed lies below a certified one, the bisection of ``[lowest, highest]`` runs on
+    predicted answers (fail at or below the fastest asked failure, certify at or above the slowest asked
+    certified speed, else certify from the guess on) and the two ends of the bracket it ends on are
+    asked; the guess moves ``tol``, ``2 tol``, ``4 tol``... past an end answered against its prediction
+    (on the way down, past each newly asked certified end, without asking the speed below it).
+    Once a failure lies below a certified speed, the bisection runs again asking every speed between
+    them, as the search without a guess would.  Asked speeds fail only at or below the fastest failure, so
+    every asked speed above ``v_min`` certified; when certification is monotone the asked answers are
+    those the search without a guess would get, so the result is its result.
+    """
+    g, step, down = min(max(guess, lowest), highest), tol, False
+    while True:
+        failed = max((u for u in runs if runs[u].verdict is not Verdict.MODE_CHANGED), default=-math.inf)
+        ceiling = min((u for u in runs if u > failed), default=math.inf)  # every asked speed above failed certified
+        if failed > -math.inf and ceiling < math.inf:  # bracketed: ask what lies between, as the bisection does
+            v_fail, v_cert = _bisect(lambda v: v > failed and (v >= ceiling or certified(v)), lowest, highest, tol)
+        else:
+            v_fail, v_cert = _bisect(lambda v: v > failed and (v >= ceiling or v >= g), lowest, highest, tol)
+        if v_cert is None:  # only when the fastest speed was asked and failed
+            return None
+        if v_cert not in runs:
+            if not certified(v_cert):  # the answer lies above: move the guess up past it
+                g, step = min(v_cert + step, highest), 2.0 * step
+            elif down:  # still certified on the way down: on, without asking the speed below
+                g, step = max(v_cert - step, lowest), 2.0 * step
+        elif v_fail == v_cert or failed >= v_fail:
+            return v_cert
+        elif certified(v_fail):  # the answer lies below: move the guess down past it
+            g, step, down = max(v_fail - step, lowest), 2.0 * step, True
 
 
 def minimal_v_sing(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress=None, observe=None):
