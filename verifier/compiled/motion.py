@@ -11,7 +11,14 @@ Imported on first use only, so that the numpy backend never loads numba.
 
 from __future__ import annotations
 
-from .ops import add, cached_jit, div, intersect, mul, sqr, sub
+import numpy as np
+
+from .ops import add, cached_jit, div, intersect, jit, mul, sqr, sub
+
+#: Columns of ``new`` holding a pair's velocity and pose bounds (numpy scalars: a Python literal
+#: would compile :func:`_write_ends` once per value, tests/test_kernel_compilation.py).
+_VELOCITY = np.int64(0)
+_POSE = np.int64(4)
 
 
 @cached_jit
@@ -54,15 +61,17 @@ def pair_kernel(x, xd, k, j, tau_lo, tau_hi, it_lo, it_hi, half_lo, half_hi, e4,
                 new[i, 4], new[i, 5], new[i, 6], new[i, 7] = xkl, xkh, xll, xlh
             # the k ends first, then each l end intersected with what is there (a sample is the k of
             # one pair and the l of another)
-            for i in range(P):
-                a = k[i]
-                xd[r, a, 0, c], xd[r, a, 1, c] = new[i, 0], new[i, 1]
-            for i in range(P):
-                b = k[i] + j
-                xd[r, b, 0, c], xd[r, b, 1, c] = intersect(xd[r, b, 0, c], xd[r, b, 1, c], new[i, 2], new[i, 3])
-            for i in range(P):
-                a = k[i]
-                x[r, a, 0, c], x[r, a, 1, c] = new[i, 4], new[i, 5]
-            for i in range(P):
-                b = k[i] + j
-                x[r, b, 0, c], x[r, b, 1, c] = intersect(x[r, b, 0, c], x[r, b, 1, c], new[i, 6], new[i, 7])
+            _write_ends(xd, r, c, k, j, new, _VELOCITY)
+            _write_ends(x, r, c, k, j, new, _POSE)
+
+
+@jit
+def _write_ends(T, r, c, k, j, new, col):
+    """Tube ``T``'s coordinate ``c`` of row ``r``: the ``k`` ends take ``new[:, col:col + 2]``, then each
+    ``k + j`` end is intersected with ``new[:, col + 2:col + 4]``."""
+    for i in range(k.shape[0]):
+        a = k[i]
+        T[r, a, 0, c], T[r, a, 1, c] = new[i, col], new[i, col + 1]
+    for i in range(k.shape[0]):
+        b = k[i] + j
+        T[r, b, 0, c], T[r, b, 1, c] = intersect(T[r, b, 0, c], T[r, b, 1, c], new[i, col + 2], new[i, col + 3])
