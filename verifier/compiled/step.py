@@ -156,10 +156,10 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
     set_input(il, ih, n, tb, TB_QS, n)
     set_input(il, ih, 2 * n, XI, r, m)
     set_input(il, ih, 2 * n + m, tb, TB_XDS, n)
-    forward(prog, T_JQ, il, ih, sc.nl, sc.nh)
+    forward(prog, T_JQ, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for e in range(nn):
         w[jl + e], w[jh + e] = output(prog, T_JQ, e, sc.nl, sc.nh)
-    forward(prog, T_JX_XD, il, ih, sc.nl, sc.nh)
+    forward(prog, T_JX_XD, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         rl, rh = output(prog, T_JX_XD, i, sc.nl, sc.nh)
         w[bl + i] = -rh
@@ -171,7 +171,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         ih[3 * n + m + i] = w[dh + i]
         il[4 * n + m + i] = tb[TB_ACC, 0, i]
         ih[4 * n + m + i] = tb[TB_ACC, 1, i]
-    forward(prog, T_ACCEL, il, ih, sc.nl, sc.nh)
+    forward(prog, T_ACCEL, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         rl, rh = output(prog, T_ACCEL, i, sc.nl, sc.nh)
         w[bl + i] = -rh
