@@ -117,20 +117,21 @@ def pack(model) -> Program:
 #: baseline's past box) some 70 times: the joints are not contracted through
 #: sin and cos, so the same argument comes back in every tape and iteration.
 MEMO_SIZE = 128
-# odd multipliers (golden ratio's, splitmix64's, Murmur3's) spreading the low bits, where
-# neighbouring arguments differ (and the sine's and cosine's tags), into the bits of the slot
+# multiplicative hashing: odd multipliers (golden ratio's, splitmix64's, Murmur3's) carry every
+# bit of the key, the low mantissa bits where neighbouring arguments differ included, into the
+# top bits of the product, where the slot is taken from (at most 7 bits: MEMO_SIZE <= 128)
 _H_LO = np.int64(-7046029254386353131)
 _H_HI = np.int64(-4658895280553007687)
 _H_TAG = np.int64(-49064778989728563)
-_SLOT_SHIFT = np.int64(44)
+_SLOT_SHIFT = np.int64(57)
 
 
 def trig_memo(size=MEMO_SIZE):
     """An empty memo of :func:`trig`: keys ``(size, 3)`` int64 (opcode + 1,
     0 = empty; bit patterns of the lower and upper argument bound) and
-    values ``(size, 2)`` float64.  ``size`` must be a power of two."""
-    if size < 1 or size & (size - 1):
-        raise ValueError(f"trig memo size must be a power of two, got {size}")
+    values ``(size, 2)`` float64.  ``size`` must be a power of two, at most 128."""
+    if size < 1 or size > 128 or size & (size - 1):
+        raise ValueError(f"trig memo size must be a power of two from 1 to 128, got {size}")
     return np.zeros((size, 3), np.int64), np.zeros((size, 2))
 
 
