@@ -264,7 +264,9 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
     baselines (see :func:`verifier.contractors.velocity_displacement`).
 
     ``past_x[r, idx[j]]``, ``past_q[r, idx[j]]`` are the boxes at
-    ``t_k - h_j``; ``DQ[dq0 + j]`` encloses ``q_k - q_{k-j}``;
+    ``t_k - h_j``; ``DQ[dq0 + j]`` encloses the mean joint rate
+    ``(q_k - q_{k-j}) / h_j`` (rad/s; the same for every iteration of a sample, so
+    the caller divides once);
     ``baseline[j]`` holds ``h_j`` (``h_lo``, ``h_hi``, s); ``axis[i].a_max``
     m/s^2.  Uses ``sc.w[:12 n + 7 n^2]``.
     """
@@ -276,12 +278,12 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
     accl, acch, u, slack = 0, n, 2 * n, 4 * n
     for jb in range(n_base):
         p = idx[jb]
-        h_lo = baseline[jb].h_lo
         h_hi = baseline[jb].h_hi
         for i in range(n):
             il[i], ih[i] = ops.hull(X[ix, 0, i], X[ix, 1, i], past_x[r, p, 0, i], past_x[r, p, 1, i])
             il[n + i], ih[n + i] = ops.hull(Q[iq, 0, i], Q[iq, 1, i], past_q[r, p, 0, i], past_q[r, p, 1, i])
-            il[2 * n + m + i], ih[2 * n + m + i] = ops.div(DQ[dq0 + jb, 0, i], DQ[dq0 + jb, 1, i], h_lo, h_hi)
+            il[2 * n + m + i] = DQ[dq0 + jb, 0, i]
+            ih[2 * n + m + i] = DQ[dq0 + jb, 1, i]
         for i in range(m):
             il[2 * n + i] = XI[ixi, 0, i]
             ih[2 * n + i] = XI[ixi, 1, i]
