@@ -28,7 +28,7 @@ import pytest
 
 from crosscert.verifier.compiled import contractors as K
 from crosscert.verifier.compiled.linalg import enclosure_scratch, linear_enclosure
-from crosscert.verifier.compiled.tape import TAPES, forward
+from crosscert.verifier.compiled.tape import TAPES, forward, trig_memo
 from crosscert.verifier.tape import OPCODES
 
 OP = {v: k for k, v in OPCODES.items()}
@@ -101,7 +101,7 @@ def test_compiled_tapes_contain_arb_values_at_points(imodel):
     for _ in range(12):
         u = _inputs(imodel, rng)
         for t in range(len(TAPES)):
-            forward(prog, t, u.copy(), u.copy(), lo, hi)
+            forward(prog, t, u.copy(), u.copy(), lo, hi, *trig_memo())
             for i, r in enumerate(_arb_nodes(prog, t, u)):
                 if not r.is_finite():
                     continue

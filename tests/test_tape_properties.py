@@ -25,7 +25,7 @@ import pytest
 
 from crosscert.verifier import interval as I
 from crosscert.verifier.compiled import vectorized as V
-from crosscert.verifier.compiled.tape import Program, forward, output
+from crosscert.verifier.compiled.tape import Program, forward, output, trig_memo
 from crosscert.verifier.tape import OPCODES, Tape
 
 N_SYM = 3
@@ -160,9 +160,10 @@ def _run_kernel(arrays, lo_in, hi_in):
     B, n_out = lo_in.shape[0], len(outs)
     olo, ohi = np.empty((B, n_out)), np.empty((B, n_out))
     lo, hi = np.empty(N), np.empty(N)
+    mk, mv = trig_memo()
     prog = Program(code, np.ascontiguousarray(arrays.value, dtype=np.float64), outs, meta, N)
     for s in range(B):
-        forward(prog, 0, np.ascontiguousarray(lo_in[s]), np.ascontiguousarray(hi_in[s]), lo, hi)
+        forward(prog, 0, np.ascontiguousarray(lo_in[s]), np.ascontiguousarray(hi_in[s]), lo, hi, mk, mv)
         for e in range(n_out):
             olo[s, e], ohi[s, e] = output(prog, 0, e, lo, hi)
     return olo, ohi

@@ -19,7 +19,7 @@ import numpy as np
 from . import ops
 from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 from .ops import cached_jit, jit
-from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output
+from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
 # differences of the baselines follow from TB_DQ on
@@ -57,6 +57,9 @@ class Scratch(NamedTuple):
         Mode of each geometry hypothesis of the current sample.
     row_qdd : float64 (P, 2, n)
         Joint-acceleration bound of each hypothesis (then ``|qdd|`` in row 0).
+    mk, mv : int64 (MEMO_SIZE, 3), float64 (MEMO_SIZE, 2)
+        Memo of sines and cosines (:func:`verifier.compiled.tape.trig_memo`):
+        per thread, since a slot is written as two keys and two values.
     """
 
     nl: np.ndarray
@@ -69,6 +72,8 @@ class Scratch(NamedTuple):
     wi: np.ndarray
     modes: np.ndarray
     row_qdd: np.ndarray
+    mk: np.ndarray
+    mv: np.ndarray
 
 
 def workspace_size(n):
@@ -84,18 +89,19 @@ def scratch_arrays(threads, n_nodes, n, m, baselines, max_pieces, hypotheses):
     the order of :class:`Scratch` (allocated once per tracker)."""
     cap = 2 * max(int(max_pieces), 0) + 2
     T = int(threads)
+    mk, mv = trig_memo()
     return Scratch(np.zeros((T, n_nodes)), np.zeros((T, n_nodes)), np.zeros((T, 5 * n + m)),
                    np.zeros((T, 5 * n + m)), np.zeros((T, workspace_size(n))),
                    np.zeros((T, TB_DQ + max(int(baselines), 1), 2, max(n, m))), np.zeros((T, 2 * cap, 2, n)),
                    np.zeros((T, max(int(baselines), 1) + 2 * cap), np.int64), np.zeros((T, hypotheses), np.int64),
-                   np.zeros((T, hypotheses, 2, n)))
+                   np.zeros((T, hypotheses, 2, n)), np.repeat(mk[None], T, axis=0), np.repeat(mv[None], T, axis=0))
 
 
 @jit
 def thread_scratch(S, t):
     """The :class:`Scratch` of thread slot ``t`` (rows of the arrays ``S``)."""
     return Scratch(S.nl[t], S.nh[t], S.il[t], S.ih[t], S.w[t], S.tb[t], S.pieces[t], S.wi[t], S.modes[t],
-                   S.row_qdd[t])
+                   S.row_qdd[t], S.mk[t], S.mv[t])
 
 
 @jit
@@ -128,7 +134,7 @@ def hc4_pose(prog, X, ix, Q, iq, XI, ixi, n, m, sc, joints_too):
     il = sc.il
     ih = sc.ih
     _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
-    hc4(prog, T_F, n, il, ih, sc.nl, sc.nh)
+    hc4(prog, T_F, n, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         X[ix, 0, i] = il[i]
         X[ix, 1, i] = ih[i]
@@ -166,11 +172,11 @@ def newton(prog, X, ix, Q, iq, XI, ixi, on_x, n, m, sc):
     for i in range(n):
         il[off + i] = w[mid + i]
         ih[off + i] = w[mid + i]
-    forward(prog, T_F, il, ih, sc.nl, sc.nh)
+    forward(prog, T_F, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         w[fl + i], w[fh + i] = output(prog, T_F, i, sc.nl, sc.nh)
     set_input(il, ih, off, V, iv, n)
-    forward(prog, tape_j, il, ih, sc.nl, sc.nh)
+    forward(prog, tape_j, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for e in range(nn):
         lo, hi = output(prog, tape_j, e, sc.nl, sc.nh)
         w[jl + e] = lo
@@ -192,7 +198,7 @@ def newton(prog, X, ix, Q, iq, XI, ixi, on_x, n, m, sc):
 def mode_of(prog, X, ix, Q, iq, XI, ixi, n, m, sc):
     """+1 / -1 when ``mode_sign det J_x`` has that sign over the box, else 0."""
     _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
-    forward(prog, T_DET, sc.il, sc.ih, sc.nl, sc.nh)
+    forward(prog, T_DET, sc.il, sc.ih, sc.nl, sc.nh, sc.mk, sc.mv)
     dl, dh = output(prog, T_DET, I0, sc.nl, sc.nh)
     if dl > 0.0:
         return 1
@@ -208,7 +214,7 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
     # w[slack], w[slack + n], when slack >= 0) (+ slack after)
     w = sc.w
     nn = n * n
-    forward(prog, T_VEL, sc.il, sc.ih, sc.nl, sc.nh)
+    forward(prog, T_VEL, sc.il, sc.ih, sc.nl, sc.nh, sc.mk, sc.mv)
     jl = off
     jh = off + nn
     bl = off + 2 * nn
@@ -258,7 +264,9 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
     baselines (see :func:`verifier.contractors.velocity_displacement`).
 
     ``past_x[r, idx[j]]``, ``past_q[r, idx[j]]`` are the boxes at
-    ``t_k - h_j``; ``DQ[dq0 + j]`` encloses ``q_k - q_{k-j}``;
+    ``t_k - h_j``; ``DQ[dq0 + j]`` encloses the mean joint rate
+    ``(q_k - q_{k-j}) / h_j`` (rad/s; the same for every iteration of a sample, so
+    the caller divides once);
     ``baseline[j]`` holds ``h_j`` (``h_lo``, ``h_hi``, s); ``axis[i].a_max``
     m/s^2.  Uses ``sc.w[:12 n + 7 n^2]``.
     """
@@ -270,12 +278,12 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
     accl, acch, u, slack = 0, n, 2 * n, 4 * n
     for jb in range(n_base):
         p = idx[jb]
-        h_lo = baseline[jb].h_lo
         h_hi = baseline[jb].h_hi
         for i in range(n):
             il[i], ih[i] = ops.hull(X[ix, 0, i], X[ix, 1, i], past_x[r, p, 0, i], past_x[r, p, 1, i])
             il[n + i], ih[n + i] = ops.hull(Q[iq, 0, i], Q[iq, 1, i], past_q[r, p, 0, i], past_q[r, p, 1, i])
-            il[2 * n + m + i], ih[2 * n + m + i] = ops.div(DQ[dq0 + jb, 0, i], DQ[dq0 + jb, 1, i], h_lo, h_hi)
+            il[2 * n + m + i] = DQ[dq0 + jb, 0, i]
+            ih[2 * n + m + i] = DQ[dq0 + jb, 1, i]
         for i in range(m):
             il[2 * n + i] = XI[ixi, 0, i]
             ih[2 * n + i] = XI[ixi, 1, i]

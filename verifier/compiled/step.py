@@ -156,10 +156,10 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
     set_input(il, ih, n, tb, TB_QS, n)
     set_input(il, ih, 2 * n, XI, r, m)
     set_input(il, ih, 2 * n + m, tb, TB_XDS, n)
-    forward(prog, T_JQ, il, ih, sc.nl, sc.nh)
+    forward(prog, T_JQ, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for e in range(nn):
         w[jl + e], w[jh + e] = output(prog, T_JQ, e, sc.nl, sc.nh)
-    forward(prog, T_JX_XD, il, ih, sc.nl, sc.nh)
+    forward(prog, T_JX_XD, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         rl, rh = output(prog, T_JX_XD, i, sc.nl, sc.nh)
         w[bl + i] = -rh
@@ -171,7 +171,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         ih[3 * n + m + i] = w[dh + i]
         il[4 * n + m + i] = tb[TB_ACC, 0, i]
         ih[4 * n + m + i] = tb[TB_ACC, 1, i]
-    forward(prog, T_ACCEL, il, ih, sc.nl, sc.nh)
+    forward(prog, T_ACCEL, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         rl, rh = output(prog, T_ACCEL, i, sc.nl, sc.nh)
         w[bl + i] = -rh
@@ -252,7 +252,7 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
             XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
                                                      prior.xd[b, kk, 1, i])
     copy_box(tb, TB_QN, Q, r, n)
-    # displacement baselines: past boxes and readings only, built once per sample
+    # displacement baselines' mean joint rates: past boxes and readings only, built once per sample
     idx = sc.wi
     n_base = I0  # not the literal 0: see contractors.I0
     if vmodel == SOUND:
@@ -266,8 +266,8 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
                 qk = q[b, kk, i]
                 qp = past_r[r, p, i]
                 dl, dh = ops.sub(qk, qk, qp, qp)
-                tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.add(dl, dh, c.diff_err[jb, 0, i],
-                                                                     c.diff_err[jb, 1, i])
+                dl, dh = ops.add(dl, dh, c.diff_err[jb, 0, i], c.diff_err[jb, 1, i])
+                tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.div(dl, dh, c.baseline[jb].h_lo, c.baseline[jb].h_hi)
             n_base += 1
     keep_xi = c.keep_xi
     copy_box(XI, r, tb, TB_XIW, m)

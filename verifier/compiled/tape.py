@@ -21,7 +21,7 @@ from ..tape import OPCODES
 from . import ops
 from .ops import jit
 
-__all__ = ["Program", "TAPES", "pack"]
+__all__ = ["Program", "TAPES", "pack", "trig_memo"]
 
 #: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
 TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
@@ -112,10 +112,64 @@ def pack(model) -> Program:
     )
 
 
+#: Entries of a thread's memo of sine and cosine bounds (a power of two).  Their
+#: arguments are the joints' box and its hulls with the baselines' past boxes; the
+#: joints are not contracted through sin and cos, so an argument comes back in every
+#: tape and iteration, and often in the next sample: on the 1.458 m/s crossing a
+#: row's sample asks for about 116 of them, of which 93 % hit.
+MEMO_SIZE = 128
+# the slot: multiplicative hashing (odd multipliers: the golden ratio's, splitmix64's,
+# Murmur3's) and an xor-shift carry every bit of the key, the low mantissa bits where
+# neighbouring arguments differ included, into the top 7 bits (MEMO_SIZE <= 128)
+_H_LO = np.int64(-7046029254386353131)
+_H_HI = np.int64(-4658895280553007687)
+_H_TAG = np.int64(-49064778989728563)
+_SLOT_SHIFT = np.int64(57)
+
+
+def trig_memo(size=MEMO_SIZE):
+    """An empty memo of :func:`trig`: keys ``(size, 3)`` int64 (opcode + 1,
+    0 = empty; bit patterns of the lower and upper argument bound) and
+    values ``(size, 2)`` float64.  ``size`` must be a power of two, at most 128."""
+    if size < 1 or size > 128 or size & (size - 1):
+        raise ValueError(f"trig memo size must be a power of two from 1 to 128, got {size}")
+    return np.zeros((size, 3), np.int64), np.zeros((size, 2))
+
+
 @jit
-def forward(prog, t, in_lo, in_hi, lo, hi):
+def trig(op, al, ah, mk, mv):
+    """``sin([a])`` (``op`` = OP_SIN) or ``cos([a])`` (OP_COS), through the
+    memo ``mk, mv`` (:func:`trig_memo`).
+
+    Both are pure functions of the two bounds' bit patterns, so a hit returns
+    the very floats a recomputation gives.  The key is the opcode and the
+    bit patterns, not float equality: ``-0.0`` and ``0.0`` are distinct keys
+    and a NaN bound matches itself only.  Direct-mapped: a colliding
+    argument overwrites the slot (a miss, never a wrong hit)."""
+    kl = ops._bits(al)
+    kh = ops._bits(ah)
+    tag = op + 1
+    h = kl * _H_LO ^ kh * _H_HI ^ tag * _H_TAG
+    s = (((h ^ (h >> 31)) * _H_LO) >> _SLOT_SHIFT) & (mk.shape[0] - 1)
+    if mk[s, 0] == tag and mk[s, 1] == kl and mk[s, 2] == kh:
+        return mv[s, 0], mv[s, 1]
+    if op == _SIN:
+        rl, rh = ops.sin(al, ah)
+    else:
+        rl, rh = ops.cos(al, ah)
+    mk[s, 0] = tag
+    mk[s, 1] = kl
+    mk[s, 2] = kh
+    mv[s, 0] = rl
+    mv[s, 1] = rh
+    return rl, rh
+
+
+@jit
+def forward(prog, t, in_lo, in_hi, lo, hi, mk, mv):
     """Evaluate tape ``t`` of the :class:`Program` ``prog`` over the input box;
-    node bounds land in ``lo, hi``."""
+    node bounds land in ``lo, hi``; ``mk, mv`` is the calling thread's memo
+    of sines and cosines (:func:`trig_memo`)."""
     code = prog.code
     value = prog.value
     meta = prog.meta
@@ -144,10 +198,8 @@ def forward(prog, t, in_lo, in_hi, lo, hi):
             lo[i], hi[i] = ops.sqr(lo[a], hi[a])
         elif op == _SQRT:
             lo[i], hi[i] = ops.sqrt(lo[a], hi[a])
-        elif op == _SIN:
-            lo[i], hi[i] = ops.sin(lo[a], hi[a])
-        elif op == _COS:
-            lo[i], hi[i] = ops.cos(lo[a], hi[a])
+        elif op == _SIN or op == _COS:
+            lo[i], hi[i] = trig(op, lo[a], hi[a], mk, mv)
         elif op == _TWICE:
             lo[i], hi[i] = ops.add(lo[a], hi[a], lo[a], hi[a])
         elif op == _FABS:
@@ -189,12 +241,13 @@ def _project_square(al, ah, zl, zh):
 
 
 @jit
-def hc4(prog, t, n_out, in_lo, in_hi, lo, hi):
+def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
     """HC4Revise: contract the input box in place with ``output_0(inputs) = 0``.
 
-    ``n_out`` is the number of entries of output 0 (the constrained one).
+    ``n_out`` is the number of entries of output 0 (the constrained one);
+    ``mk, mv`` as in :func:`forward`.
     """
-    forward(prog, t, in_lo, in_hi, lo, hi)
+    forward(prog, t, in_lo, in_hi, lo, hi, mk, mv)
     code = prog.code
     value = prog.value
     outs = prog.outs
