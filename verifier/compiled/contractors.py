@@ -27,7 +27,7 @@ from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = (np.int64(i) for i in range(10))
 #: Constant arguments of callees as numpy scalars, never Python literals: numba compiles a callee
 #: once more for every literal argument (``newton(..., True, ...)`` and ``newton(..., False, ...)``
-#: were two compilations of the whole Newton step; 19 of 88 such copies, test_kernels_compile_once).
+#: were two compilations of the whole Newton step; 19 of 88 such copies; tests/test_kernel_compilation.py).
 I0 = np.int64(0)
 NO_SLACK = np.int64(-1)
 ONE = np.int64(1)
