@@ -39,8 +39,9 @@ def _compiled_inverse(A, n):
 
 @pytest.mark.parametrize("n", [2, 3])
 def test_point_inverse_bitwise(n):
-    """n = 2 is the path written out, n = 3 the general loops; removing a division, swapping the
-    elimination's order or the strict pivot test of the n = 2 path fails this test."""
+    """n = 2 is the path written out, n = 3 the general loops.  In the n = 2 path, a pivot test
+    ``>=`` instead of ``>``, a dropped division by the pivot, a dropped last elimination step or a
+    dropped finiteness check of the inverse each fails this test."""
     rng = np.random.default_rng(17)
     A = _edge_matrices(n, rng)
     with np.errstate(all="ignore"):
