@@ -25,6 +25,9 @@ def point_inverse(w, a, c, t, n):
     The same float operations as :func:`verifier.linalg.point_inverse`;
     ``w[t:t + n^2]`` is scratch.
     """
+    if n == 2:
+        _inverse_2(w, a, c)
+        return
     for i in range(n * n):
         w[t + i] = w[a + i]
     ok = True
@@ -66,6 +69,66 @@ def point_inverse(w, a, c, t, n):
         for i in range(n):
             for j in range(n):
                 w[c + i * n + j] = 1.0 if i == j else 0.0
+
+
+@jit
+def _inverse_2(w, a, c):
+    """:func:`point_inverse` for ``n = 2``, its loops written out on scalars:
+    the same divisions and products in the same order (the same floats,
+    tests/test_compiled_ops.py), without the index arithmetic and the scratch
+    matrix of the general loops."""
+    t00 = w[a]
+    t01 = w[a + 1]
+    t10 = w[a + 2]
+    t11 = w[a + 3]
+    c00 = 1.0
+    c01 = 0.0
+    c10 = 0.0
+    c11 = 1.0
+    ok = math.isfinite(t00) and math.isfinite(t01) and math.isfinite(t10) and math.isfinite(t11)
+    if ok:
+        # column 0: the pivot is row 1 only when strictly larger
+        if abs(t10) > abs(t00):
+            t00, t10 = t10, t00
+            t01, t11 = t11, t01
+            c00, c10 = c10, c00
+            c01, c11 = c11, c01
+        if t00 == 0.0:
+            ok = False
+        else:
+            piv = t00
+            t00 = t00 / piv
+            c00 = c00 / piv
+            t01 = t01 / piv
+            c01 = c01 / piv
+            f = t10
+            t10 = t10 - f * t00
+            c10 = c10 - f * c00
+            t11 = t11 - f * t01
+            c11 = c11 - f * c01
+            # column 1: row 1 is the only candidate
+            if t11 == 0.0:
+                ok = False
+            else:
+                piv = t11
+                t10 = t10 / piv
+                c10 = c10 / piv
+                t11 = t11 / piv
+                c11 = c11 / piv
+                f = t01
+                c00 = c00 - f * c10
+                c01 = c01 - f * c11
+    if ok:
+        ok = math.isfinite(c00) and math.isfinite(c01) and math.isfinite(c10) and math.isfinite(c11)
+    if not ok:
+        c00 = 1.0
+        c01 = 0.0
+        c10 = 0.0
+        c11 = 1.0
+    w[c] = c00
+    w[c + 1] = c01
+    w[c + 2] = c10
+    w[c + 3] = c11
 
 
 @jit

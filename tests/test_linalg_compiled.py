@@ -1,0 +1,51 @@
+"""The compiled 2 x 2 linear algebra written out on scalars against the numpy reference, bit for bit.
+
+:func:`verifier.compiled.linalg.point_inverse` takes a path of its own for ``n = 2`` (every sample
+of a planar robot inverts six such matrices); its floats must be those of the general loops and of
+:func:`verifier.linalg.point_inverse`, signed zeros included (compared as bit patterns).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from crosscert.verifier import linalg as ref
+from crosscert.verifier.compiled import linalg as K
+
+
+def _edge_matrices(n, rng):
+    """Random matrices and the cases where the elimination branches: ties and swaps of the pivot,
+    zero and negative pivots (signed zeros in the inverse), singular, overflowing and non-finite."""
+    out = [rng.normal(size=(n, n)) * 10.0 ** rng.integers(-3, 4) for _ in range(300)]
+    out += [rng.integers(-2, 3, size=(n, n)).astype(float) for _ in range(300)]  # zeros, ties, singular
+    special = [0.0, -0.0, 1.0, -1.0, 1e-310, 1e300, -1e300, np.inf, -np.inf, np.nan]
+    for _ in range(300):
+        out.append(rng.choice(special, size=(n, n)))
+    for v in (np.eye(n), -np.eye(n), np.ones((n, n)), np.zeros((n, n)), np.eye(n)[::-1]):
+        out.append(v.copy())
+    return np.array(out)
+
+
+def _compiled_inverse(A, n):
+    w = np.zeros(3 * n * n)
+    C = np.empty_like(A)
+    for s in range(len(A)):
+        w[: n * n] = A[s].ravel()
+        K.point_inverse(w, np.int64(0), np.int64(n * n), np.int64(2 * n * n), np.int64(n))
+        C[s] = w[n * n: 2 * n * n].reshape(n, n)
+    return C
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_point_inverse_bitwise(n):
+    """n = 2 is the path written out, n = 3 the general loops.  In the n = 2 path, a pivot test
+    ``>=`` instead of ``>``, a dropped division by the pivot, a dropped last elimination step or a
+    dropped finiteness check of the inverse each fails this test."""
+    rng = np.random.default_rng(17)
+    A = _edge_matrices(n, rng)
+    with np.errstate(all="ignore"):
+        want = ref.point_inverse(A)
+    got = _compiled_inverse(A, n)
+    bad = np.nonzero(np.any(got.view(np.int64) != want.view(np.int64), axis=(1, 2)))[0]
+    assert bad.size == 0, f"{bad.size} matrices differ, first {A[bad[0]]}: {got[bad[0]]} != {want[bad[0]]}"
