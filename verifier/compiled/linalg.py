@@ -75,7 +75,7 @@ def point_inverse(w, a, c, t, n):
 def _inverse_2(w, a, c):
     """:func:`point_inverse` for ``n = 2``, its loops written out on scalars:
     the same divisions and products in the same order (the same floats,
-    tests/test_compiled_ops.py), without the index arithmetic and the scratch
+    tests/test_linalg_compiled.py), without the index arithmetic and the scratch
     matrix of the general loops."""
     t00 = w[a]
     t01 = w[a + 1]
