@@ -26,6 +26,8 @@ vectorised over ``k``, with outward rounding (:mod:`verifier.interval`); with ``
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from . import interval as I
@@ -50,20 +52,16 @@ def _constants(j: int, t_s: float, a):
     return tau, I.div(2.0, 2.0, *tau), e4, I.scale(4.0, a, a)
 
 
-#: :func:`_constants` of the last few ``(j, t_s, a)``: the window contracts with the same ones after every
-#: pass, and deriving them cost as much as the compiled contraction itself.
-_CONSTANTS: dict = {}
-
-
 def _constants_of(j: int, t_s: float, a):
-    """:func:`_constants`, remembered (the same floats: a pure function of its arguments)."""
-    key = (int(j), float(t_s), a.shape, a.tobytes())
-    got = _CONSTANTS.get(key)
-    if got is None:
-        if len(_CONSTANTS) >= 64:
-            _CONSTANTS.clear()
-        got = _CONSTANTS[key] = _constants(j, t_s, a)
-    return got
+    """:func:`_constants`, remembered for the last few ``(j, t_s, a)`` (the window contracts with the same
+    ones after every pass, and deriving them cost as much as the compiled contraction itself)."""
+    return _constants_remembered(int(j), float(t_s), a.shape, a.tobytes())
+
+
+@functools.lru_cache(maxsize=64)
+def _constants_remembered(j: int, t_s: float, shape: tuple, a_bytes: bytes):
+    # a pure function of its (hashable) arguments: the same floats as _constants
+    return _constants(j, t_s, np.frombuffer(a_bytes, dtype=np.float64).reshape(shape))
 
 
 def _remainder(vk, vl, e4, four_a):
