@@ -16,16 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from crosscert.robots import KinematicModel
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
-from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.settings import TrackerSettings, Verdict
 from crosscert.verifier.tracker import initial_box_from_mode, track_batch
 from crosscert.verifier.window import Reasoning, track_window
 
 from . import execution as ex_
 from .certify.plan import execution_class
+from .models import interval_model, kinematic_model
 from .plan import derived_a_max
 from .simulate import Quantisation, quantise, random_geometry
 from .task import PlannedTrajectory, PlanningBounds
@@ -98,8 +97,6 @@ class MonteCarloResult:
 #: Largest joint change (rad; m for a prismatic joint) from the planned joints that a geometry of the box may cause on the same
 #: leg branch (the calibration boxes move joints by milliradians; another branch is radians away).
 _SAME_BRANCH = 0.2
-#: Interval and kinematic models built in this process for :func:`monte_carlo_runs`, by robot value.
-_MODELS: dict = {}
 #: Executions per task when an executor is given: ~1-2 s of tracking per task on one core.
 BATCH_RUNS = 200
 
@@ -170,13 +167,9 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
     """Executions ``start .. stop - 1`` of a Monte Carlo confirmation (module-level: any executor can run it).
 
     ``b`` are bounds bound to the robot (``PlanningBounds.for_robot``); ``models`` the robot's ``(KinematicModel,
-    IntervalModel)``, built (once per process) when absent.
+    IntervalModel)``, those this thread keeps when absent (:mod:`planner.models`).
     """
-    if models is None:
-        models = _MODELS.get(robot)
-        if models is None:
-            models = _MODELS[robot] = (KinematicModel(robot), IntervalModel(robot))
-    kin, imodel = models
+    kin, imodel = (kinematic_model(robot), interval_model(robot)) if models is None else models
     m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
     qs, truths = [], []
     for r in range(start, stop):

@@ -31,6 +31,7 @@ from crosscert.verifier.window import WindowResult
 from .. import execution as ex_
 from .. import refute
 from ..bounce import BounceGap, bounce_floor, bounce_verdicts, gap_of
+from ..models import kinematic_model
 from ..montecarlo import MonteCarloResult, monte_carlo_confirmation
 from ..acceleration import AccelerationAssumption, derived_a_max
 from ..plan import plan_crossing, speed_ceiling
@@ -496,8 +497,6 @@ def timed(fn, *args, **kwargs):
     return value, time.perf_counter() - t0
 
 
-#: Kinematic models built in this process for :func:`refute_speed`, by robot value.
-_MODELS: dict = {}
 #: IPOPT time cap per counterexample attempt, s.  On the benchmark task of
 #: docs/planning.md every verified counterexample took <= 0.2 s (<= 60
 #: iterations); attempts near the bound can wander for 10-25 s before declaring
@@ -507,12 +506,9 @@ REFUTE_CPU_TIME = 2.0
 
 
 def load_model(robot) -> None:
-    """Build (and keep) the robot's ``KinematicModel`` in this process for :func:`refute_speed`.
-
-    Keyed by the robot's value (a frozen dataclass): variants of one robot differ in their boxes.
-    """
-    if robot not in _MODELS:
-        _MODELS[robot] = KinematicModel(robot)
+    """Build (and keep, :mod:`planner.models`) the robot's ``KinematicModel`` in this process for
+    :func:`refute_speed` (in the calling thread)."""
+    kinematic_model(robot)
 
 
 def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
@@ -524,8 +520,7 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     counterexample at a neighbouring speed, the start of the first attempt (:func:`refute.refutation_bound`).
     """
     if kin is None:
-        load_model(robot)
-        kin = _MODELS[robot]
+        kin = kinematic_model(robot)
     try:
         plan = plan_crossing(kin, task, v, b)
     except (InputError, SimulationError) as exc:
