@@ -517,13 +517,15 @@ class CompiledStep:
                 no_record=kernels.Record(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64),
                                          np.zeros((B, 0, n))),
                 no_prior=kernels.Prior(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n))),
+                # its type selects the velocity model's kernels: a driver compiled per model in use
+                vel=kernels.velocity_strategy(c.velocity_model),
                 Record=kernels.Record, Prior=kernels.Prior)
         return a
 
     def advance(self, config, st, q, record=None, prior=None):
         a = self._args(config, st)
         slots = a["slots"]
-        head = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"])
+        head = (config.model.program, config.const, a["vel"], a["rows"], a["scen"], a["scratch"])
         if record is None and prior is None and len(slots) == 1:
             # the online path: every argument's type is fixed for this state (q is a
             # C-contiguous float64 copy), so after the first call the compiled entry

@@ -10,7 +10,8 @@ scenario and its rows are independent of every other scenario.
 
 Kernels take a few structured arguments: the robot's
 :class:`~verifier.compiled.tape.Program`, the
-:class:`~verifier.constants.StepConstants` (read by name), the state as
+:class:`~verifier.constants.StepConstants` (read by name), the velocity
+model's strategy (:func:`velocity_strategy`), the state as
 :class:`Rows` and :class:`Scenarios`, per-thread :class:`Scratch` allocated
 once per tracker, the readings, and the optional record and prior boxes.
 The per-sample path neither allocates nor slices: boxes are indices into the
@@ -23,9 +24,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.extending import overload
 
-from ..constants import JOINT_FD, SOUND
+from ..constants import JOINT_FD, PAPER, SOUND
 from . import ops
 from .contractors import (
     TB_ACC,
@@ -39,6 +41,7 @@ from .contractors import (
     TB_XS,
     I0,
     NO,
+    ONE,
     TWO,
     YES,
     copy_box,
@@ -185,10 +188,183 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         qdd[iqdd, 1, i] = hi if ok else np.inf
 
 
+# ---------------------------------------------------------------------------- velocity information
+# One strategy per velocity model, chosen by the *type* of the driver's ``vel``
+# argument (:func:`velocity_strategy`): numba compiles a driver per type and,
+# in it, only that model's kernels (the joint-acceleration bound and the
+# Gauss-Seidel contractor are not compiled for the default model).  A named
+# tuple rather than a kernel passed as an argument: numba's on-disk cache
+# compares a kernel argument's type by object identity, so a driver taking one
+# missed the cache in every new process (numba 0.68, benchmarks/README.md).
+
+
+class Displacement(NamedTuple):
+    """The ``SOUND`` model: mean joint rates over the displacement baselines
+    (:func:`verifier.contractors.velocity_displacement`)."""
+
+    code: np.int64  # the model's code (verifier.constants); the type, not the value, selects the kernels
+
+
+class JointRates(NamedTuple):
+    """The ``PAPER`` model: finite differences of the last two readings, quantisation only (unsound)."""
+
+    code: np.int64
+
+
+class JointRatesQdd(NamedTuple):
+    """The ``JOINT_FD`` model: finite differences plus ``(t_s/2) [qdd]``, a joint-acceleration bound
+    over the sampling interval (:func:`_qdd_over_step`)."""
+
+    code: np.int64
+
+
+_STRATEGIES = {SOUND: Displacement, PAPER: JointRates, JOINT_FD: JointRatesQdd}
+
+
+def velocity_strategy(code: int):
+    """The compiled strategy of the velocity model ``code`` (:data:`verifier.constants.SOUND`, ...)."""
+    return _STRATEGIES[code](np.int64(code))
+
+
 @jit
-def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``.  Writes its mode
-    to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+def _displacement_info(c, rows, r, k, q, b, kk, sc):
+    """The displacement baselines' mean joint rates, from past boxes and readings only: ``sc.tb[TB_DQ + j]``
+    (rad/s) and the window slots ``sc.wi[j]`` of the baselines that reach back, built once per sample;
+    returns their number."""
+    past_r = rows.past_r
+    tb = sc.tb
+    idx = sc.wi
+    n = rows.x.shape[2]
+    D = rows.past_x.shape[1]
+    n_past = min(k, D)
+    n_base = I0  # not the literal 0: see contractors.I0
+    for jb in range(c.baseline.shape[0]):
+        j = c.baseline[jb].j
+        if j > n_past:
+            break
+        p = (k - j) % D
+        idx[jb] = p
+        for i in range(n):
+            qk = q[b, kk, i]
+            qp = past_r[r, p, i]
+            dl, dh = ops.sub(qk, qk, qp, qp)
+            dl, dh = ops.add(dl, dh, c.diff_err[jb, 0, i], c.diff_err[jb, 1, i])
+            tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.div(dl, dh, c.baseline[jb].h_lo, c.baseline[jb].h_hi)
+        n_base += 1
+    return n_base
+
+
+@jit
+def _displacement_contract(prog, c, rows, r, sc, n_base):
+    """Contract the velocity box of row ``r`` with the ``n_base`` baselines of :func:`_displacement_info`."""
+    n = rows.x.shape[2]
+    m = rows.xi.shape[2]
+    velocity_displacement(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, rows.past_x, rows.past_q, r, sc.tb,
+                          TB_DQ, c.baseline, sc.wi, n_base, c.axis, n, m, sc)
+
+
+@jit
+def _joint_rates_info(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
+    """Joint rates ``sc.tb[TB_QD]`` (rad/s) from the last two readings, plus ``(t_s/2) qdd[iqdd]`` when
+    ``with_qdd``; returns 1 when a component is finite, else 0 (nothing to contract with)."""
+    tb = sc.tb
+    n = rows.x.shape[2]
+    D = rows.past_x.shape[1]
+    ts = c.t_s
+    for i in range(n):
+        tb[TB_QD, 0, i] = -np.inf
+        tb[TB_QD, 1, i] = np.inf
+    if k > 0:
+        prev = (k - 1) % D
+        for i in range(n):
+            qk = q[b, kk, i]
+            qp = rows.past_r[r, prev, i]
+            dl, dh = ops.sub(qk, qk, qp, qp)
+            fl, fh = ops.div(dl, dh, ts, ts)
+            ql, qh = ops.add(fl, fh, c.axis[i].quant_lo, c.axis[i].quant_hi)
+            if with_qdd:
+                tl, th = ops.mul(0.5 * ts, 0.5 * ts, qdd[iqdd, 0, i], qdd[iqdd, 1, i])
+                ql, qh = ops.add(ql, qh, tl, th)
+                ql = -np.inf if ql != ql else ql
+                qh = np.inf if qh != qh else qh
+            tb[TB_QD, 0, i] = ql
+            tb[TB_QD, 1, i] = qh
+    has_qd = I0
+    for i in range(n):
+        if math.isfinite(tb[TB_QD, 0, i]):
+            has_qd = ONE
+    return has_qd
+
+
+@jit
+def _joint_fd_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """``JOINT_FD``: the joint-acceleration bound over the last interval into ``qdd[iqdd]`` (intersected with
+    the given ``|qdd|`` bound), then :func:`_joint_rates_info` with it."""
+    if k > 0:
+        n = rows.x.shape[2]
+        prev = (k - 1) % rows.past_x.shape[1]
+        _qdd_over_step(prog, c, rows.x, r, rows.xd, rows.past_q, prev, rows.xi, n, rows.xi.shape[2], sc, qdd, iqdd)
+        if c.has_qdd_bound:
+            for i in range(n):
+                g = c.axis[i].qdd_bound
+                qdd[iqdd, 0, i], qdd[iqdd, 1, i] = ops.intersect(qdd[iqdd, 0, i], qdd[iqdd, 1, i], -g, g)
+    return _joint_rates_info(c, rows, r, k, q, b, kk, sc, qdd, iqdd, YES)
+
+
+@jit
+def _joint_rates_contract(prog, rows, r, sc, has_qd):
+    """Contract the velocity box of row ``r`` with the joint rates ``sc.tb[TB_QD]`` (when any is finite)."""
+    if has_qd > 0:
+        velocity_gs(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, sc.tb, TB_QD, rows.x.shape[2],
+                    rows.xi.shape[2], sc)
+
+
+def velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """The velocity information of model ``vel`` for row ``r`` at sample ``k``, before the prediction (from
+    the boxes of sample ``k - 1``, the window and the reading ``q[b, kk]``), into the scratch; returns what
+    :func:`velocity_contract` needs (an int).  May write a joint-acceleration bound to ``qdd[iqdd]``."""
+    raise NotImplementedError("compiled code only")
+
+
+def velocity_contract(vel, prog, c, rows, r, sc, info):
+    """Contract the velocity box of row ``r`` with model ``vel``'s information ``info``, in place."""
+    raise NotImplementedError("compiled code only")
+
+
+def _is(vel, cls):
+    return isinstance(vel, types.BaseNamedTuple) and vel.instance_class is cls
+
+
+@overload(velocity_info, jit_options=KERNEL_FLAGS)
+def _velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    if _is(vel, Displacement):
+        return lambda vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd: _displacement_info(c, rows, r, k, q, b,
+                                                                                             kk, sc)
+    if _is(vel, JointRates):
+        return lambda vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd: _joint_rates_info(c, rows, r, k, q, b,
+                                                                                            kk, sc, qdd, iqdd, NO)
+    if _is(vel, JointRatesQdd):
+        return lambda vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd: _joint_fd_info(prog, c, rows, r, k, q, b,
+                                                                                         kk, sc, qdd, iqdd)
+    return None
+
+
+@overload(velocity_contract, jit_options=KERNEL_FLAGS)
+def _velocity_contract(vel, prog, c, rows, r, sc, info):
+    if _is(vel, Displacement):
+        return lambda vel, prog, c, rows, r, sc, info: _displacement_contract(prog, c, rows, r, sc, info)
+    if _is(vel, JointRates) or _is(vel, JointRatesQdd):
+        return lambda vel, prog, c, rows, r, sc, info: _joint_rates_contract(prog, rows, r, sc, info)
+    return None
+
+
+# ---------------------------------------------------------------------------- one row, one sample
+
+
+@jit
+def _row_step(prog, c, vel, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` with the velocity strategy ``vel``.  Writes
+    its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
     to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
     Results are written rather than returned because an assignment of a
     call's result inside a ``prange`` body went wrong (test_backends); with
@@ -205,9 +381,7 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
     n = X.shape[2]
     m = XI.shape[2]
     D = past_x.shape[1]
-    n_past = min(k, D)
     ts = c.t_s
-    vmodel = c.velocity_model
     for i in range(n):
         qk = q[b, kk, i]
         e = c.axis[i].eps_q
@@ -215,29 +389,8 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
         tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
         qdd[iqdd, 0, i] = -np.inf
         qdd[iqdd, 1, i] = np.inf
-        tb[TB_QD, 0, i] = -np.inf
-        tb[TB_QD, 1, i] = np.inf
-    if k > 0 and vmodel != SOUND:
-        prev = (k - 1) % D
-        if vmodel == JOINT_FD:
-            _qdd_over_step(prog, c, X, r, XD, past_q, prev, XI, n, m, sc, qdd, iqdd)
-            if c.has_qdd_bound:
-                for i in range(n):
-                    g = c.axis[i].qdd_bound
-                    qdd[iqdd, 0, i], qdd[iqdd, 1, i] = ops.intersect(qdd[iqdd, 0, i], qdd[iqdd, 1, i], -g, g)
-        for i in range(n):
-            qk = q[b, kk, i]
-            qp = past_r[r, prev, i]
-            dl, dh = ops.sub(qk, qk, qp, qp)
-            fl, fh = ops.div(dl, dh, ts, ts)
-            ql, qh = ops.add(fl, fh, c.axis[i].quant_lo, c.axis[i].quant_hi)
-            if vmodel == JOINT_FD:
-                tl, th = ops.mul(0.5 * ts, 0.5 * ts, qdd[iqdd, 0, i], qdd[iqdd, 1, i])
-                ql, qh = ops.add(ql, qh, tl, th)
-                ql = -np.inf if ql != ql else ql
-                qh = np.inf if qh != qh else qh
-            tb[TB_QD, 0, i] = ql
-            tb[TB_QD, 1, i] = qh
+    # from the boxes of the last sample: before the prediction overwrites them
+    info = velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd)
     if k > 0:
         for i in range(n):
             ax = c.axis[i]
@@ -252,28 +405,8 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
             XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
                                                      prior.xd[b, kk, 1, i])
     copy_box(tb, TB_QN, Q, r, n)
-    # displacement baselines' mean joint rates: past boxes and readings only, built once per sample
-    idx = sc.wi
-    n_base = I0  # not the literal 0: see contractors.I0
-    if vmodel == SOUND:
-        for jb in range(c.baseline.shape[0]):
-            j = c.baseline[jb].j
-            if j > n_past:
-                break
-            p = (k - j) % D
-            idx[jb] = p
-            for i in range(n):
-                qk = q[b, kk, i]
-                qp = past_r[r, p, i]
-                dl, dh = ops.sub(qk, qk, qp, qp)
-                dl, dh = ops.add(dl, dh, c.diff_err[jb, 0, i], c.diff_err[jb, 1, i])
-                tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.div(dl, dh, c.baseline[jb].h_lo, c.baseline[jb].h_hi)
-            n_base += 1
     keep_xi = c.keep_xi
     copy_box(XI, r, tb, TB_XIW, m)
-    has_qd = False
-    for i in range(n):
-        has_qd |= math.isfinite(tb[TB_QD, 0, i])
     dead = False
     for _ in range(c.max_iter):
         wx0 = _wsum(X, r, n)
@@ -284,11 +417,7 @@ def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, i
         if keep_xi:
             copy_box(tb, TB_XIW, XI, r, m)
         newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
-        if vmodel == SOUND:
-            velocity_displacement(prog, X, r, Q, r, XI, r, XD, r, past_x, past_q, r, tb, TB_DQ, c.baseline, idx,
-                                  n_base, c.axis, n, m, sc)
-        elif has_qd:
-            velocity_gs(prog, X, r, Q, r, XI, r, XD, r, tb, TB_QD, n, m, sc)
+        velocity_contract(vel, prog, c, rows, r, sc, info)
         if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
             dead = True
             break
@@ -384,9 +513,10 @@ def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
 
 
 @njit(cache=True, **KERNEL_FLAGS)
-def run_slot(prog, c, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, prior):
+def run_slot(prog, c, vel, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, prior):
     """Advance scenarios ``t, t + T, ...`` of the batch over the readings ``q``
-    ``(B, Kc, n)`` with scratch slot ``t`` (``t = 0, T = 1``: every scenario).
+    ``(B, Kc, n)`` with scratch slot ``t`` (``t = 0, T = 1``: every scenario)
+    and the velocity strategy ``vel`` (:func:`velocity_strategy`).
     The one driver of batches: several threads call it at once, each with its
     own slot (``verifier.step``), since it releases the GIL and the scenarios
     of different slots share no array element.  Each scenario advances over
@@ -401,11 +531,11 @@ def run_slot(prog, c, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, pr
             for p in range(P):
                 r = b * P + p
                 if rows.row_bad[r] < 0:
-                    _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
+                    _row_step(prog, c, vel, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
-def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
+def run_hypotheses_parallel(prog, c, vel, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
     """As :func:`run_slot` over every scenario, the geometry hypotheses of each sample spread
     over the threads (one scenario online: its latency, not throughput);
     thread slot ``t`` runs hypotheses ``t, t + T, ...`` with its scratch."""
@@ -420,7 +550,7 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
                 for p in range(t, P, T):
                     r = b * P + p
                     if rows.row_bad[r] < 0:
-                        _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
+                        _row_step(prog, c, vel, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
