@@ -189,13 +189,16 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
 
 
 # ---------------------------------------------------------------------------- velocity information
-# One strategy per velocity model, chosen by the *type* of the driver's ``vel``
-# argument (:func:`velocity_strategy`): numba compiles a driver per type and,
-# in it, only that model's kernels (the joint-acceleration bound and the
+# One strategy per velocity model, chosen by the *type* of the drivers' ``vel``
+# argument (:func:`velocity_strategy`): numba compiles a driver per type and
+# in it only that model's kernels (the joint-acceleration bound and the
 # Gauss-Seidel contractor are not compiled for the default model).  A named
 # tuple rather than a kernel passed as an argument: numba's on-disk cache
-# compares a kernel argument's type by object identity, so a driver taking one
-# missed the cache in every new process (numba 0.68, benchmarks/README.md).
+# compares such an argument's type by object identity, so a driver taking a
+# kernel missed the cache in every new process (numba 0.68).  The hooks are
+# inlined into the row step (``inline="always"``: no compiled function of
+# their own; each one in the call chain of a contractor cost about as much
+# compilation again as the contractor, benchmarks/README.md).
 
 
 class Displacement(NamedTuple):
@@ -226,10 +229,18 @@ def velocity_strategy(code: int):
     return _STRATEGIES[code](np.int64(code))
 
 
-@jit
-def _displacement_info(c, rows, r, k, q, b, kk, sc):
-    """The displacement baselines' mean joint rates, from past boxes and readings only: ``sc.tb[TB_DQ + j]``
-    (rad/s) and the window slots ``sc.wi[j]`` of the baselines that reach back, built once per sample;
+# Each strategy is two hooks, inlined into the row step:
+#   info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd) -> int, before the prediction (from the boxes of
+#     sample k - 1, the window and the reading q[b, kk]): the velocity information into the scratch, and
+#     what ``contract`` reads; may write a joint-acceleration bound to qdd[iqdd];
+#   contract(prog, c, rows, r, sc, info): contracts the velocity box of row r in place, every round.
+inline_jit = njit(inline="always", **KERNEL_FLAGS)
+
+
+@inline_jit
+def _displacement_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """``SOUND``: the displacement baselines' mean joint rates, from past boxes and readings only, into
+    ``sc.tb[TB_DQ + j]`` (rad/s), and the window slots ``sc.wi[j]`` of the baselines that reach back;
     returns their number."""
     past_r = rows.past_r
     tb = sc.tb
@@ -254,17 +265,15 @@ def _displacement_info(c, rows, r, k, q, b, kk, sc):
     return n_base
 
 
-@jit
-def _displacement_contract(prog, c, rows, r, sc, n_base):
-    """Contract the velocity box of row ``r`` with the ``n_base`` baselines of :func:`_displacement_info`."""
-    n = rows.x.shape[2]
-    m = rows.xi.shape[2]
+@inline_jit
+def _displacement_contract(prog, c, rows, r, sc, info):
+    """``SOUND``: contract with the ``info`` baselines of :func:`_displacement_info`."""
     velocity_displacement(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, rows.past_x, rows.past_q, r, sc.tb,
-                          TB_DQ, c.baseline, sc.wi, n_base, c.axis, n, m, sc)
+                          TB_DQ, c.baseline, sc.wi, info, c.axis, rows.x.shape[2], rows.xi.shape[2], sc)
 
 
 @jit
-def _joint_rates_info(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
+def _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
     """Joint rates ``sc.tb[TB_QD]`` (rad/s) from the last two readings, plus ``(t_s/2) qdd[iqdd]`` when
     ``with_qdd``; returns 1 when a component is finite, else 0 (nothing to contract with)."""
     tb = sc.tb
@@ -296,10 +305,16 @@ def _joint_rates_info(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
     return has_qd
 
 
-@jit
+@inline_jit
+def _paper_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """``PAPER``: :func:`_joint_rates` with the quantisation error only."""
+    return _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, NO)
+
+
+@inline_jit
 def _joint_fd_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
     """``JOINT_FD``: the joint-acceleration bound over the last interval into ``qdd[iqdd]`` (intersected with
-    the given ``|qdd|`` bound), then :func:`_joint_rates_info` with it."""
+    the given ``|qdd|`` bound), then :func:`_joint_rates` with it."""
     if k > 0:
         n = rows.x.shape[2]
         prev = (k - 1) % rows.past_x.shape[1]
@@ -308,149 +323,131 @@ def _joint_fd_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
             for i in range(n):
                 g = c.axis[i].qdd_bound
                 qdd[iqdd, 0, i], qdd[iqdd, 1, i] = ops.intersect(qdd[iqdd, 0, i], qdd[iqdd, 1, i], -g, g)
-    return _joint_rates_info(c, rows, r, k, q, b, kk, sc, qdd, iqdd, YES)
+    return _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, YES)
 
 
-@jit
-def _joint_rates_contract(prog, rows, r, sc, has_qd):
-    """Contract the velocity box of row ``r`` with the joint rates ``sc.tb[TB_QD]`` (when any is finite)."""
-    if has_qd > 0:
+@inline_jit
+def _joint_rates_contract(prog, c, rows, r, sc, info):
+    """``PAPER``, ``JOINT_FD``: contract with the joint rates ``sc.tb[TB_QD]`` (when ``info``: one is finite)."""
+    if info > 0:
         velocity_gs(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, sc.tb, TB_QD, rows.x.shape[2],
                     rows.xi.shape[2], sc)
-
-
-def velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
-    """The velocity information of model ``vel`` for row ``r`` at sample ``k``, before the prediction (from
-    the boxes of sample ``k - 1``, the window and the reading ``q[b, kk]``), into the scratch; returns what
-    :func:`velocity_contract` needs (an int).  May write a joint-acceleration bound to ``qdd[iqdd]``."""
-    raise NotImplementedError("compiled code only")
-
-
-def velocity_contract(vel, prog, c, rows, r, sc, info):
-    """Contract the velocity box of row ``r`` with model ``vel``'s information ``info``, in place."""
-    raise NotImplementedError("compiled code only")
-
-
-def _is(vel, cls):
-    return isinstance(vel, types.BaseNamedTuple) and vel.instance_class is cls
-
-
-@overload(velocity_info, jit_options=KERNEL_FLAGS)
-def _velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
-    if _is(vel, Displacement):
-        return lambda vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd: _displacement_info(c, rows, r, k, q, b,
-                                                                                             kk, sc)
-    if _is(vel, JointRates):
-        return lambda vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd: _joint_rates_info(c, rows, r, k, q, b,
-                                                                                            kk, sc, qdd, iqdd, NO)
-    if _is(vel, JointRatesQdd):
-        return lambda vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd: _joint_fd_info(prog, c, rows, r, k, q, b,
-                                                                                         kk, sc, qdd, iqdd)
-    return None
-
-
-@overload(velocity_contract, jit_options=KERNEL_FLAGS)
-def _velocity_contract(vel, prog, c, rows, r, sc, info):
-    if _is(vel, Displacement):
-        return lambda vel, prog, c, rows, r, sc, info: _displacement_contract(prog, c, rows, r, sc, info)
-    if _is(vel, JointRates) or _is(vel, JointRatesQdd):
-        return lambda vel, prog, c, rows, r, sc, info: _joint_rates_contract(prog, rows, r, sc, info)
-    return None
 
 
 # ---------------------------------------------------------------------------- one row, one sample
 
 
-@jit
-def _row_step(prog, c, vel, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` with the velocity strategy ``vel``.  Writes
-    its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
-    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
-    Results are written rather than returned because an assignment of a
-    call's result inside a ``prange`` body went wrong (test_backends); with
-    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
-    hold the truth at this sample are intersected with the prediction."""
-    X = rows.x
-    XD = rows.xd
-    XI = rows.xi
-    Q = rows.q
-    past_x = rows.past_x
-    past_q = rows.past_q
-    past_r = rows.past_r
-    tb = sc.tb
-    n = X.shape[2]
-    m = XI.shape[2]
-    D = past_x.shape[1]
-    ts = c.t_s
-    for i in range(n):
-        qk = q[b, kk, i]
-        e = c.axis[i].eps_q
-        tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
-        tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
-        qdd[iqdd, 0, i] = -np.inf
-        qdd[iqdd, 1, i] = np.inf
-    # from the boxes of the last sample: before the prediction overwrites them
-    info = velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd)
-    if k > 0:
+def _row_step_with(velocity_info, velocity_contract):
+    """The row step of one velocity model, with its hooks (compiled through :func:`row_step`)."""
+
+    def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+        """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` (``vel``: the strategy, only typed).  Writes
+        its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+        to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
+        Results are written rather than returned because an assignment of a
+        call's result inside a ``prange`` body went wrong (test_backends); with
+        ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
+        hold the truth at this sample are intersected with the prediction."""
+        X = rows.x
+        XD = rows.xd
+        XI = rows.xi
+        Q = rows.q
+        past_x = rows.past_x
+        past_q = rows.past_q
+        past_r = rows.past_r
+        tb = sc.tb
+        n = X.shape[2]
+        m = XI.shape[2]
+        D = past_x.shape[1]
+        ts = c.t_s
         for i in range(n):
-            ax = c.axis[i]
-            pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
-            xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
-            X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
-            vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
-            XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
-    if use_prior:
-        for i in range(n):
-            X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
-            XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
-                                                     prior.xd[b, kk, 1, i])
-    copy_box(tb, TB_QN, Q, r, n)
-    keep_xi = c.keep_xi
-    copy_box(XI, r, tb, TB_XIW, m)
-    dead = False
-    for _ in range(c.max_iter):
-        wx0 = _wsum(X, r, n)
-        wv0 = _wsum(XD, r, n)
-        if not keep_xi:
-            copy_box(XI, r, tb, TB_XIW, m)
-        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
-        if keep_xi:
-            copy_box(tb, TB_XIW, XI, r, m)
-        newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
-        velocity_contract(vel, prog, c, rows, r, sc, info)
-        if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
-            dead = True
-            break
-        wx1 = _wsum(X, r, n)
-        wv1 = _wsum(XD, r, n)
-        gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
-        gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
-        if not (ops.maxn(gx, gv) > c.rel_tol):
-            break
-    mode = 0
-    if not dead:
-        mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
-        if c.split_boxes > 0 and mode == 0:
-            narrow = True
+            qk = q[b, kk, i]
+            e = c.axis[i].eps_q
+            tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
+            tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
+            qdd[iqdd, 0, i] = -np.inf
+            qdd[iqdd, 1, i] = np.inf
+        # from the boxes of the last sample: before the prediction overwrites them
+        info = velocity_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd)
+        if k > 0:
             for i in range(n):
-                narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
-            if narrow:
-                mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
-                                   c.baseline.shape[0])
-                dead = empty_box(X, r, n)
-    if dead:
-        rows.row_bad[r] = k
+                ax = c.axis[i]
+                pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
+                xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
+                X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
+                vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
+                XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
+        if use_prior:
+            for i in range(n):
+                X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
+                XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
+                                                         prior.xd[b, kk, 1, i])
+        copy_box(tb, TB_QN, Q, r, n)
+        keep_xi = c.keep_xi
+        copy_box(XI, r, tb, TB_XIW, m)
+        dead = False
+        for _ in range(c.max_iter):
+            wx0 = _wsum(X, r, n)
+            wv0 = _wsum(XD, r, n)
+            if not keep_xi:
+                copy_box(XI, r, tb, TB_XIW, m)
+            hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
+            if keep_xi:
+                copy_box(tb, TB_XIW, XI, r, m)
+            newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
+            velocity_contract(prog, c, rows, r, sc, info)
+            if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
+                dead = True
+                break
+            wx1 = _wsum(X, r, n)
+            wv1 = _wsum(XD, r, n)
+            gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
+            gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
+            if not (ops.maxn(gx, gv) > c.rel_tol):
+                break
         mode = 0
-    # this sample joins the window of past boxes and readings
-    slot = k % D
-    for i in range(n):
-        past_x[r, slot, 0, i] = X[r, 0, i]
-        past_x[r, slot, 1, i] = X[r, 1, i]
-        past_q[r, slot, 0, i] = Q[r, 0, i]
-        past_q[r, slot, 1, i] = Q[r, 1, i]
-        past_r[r, slot, i] = q[b, kk, i]
-        qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
-    modes[iqdd] = mode
+        if not dead:
+            mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
+            if c.split_boxes > 0 and mode == 0:
+                narrow = True
+                for i in range(n):
+                    narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
+                if narrow:
+                    mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
+                                       c.baseline.shape[0])
+                    dead = empty_box(X, r, n)
+        if dead:
+            rows.row_bad[r] = k
+            mode = 0
+        # this sample joins the window of past boxes and readings
+        slot = k % D
+        for i in range(n):
+            past_x[r, slot, 0, i] = X[r, 0, i]
+            past_x[r, slot, 1, i] = X[r, 1, i]
+            past_q[r, slot, 0, i] = Q[r, 0, i]
+            past_q[r, slot, 1, i] = Q[r, 1, i]
+            past_r[r, slot, i] = q[b, kk, i]
+            qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
+        modes[iqdd] = mode
+
+    return row_step
+
+
+_ROW_STEPS = {Displacement: _row_step_with(_displacement_info, _displacement_contract),
+              JointRates: _row_step_with(_paper_info, _joint_rates_contract),
+              JointRatesQdd: _row_step_with(_joint_fd_info, _joint_rates_contract)}
+
+
+def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` with the velocity strategy ``vel``: the row step of
+    its model (:func:`_row_step_with`), chosen by the type of ``vel`` when the caller is compiled.
+    Compiled code only."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(row_step, jit_options=KERNEL_FLAGS)
+def _row_step_of(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    return _ROW_STEPS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
 
 
 @jit
@@ -531,7 +528,7 @@ def run_slot(prog, c, vel, rows, scen, S, t, T, k0, q, use_record, rec, use_prio
             for p in range(P):
                 r = b * P + p
                 if rows.row_bad[r] < 0:
-                    _row_step(prog, c, vel, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
+                    row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
@@ -550,7 +547,7 @@ def run_hypotheses_parallel(prog, c, vel, rows, scen, S, k0, q, use_record, rec,
                 for p in range(t, P, T):
                     r = b * P + p
                     if rows.row_bad[r] < 0:
-                        _row_step(prog, c, vel, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
+                        row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
