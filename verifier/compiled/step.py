@@ -60,6 +60,12 @@ from .ops import KERNEL_FLAGS, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 
+#: Kernels inlined into their callers' IR: no compiled function (and Python entry) of their own.  Each
+#: compiled function costs its own typing and machine code of all it calls, a second or more for the
+#: callees of the row step (benchmarks/README.md, "Compile only the velocity model in use").
+inline_jit = njit(inline="always", **KERNEL_FLAGS)
+
+
 class Rows(NamedTuple):
     """Row arrays of the state (see :class:`verifier.step.TrackerState`)."""
 
@@ -104,7 +110,7 @@ class Prior(NamedTuple):
     xd: np.ndarray
 
 
-@jit
+@inline_jit
 def _wsum(B, b, k):
     s = 0.0
     for i in range(k):
@@ -196,9 +202,9 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
 # tuple rather than a kernel passed as an argument: numba's on-disk cache
 # compares such an argument's type by object identity, so a driver taking a
 # kernel missed the cache in every new process (numba 0.68).  The hooks are
-# inlined into the row step (``inline="always"``: no compiled function of
-# their own; each one in the call chain of a contractor cost about as much
-# compilation again as the contractor, benchmarks/README.md).
+# inlined into the row step (:data:`inline_jit`): a wrapper of its own in the
+# call chain of a contractor cost about as much compilation again as the
+# contractor.
 
 
 class Displacement(NamedTuple):
@@ -234,7 +240,6 @@ def velocity_strategy(code: int):
 #     sample k - 1, the window and the reading q[b, kk]): the velocity information into the scratch, and
 #     what ``contract`` reads; may write a joint-acceleration bound to qdd[iqdd];
 #   contract(prog, c, rows, r, sc, info): contracts the velocity box of row r in place, every round.
-inline_jit = njit(inline="always", **KERNEL_FLAGS)
 
 
 @inline_jit
@@ -450,7 +455,7 @@ def _row_step_of(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes
     return _ROW_STEPS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
 
 
-@jit
+@inline_jit
 def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
     """Combine the geometry hypotheses of scenario ``b`` after sample ``k``:
     hull of the consistent rows, their common mode, streaks, widths, record."""
