@@ -17,6 +17,12 @@ the same step, chosen by the user-facing :class:`Backend`:
   sample; scenarios in parallel for batches;
 * ``"numpy"`` (:class:`NumpyStep`): the reference, vectorised over rows.
 
+Inside the step, the velocity model is a strategy of its own in both
+(:class:`VelocityInfo`: :class:`Displacement` for ``SOUND``,
+:class:`JointRates` for ``PAPER`` and ``JOINT_FD``; the compiled ones are
+chosen by type, so numba compiles only the model in use,
+:func:`verifier.compiled.step.velocity_strategy`).
+
 Both read the same :class:`verifier.constants.StepConstants` by name and
 follow the same float operations; their boxes agree bit for bit except
 where numpy's and the C library's ``sin``/``cos`` differ in the last bits
