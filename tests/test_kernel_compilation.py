@@ -67,3 +67,53 @@ def test_the_check_sees_a_literal_argument(tmp_path, monkeypatch):
     mod = importlib.import_module("crosscert.verifier.compiled.contractors")
     monkeypatch.setattr(mod, "__file__", str(fake))
     assert any("copy_box(X_search, 0, stack, I0, n)" in line for line in _literal_kernel_calls("contractors"))
+
+
+def _reachable_kernels(fn) -> set[str]:
+    """Names of the kernels a Python function or kernel calls, directly or through callees: its globals and
+    closure cells that are kernels, followed through theirs."""
+    seen, todo = set(), [getattr(fn, "py_func", fn)]
+    while todo:
+        f = todo.pop()
+        refs = [f.__globals__.get(name) for name in f.__code__.co_names]
+        refs += [cell.cell_contents for cell in (f.__closure__ or ())]
+        for obj in refs:
+            if isinstance(obj, CPUDispatcher) and obj.py_func.__name__ not in seen:
+                seen.add(obj.py_func.__name__)
+                todo.append(obj.py_func)
+    return seen
+
+
+def test_the_default_velocity_model_compiles_only_its_own_kernels():
+    """The row step of the default model (``SOUND``) reaches neither the joint-acceleration bound nor the
+    Gauss-Seidel contractor of the joint-rate models: numba compiles only what a call reaches, and these
+    two cost 2 s of the first run (benchmarks/README.md, "Compile only the velocity model in use")."""
+    from crosscert.verifier.compiled import step as kernels
+    from crosscert.verifier.constants import JOINT_FD, PAPER, SOUND
+
+    def reach(code):
+        return _reachable_kernels(kernels._ROW_STEPS[type(kernels.velocity_strategy(code))])
+
+    sound, paper, joint_fd = reach(SOUND), reach(PAPER), reach(JOINT_FD)
+    assert "velocity_displacement" in sound and "split_prune" in sound
+    assert not {"velocity_gs", "_qdd_over_step", "_joint_rates"} & sound
+    assert "velocity_gs" in paper and "_qdd_over_step" not in paper and "velocity_displacement" not in paper
+    assert {"velocity_gs", "_qdd_over_step"} <= joint_fd
+
+
+def test_velocity_strategies_survive_the_on_disk_cache():
+    """numba's on-disk cache finds a driver by its argument types, pickled in its index and compared after
+    loading in the next process: the strategy's type must compare equal after a pickle round trip, by value.
+    (The type of a kernel passed as an argument compares by object identity: a driver taking one was
+    compiled again in every new process, numba 0.68; benchmarks/README.md.)"""
+    import pickle
+
+    import numba
+
+    from crosscert.verifier.compiled import step as kernels
+    from crosscert.verifier.constants import JOINT_FD, PAPER, SOUND
+
+    types_ = {code: numba.typeof(kernels.velocity_strategy(code)) for code in (SOUND, PAPER, JOINT_FD)}
+    for code, t in types_.items():
+        assert pickle.loads(pickle.dumps(t)) == t, code
+    assert len(set(types_.values())) == 3  # one driver per model, never a shared one

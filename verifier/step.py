@@ -17,6 +17,12 @@ the same step, chosen by the user-facing :class:`Backend`:
   sample; scenarios in parallel for batches;
 * ``"numpy"`` (:class:`NumpyStep`): the reference, vectorised over rows.
 
+Inside the step, the velocity model is a strategy of its own in both
+(:class:`VelocityInfo`: :class:`Displacement` for ``SOUND``,
+:class:`JointRates` for ``PAPER`` and ``JOINT_FD``; the compiled ones are
+chosen by type, so numba compiles only the model in use,
+:func:`verifier.compiled.step.velocity_strategy`).
+
 Both read the same :class:`verifier.constants.StepConstants` by name and
 follow the same float operations; their boxes agree bit for bit except
 where numpy's and the C library's ``sin``/``cos`` differ in the last bits
@@ -42,7 +48,7 @@ from . import interval as I
 from .contractors import hc4_pose, mode_of, newton, split_prune, velocity, velocity_displacement
 from .contractors import pose_solutions as _np_pose_solutions
 from crosscert.robots.errors import InputError
-from .constants import JOINT_FD, SOUND, StepConstants, pack_constants
+from .constants import JOINT_FD, PAPER, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
@@ -270,29 +276,15 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
     R, D = B * P, c.depth
     ts = c.t_s
     ax = c.axis
-    vmodel = c.velocity_model
     qk = np.repeat(qk, P, axis=0)
     eps = ax["eps_q"]
     alive = st.row_bad < 0
     X, XD, XI = _rows(st.x), _rows(st.xd), _rows(st.xi)
     Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
     QDD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
-    QD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
-    prev = (k - 1) % D
-    if k > 0 and vmodel != SOUND:
-        if vmodel == JOINT_FD:
-            A = (np.broadcast_to(-ax["a_max"], (R, n)), np.broadcast_to(ax["a_max"], (R, n)))
-            QDD = _qdd_over_step(model, ts, X, XD, _rows(st.past_q[:, prev]), Q, XI, A)
-            if c.has_qdd_bound:
-                QDD = I.intersect(*QDD, -ax["qdd_bound"], ax["qdd_bound"])
-        qp = st.past_r[:, prev]
-        fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
-        QD = I.add(*fd, ax["quant_lo"], ax["quant_hi"])
-        if vmodel == JOINT_FD:
-            # q_{k-1} = q_k - t_s qd_k + (t_s^2/2) qdd(zeta), per component, so
-            # qd_k = FD + (t_s/2) qdd(zeta)
-            QD = I.add(*QD, *I.mul(0.5 * ts, 0.5 * ts, *QDD))
-            QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
+    # from the boxes of the last sample: before the prediction replaces them
+    vel = _VELOCITY[c.velocity_model]
+    QDD, info = vel.info(model, c, st, qk, Q, X, XD, XI, QDD)
     if k > 0:
         # prediction (Taylor with Lagrange remainder)
         Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), ax["half_ts2_a_lo"], ax["half_ts2_a_hi"])
@@ -303,32 +295,16 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
         px, pxd = (np.repeat(np.asarray(a, dtype=np.float64), P, axis=0) for a in prior)
         X = I.intersect(*X, px[:, 0], px[:, 1])
         XD = I.intersect(*XD, pxd[:, 0], pxd[:, 1])
-    # the displacement baselines depend only on past boxes and readings
-    pasts = []
-    if vmodel == SOUND:
-        for jb, base in enumerate(c.baseline):
-            if base["j"] > min(k, D):
-                break
-            p = (k - base["j"]) % D
-            qp = st.past_r[:, p]
-            DQ = I.add(*I.sub(qk, qk, qp, qp), *c.diff_err[jb])
-            pasts.append((_rows(st.past_x[:, p]), _rows(st.past_q[:, p]), DQ, (base["h_lo"], base["h_hi"])))
     # contraction to a fixpoint, row by row
     active = alive.copy()
     bad = st.row_bad.copy()
-    has_qd = np.any(np.isfinite(QD[0]))
     for _ in range(c.max_iter):
         wx0 = I.width(*X).sum(-1)
         wv0 = I.width(*XD).sum(-1)
         Xc, Qc, XIc = hc4_pose(model, X, Q, XI)
         XIc = XIc if c.keep_xi else XI
         Xc = newton(model, Xc, Qc, XIc, "x")
-        if vmodel == SOUND:
-            XDc = velocity_displacement(model, Xc, Qc, pasts, XIc, XD, ax["a_max"])
-        elif has_qd:
-            XDc = velocity(model, Xc, Qc, XIc, XD, QD)
-        else:
-            XDc = XD
+        XDc = vel.contract(model, c, Xc, Qc, XIc, XD, info)
         keep = active[:, None]
         X, Q, XI, XD = ((np.where(keep, new[0], old[0]), np.where(keep, new[1], old[1]))
                         for new, old in ((Xc, X), (Qc, Q), (XIc, XI), (XDc, XD)))
@@ -393,6 +369,76 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
     st.max_width_velocity[:] = np.where(ok, np.maximum(st.max_width_velocity,
                                                        I.width(*_rows(st.xd_hull)).max(-1)),
                                         st.max_width_velocity)
+
+
+class VelocityInfo(Protocol):
+    """The velocity information of one velocity model, in the reference (the compiled kernels mirror it with
+    the strategies of :func:`verifier.compiled.step.velocity_strategy`)."""
+
+    def info(self, model, c: StepConstants, st: TrackerState, qk, Q, X, XD, XI, QDD):
+        """What the contraction needs at sample ``st.k``, from the boxes of sample ``k - 1`` (``X``, ``XD``,
+        ``XI``: rows ``(lo, hi)``), the window of ``st``, the readings ``qk`` ``(R, n)`` and their box ``Q``:
+        ``(QDD, info)``, the joint-acceleration bound (rad/s^2; ``QDD`` as given when none) and what
+        :meth:`contract` reads."""
+
+    def contract(self, model, c: StepConstants, X, Q, XI, XD, info):
+        """The velocity box ``XD`` (m/s) contracted with ``info`` and the current boxes."""
+
+
+class Displacement:
+    """The ``SOUND`` model: mean joint rates over the displacement baselines, from past boxes and readings
+    only (:func:`verifier.contractors.velocity_displacement`)."""
+
+    def info(self, model, c, st, qk, Q, X, XD, XI, QDD):
+        k, D = st.k, c.depth
+        pasts = []
+        for jb, base in enumerate(c.baseline):
+            if base["j"] > min(k, D):
+                break
+            p = (k - base["j"]) % D
+            qp = st.past_r[:, p]
+            DQ = I.add(*I.sub(qk, qk, qp, qp), *c.diff_err[jb])
+            pasts.append((_rows(st.past_x[:, p]), _rows(st.past_q[:, p]), DQ, (base["h_lo"], base["h_hi"])))
+        return QDD, pasts
+
+    def contract(self, model, c, X, Q, XI, XD, info):
+        return velocity_displacement(model, X, Q, info, XI, XD, c.axis["a_max"])
+
+
+class JointRates:
+    """Finite differences of the last two readings: quantisation only (``PAPER``, unsound), or plus
+    ``(t_s/2) [qdd]`` with ``with_qdd``, a joint-acceleration bound over the interval (``JOINT_FD``,
+    :func:`_qdd_over_step`)."""
+
+    def __init__(self, with_qdd: bool):
+        self.with_qdd = with_qdd
+
+    def info(self, model, c, st, qk, Q, X, XD, XI, QDD):
+        k, ts, ax = st.k, c.t_s, c.axis
+        QD = (np.full_like(QDD[0], -np.inf), np.full_like(QDD[1], np.inf))
+        if k > 0:
+            prev = (k - 1) % c.depth
+            if self.with_qdd:
+                A = (np.broadcast_to(-ax["a_max"], QD[0].shape), np.broadcast_to(ax["a_max"], QD[0].shape))
+                QDD = _qdd_over_step(model, ts, X, XD, _rows(st.past_q[:, prev]), Q, XI, A)
+                if c.has_qdd_bound:
+                    QDD = I.intersect(*QDD, -ax["qdd_bound"], ax["qdd_bound"])
+            qp = st.past_r[:, prev]
+            fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
+            QD = I.add(*fd, ax["quant_lo"], ax["quant_hi"])
+            if self.with_qdd:
+                # q_{k-1} = q_k - t_s qd_k + (t_s^2/2) qdd(zeta), per component, so
+                # qd_k = FD + (t_s/2) qdd(zeta)
+                QD = I.add(*QD, *I.mul(0.5 * ts, 0.5 * ts, *QDD))
+                QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
+        return QDD, (QD if np.any(np.isfinite(QD[0])) else None)
+
+    def contract(self, model, c, X, Q, XI, XD, info):
+        return XD if info is None else velocity(model, X, Q, XI, XD, info)
+
+
+#: The reference's strategy of each velocity model (by its code in :class:`StepConstants`).
+_VELOCITY = {SOUND: Displacement(), PAPER: JointRates(with_qdd=False), JOINT_FD: JointRates(with_qdd=True)}
 
 
 def _qdd_over_step(model, ts, X, XD, Q_prev, Q_now, XI, A):
@@ -517,13 +563,15 @@ class CompiledStep:
                 no_record=kernels.Record(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64),
                                          np.zeros((B, 0, n))),
                 no_prior=kernels.Prior(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n))),
+                # its type selects the velocity model's kernels: a driver compiled per model in use
+                vel=kernels.velocity_strategy(c.velocity_model),
                 Record=kernels.Record, Prior=kernels.Prior)
         return a
 
     def advance(self, config, st, q, record=None, prior=None):
         a = self._args(config, st)
         slots = a["slots"]
-        head = (config.model.program, config.const, a["rows"], a["scen"], a["scratch"])
+        head = (config.model.program, config.const, a["vel"], a["rows"], a["scen"], a["scratch"])
         if record is None and prior is None and len(slots) == 1:
             # the online path: every argument's type is fixed for this state (q is a
             # C-contiguous float64 copy), so after the first call the compiled entry

@@ -10,7 +10,8 @@ scenario and its rows are independent of every other scenario.
 
 Kernels take a few structured arguments: the robot's
 :class:`~verifier.compiled.tape.Program`, the
-:class:`~verifier.constants.StepConstants` (read by name), the state as
+:class:`~verifier.constants.StepConstants` (read by name), the velocity
+model's strategy (:func:`velocity_strategy`), the state as
 :class:`Rows` and :class:`Scenarios`, per-thread :class:`Scratch` allocated
 once per tracker, the readings, and the optional record and prior boxes.
 The per-sample path neither allocates nor slices: boxes are indices into the
@@ -23,9 +24,10 @@ import math
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.extending import overload
 
-from ..constants import JOINT_FD, SOUND
+from ..constants import JOINT_FD, PAPER, SOUND
 from . import ops
 from .contractors import (
     TB_ACC,
@@ -39,6 +41,7 @@ from .contractors import (
     TB_XS,
     I0,
     NO,
+    ONE,
     TWO,
     YES,
     copy_box,
@@ -55,6 +58,12 @@ from .contractors import (
 from .linalg import linear_enclosure
 from .ops import KERNEL_FLAGS, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
+
+
+#: Kernels inlined into their callers' IR: no compiled function (and Python entry) of their own.  Each
+#: compiled function costs its own typing and machine code of all it calls, a second or more for the
+#: callees of the row step (benchmarks/README.md, "Compile only the velocity model in use").
+inline_jit = njit(inline="always", **KERNEL_FLAGS)
 
 
 class Rows(NamedTuple):
@@ -101,7 +110,7 @@ class Prior(NamedTuple):
     xd: np.ndarray
 
 
-@jit
+@inline_jit
 def _wsum(B, b, k):
     s = 0.0
     for i in range(k):
@@ -185,146 +194,268 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         qdd[iqdd, 1, i] = hi if ok else np.inf
 
 
-@jit
-def _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)``.  Writes its mode
-    to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
-    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
-    Results are written rather than returned because an assignment of a
-    call's result inside a ``prange`` body went wrong (test_backends); with
-    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
-    hold the truth at this sample are intersected with the prediction."""
-    X = rows.x
-    XD = rows.xd
-    XI = rows.xi
-    Q = rows.q
-    past_x = rows.past_x
-    past_q = rows.past_q
+# ---------------------------------------------------------------------------- velocity information
+# One strategy per velocity model, chosen by the *type* of the drivers' ``vel``
+# argument (:func:`velocity_strategy`): numba compiles a driver per type and
+# in it only that model's kernels (the joint-acceleration bound and the
+# Gauss-Seidel contractor are not compiled for the default model).  A named
+# tuple rather than a kernel passed as an argument: numba's on-disk cache
+# compares such an argument's type by object identity, so a driver taking a
+# kernel missed the cache in every new process (numba 0.68).  The hooks are
+# inlined into the row step (:data:`inline_jit`): a wrapper of its own in the
+# call chain of a contractor cost about as much compilation again as the
+# contractor.
+
+
+class Displacement(NamedTuple):
+    """The ``SOUND`` model: mean joint rates over the displacement baselines
+    (:func:`verifier.contractors.velocity_displacement`)."""
+
+    code: np.int64  # the model's code (verifier.constants); the type, not the value, selects the kernels
+
+
+class JointRates(NamedTuple):
+    """The ``PAPER`` model: finite differences of the last two readings, quantisation only (unsound)."""
+
+    code: np.int64
+
+
+class JointRatesQdd(NamedTuple):
+    """The ``JOINT_FD`` model: finite differences plus ``(t_s/2) [qdd]``, a joint-acceleration bound
+    over the sampling interval (:func:`_qdd_over_step`)."""
+
+    code: np.int64
+
+
+_STRATEGIES = {SOUND: Displacement, PAPER: JointRates, JOINT_FD: JointRatesQdd}
+
+
+def velocity_strategy(code: int):
+    """The compiled strategy of the velocity model ``code`` (:data:`verifier.constants.SOUND`, ...)."""
+    return _STRATEGIES[code](np.int64(code))
+
+
+# Each strategy is two hooks, inlined into the row step:
+#   info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd) -> int, before the prediction (from the boxes of
+#     sample k - 1, the window and the reading q[b, kk]): the velocity information into the scratch, and
+#     what ``contract`` reads; may write a joint-acceleration bound to qdd[iqdd];
+#   contract(prog, c, rows, r, sc, info): contracts the velocity box of row r in place, every round.
+
+
+@inline_jit
+def _displacement_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """``SOUND``: the displacement baselines' mean joint rates, from past boxes and readings only, into
+    ``sc.tb[TB_DQ + j]`` (rad/s), and the window slots ``sc.wi[j]`` of the baselines that reach back;
+    returns their number."""
     past_r = rows.past_r
     tb = sc.tb
-    n = X.shape[2]
-    m = XI.shape[2]
-    D = past_x.shape[1]
+    idx = sc.wi
+    n = rows.x.shape[2]
+    D = rows.past_x.shape[1]
     n_past = min(k, D)
-    ts = c.t_s
-    vmodel = c.velocity_model
-    for i in range(n):
-        qk = q[b, kk, i]
-        e = c.axis[i].eps_q
-        tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
-        tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
-        qdd[iqdd, 0, i] = -np.inf
-        qdd[iqdd, 1, i] = np.inf
-        tb[TB_QD, 0, i] = -np.inf
-        tb[TB_QD, 1, i] = np.inf
-    if k > 0 and vmodel != SOUND:
-        prev = (k - 1) % D
-        if vmodel == JOINT_FD:
-            _qdd_over_step(prog, c, X, r, XD, past_q, prev, XI, n, m, sc, qdd, iqdd)
-            if c.has_qdd_bound:
-                for i in range(n):
-                    g = c.axis[i].qdd_bound
-                    qdd[iqdd, 0, i], qdd[iqdd, 1, i] = ops.intersect(qdd[iqdd, 0, i], qdd[iqdd, 1, i], -g, g)
+    n_base = I0  # not the literal 0: see contractors.I0
+    for jb in range(c.baseline.shape[0]):
+        j = c.baseline[jb].j
+        if j > n_past:
+            break
+        p = (k - j) % D
+        idx[jb] = p
         for i in range(n):
             qk = q[b, kk, i]
-            qp = past_r[r, prev, i]
+            qp = past_r[r, p, i]
+            dl, dh = ops.sub(qk, qk, qp, qp)
+            dl, dh = ops.add(dl, dh, c.diff_err[jb, 0, i], c.diff_err[jb, 1, i])
+            tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.div(dl, dh, c.baseline[jb].h_lo, c.baseline[jb].h_hi)
+        n_base += 1
+    return n_base
+
+
+@inline_jit
+def _displacement_contract(prog, c, rows, r, sc, info):
+    """``SOUND``: contract with the ``info`` baselines of :func:`_displacement_info`."""
+    velocity_displacement(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, rows.past_x, rows.past_q, r, sc.tb,
+                          TB_DQ, c.baseline, sc.wi, info, c.axis, rows.x.shape[2], rows.xi.shape[2], sc)
+
+
+@jit
+def _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
+    """Joint rates ``sc.tb[TB_QD]`` (rad/s) from the last two readings, plus ``(t_s/2) qdd[iqdd]`` when
+    ``with_qdd``; returns 1 when a component is finite, else 0 (nothing to contract with)."""
+    tb = sc.tb
+    n = rows.x.shape[2]
+    D = rows.past_x.shape[1]
+    ts = c.t_s
+    for i in range(n):
+        tb[TB_QD, 0, i] = -np.inf
+        tb[TB_QD, 1, i] = np.inf
+    if k > 0:
+        prev = (k - 1) % D
+        for i in range(n):
+            qk = q[b, kk, i]
+            qp = rows.past_r[r, prev, i]
             dl, dh = ops.sub(qk, qk, qp, qp)
             fl, fh = ops.div(dl, dh, ts, ts)
             ql, qh = ops.add(fl, fh, c.axis[i].quant_lo, c.axis[i].quant_hi)
-            if vmodel == JOINT_FD:
+            if with_qdd:
                 tl, th = ops.mul(0.5 * ts, 0.5 * ts, qdd[iqdd, 0, i], qdd[iqdd, 1, i])
                 ql, qh = ops.add(ql, qh, tl, th)
                 ql = -np.inf if ql != ql else ql
                 qh = np.inf if qh != qh else qh
             tb[TB_QD, 0, i] = ql
             tb[TB_QD, 1, i] = qh
+    has_qd = I0
+    for i in range(n):
+        if math.isfinite(tb[TB_QD, 0, i]):
+            has_qd = ONE
+    return has_qd
+
+
+@inline_jit
+def _paper_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """``PAPER``: :func:`_joint_rates` with the quantisation error only."""
+    return _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, NO)
+
+
+@inline_jit
+def _joint_fd_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """``JOINT_FD``: the joint-acceleration bound over the last interval into ``qdd[iqdd]`` (intersected with
+    the given ``|qdd|`` bound), then :func:`_joint_rates` with it."""
     if k > 0:
+        n = rows.x.shape[2]
+        prev = (k - 1) % rows.past_x.shape[1]
+        _qdd_over_step(prog, c, rows.x, r, rows.xd, rows.past_q, prev, rows.xi, n, rows.xi.shape[2], sc, qdd, iqdd)
+        if c.has_qdd_bound:
+            for i in range(n):
+                g = c.axis[i].qdd_bound
+                qdd[iqdd, 0, i], qdd[iqdd, 1, i] = ops.intersect(qdd[iqdd, 0, i], qdd[iqdd, 1, i], -g, g)
+    return _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, YES)
+
+
+@inline_jit
+def _joint_rates_contract(prog, c, rows, r, sc, info):
+    """``PAPER``, ``JOINT_FD``: contract with the joint rates ``sc.tb[TB_QD]`` (when ``info``: one is finite)."""
+    if info > 0:
+        velocity_gs(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, sc.tb, TB_QD, rows.x.shape[2],
+                    rows.xi.shape[2], sc)
+
+
+# ---------------------------------------------------------------------------- one row, one sample
+
+
+def _row_step_with(velocity_info, velocity_contract):
+    """The row step of one velocity model, with its hooks (compiled through :func:`row_step`)."""
+
+    def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+        """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` (``vel``: the strategy, only typed).  Writes
+        its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+        to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
+        Results are written rather than returned because an assignment of a
+        call's result inside a ``prange`` body went wrong (test_backends); with
+        ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
+        hold the truth at this sample are intersected with the prediction."""
+        X = rows.x
+        XD = rows.xd
+        XI = rows.xi
+        Q = rows.q
+        past_x = rows.past_x
+        past_q = rows.past_q
+        past_r = rows.past_r
+        tb = sc.tb
+        n = X.shape[2]
+        m = XI.shape[2]
+        D = past_x.shape[1]
+        ts = c.t_s
         for i in range(n):
-            ax = c.axis[i]
-            pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
-            xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
-            X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
-            vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
-            XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
-    if use_prior:
-        for i in range(n):
-            X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
-            XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
-                                                     prior.xd[b, kk, 1, i])
-    copy_box(tb, TB_QN, Q, r, n)
-    # displacement baselines' mean joint rates: past boxes and readings only, built once per sample
-    idx = sc.wi
-    n_base = I0  # not the literal 0: see contractors.I0
-    if vmodel == SOUND:
-        for jb in range(c.baseline.shape[0]):
-            j = c.baseline[jb].j
-            if j > n_past:
+            qk = q[b, kk, i]
+            e = c.axis[i].eps_q
+            tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
+            tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
+            qdd[iqdd, 0, i] = -np.inf
+            qdd[iqdd, 1, i] = np.inf
+        # from the boxes of the last sample: before the prediction overwrites them
+        info = velocity_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd)
+        if k > 0:
+            for i in range(n):
+                ax = c.axis[i]
+                pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
+                xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
+                X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
+                vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
+                XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
+        if use_prior:
+            for i in range(n):
+                X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
+                XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
+                                                         prior.xd[b, kk, 1, i])
+        copy_box(tb, TB_QN, Q, r, n)
+        keep_xi = c.keep_xi
+        copy_box(XI, r, tb, TB_XIW, m)
+        dead = False
+        for _ in range(c.max_iter):
+            wx0 = _wsum(X, r, n)
+            wv0 = _wsum(XD, r, n)
+            if not keep_xi:
+                copy_box(XI, r, tb, TB_XIW, m)
+            hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
+            if keep_xi:
+                copy_box(tb, TB_XIW, XI, r, m)
+            newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
+            velocity_contract(prog, c, rows, r, sc, info)
+            if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
+                dead = True
                 break
-            p = (k - j) % D
-            idx[jb] = p
-            for i in range(n):
-                qk = q[b, kk, i]
-                qp = past_r[r, p, i]
-                dl, dh = ops.sub(qk, qk, qp, qp)
-                dl, dh = ops.add(dl, dh, c.diff_err[jb, 0, i], c.diff_err[jb, 1, i])
-                tb[TB_DQ + jb, 0, i], tb[TB_DQ + jb, 1, i] = ops.div(dl, dh, c.baseline[jb].h_lo, c.baseline[jb].h_hi)
-            n_base += 1
-    keep_xi = c.keep_xi
-    copy_box(XI, r, tb, TB_XIW, m)
-    has_qd = False
-    for i in range(n):
-        has_qd |= math.isfinite(tb[TB_QD, 0, i])
-    dead = False
-    for _ in range(c.max_iter):
-        wx0 = _wsum(X, r, n)
-        wv0 = _wsum(XD, r, n)
-        if not keep_xi:
-            copy_box(XI, r, tb, TB_XIW, m)
-        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
-        if keep_xi:
-            copy_box(tb, TB_XIW, XI, r, m)
-        newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
-        if vmodel == SOUND:
-            velocity_displacement(prog, X, r, Q, r, XI, r, XD, r, past_x, past_q, r, tb, TB_DQ, c.baseline, idx,
-                                  n_base, c.axis, n, m, sc)
-        elif has_qd:
-            velocity_gs(prog, X, r, Q, r, XI, r, XD, r, tb, TB_QD, n, m, sc)
-        if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
-            dead = True
-            break
-        wx1 = _wsum(X, r, n)
-        wv1 = _wsum(XD, r, n)
-        gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
-        gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
-        if not (ops.maxn(gx, gv) > c.rel_tol):
-            break
-    mode = 0
-    if not dead:
-        mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
-        if c.split_boxes > 0 and mode == 0:
-            narrow = True
-            for i in range(n):
-                narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
-            if narrow:
-                mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
-                                   c.baseline.shape[0])
-                dead = empty_box(X, r, n)
-    if dead:
-        rows.row_bad[r] = k
+            wx1 = _wsum(X, r, n)
+            wv1 = _wsum(XD, r, n)
+            gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
+            gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
+            if not (ops.maxn(gx, gv) > c.rel_tol):
+                break
         mode = 0
-    # this sample joins the window of past boxes and readings
-    slot = k % D
-    for i in range(n):
-        past_x[r, slot, 0, i] = X[r, 0, i]
-        past_x[r, slot, 1, i] = X[r, 1, i]
-        past_q[r, slot, 0, i] = Q[r, 0, i]
-        past_q[r, slot, 1, i] = Q[r, 1, i]
-        past_r[r, slot, i] = q[b, kk, i]
-        qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
-    modes[iqdd] = mode
+        if not dead:
+            mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
+            if c.split_boxes > 0 and mode == 0:
+                narrow = True
+                for i in range(n):
+                    narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
+                if narrow:
+                    mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
+                                       c.baseline.shape[0])
+                    dead = empty_box(X, r, n)
+        if dead:
+            rows.row_bad[r] = k
+            mode = 0
+        # this sample joins the window of past boxes and readings
+        slot = k % D
+        for i in range(n):
+            past_x[r, slot, 0, i] = X[r, 0, i]
+            past_x[r, slot, 1, i] = X[r, 1, i]
+            past_q[r, slot, 0, i] = Q[r, 0, i]
+            past_q[r, slot, 1, i] = Q[r, 1, i]
+            past_r[r, slot, i] = q[b, kk, i]
+            qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
+        modes[iqdd] = mode
+
+    return row_step
 
 
-@jit
+_ROW_STEPS = {Displacement: _row_step_with(_displacement_info, _displacement_contract),
+              JointRates: _row_step_with(_paper_info, _joint_rates_contract),
+              JointRatesQdd: _row_step_with(_joint_fd_info, _joint_rates_contract)}
+
+
+def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` with the velocity strategy ``vel``: the row step of
+    its model (:func:`_row_step_with`), chosen by the type of ``vel`` when the caller is compiled.
+    Compiled code only."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(row_step, jit_options=KERNEL_FLAGS)
+def _row_step_of(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    return _ROW_STEPS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
+
+
+@inline_jit
 def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
     """Combine the geometry hypotheses of scenario ``b`` after sample ``k``:
     hull of the consistent rows, their common mode, streaks, widths, record."""
@@ -384,9 +515,10 @@ def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
 
 
 @njit(cache=True, **KERNEL_FLAGS)
-def run_slot(prog, c, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, prior):
+def run_slot(prog, c, vel, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, prior):
     """Advance scenarios ``t, t + T, ...`` of the batch over the readings ``q``
-    ``(B, Kc, n)`` with scratch slot ``t`` (``t = 0, T = 1``: every scenario).
+    ``(B, Kc, n)`` with scratch slot ``t`` (``t = 0, T = 1``: every scenario)
+    and the velocity strategy ``vel`` (:func:`velocity_strategy`).
     The one driver of batches: several threads call it at once, each with its
     own slot (``verifier.step``), since it releases the GIL and the scenarios
     of different slots share no array element.  Each scenario advances over
@@ -401,11 +533,11 @@ def run_slot(prog, c, rows, scen, S, t, T, k0, q, use_record, rec, use_prior, pr
             for p in range(P):
                 r = b * P + p
                 if rows.row_bad[r] < 0:
-                    _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
+                    row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
-def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
+def run_hypotheses_parallel(prog, c, vel, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
     """As :func:`run_slot` over every scenario, the geometry hypotheses of each sample spread
     over the threads (one scenario online: its latency, not throughput);
     thread slot ``t`` runs hypotheses ``t, t + T, ...`` with its scratch."""
@@ -420,7 +552,7 @@ def run_hypotheses_parallel(prog, c, rows, scen, S, k0, q, use_record, rec, use_
                 for p in range(t, P, T):
                     r = b * P + p
                     if rows.row_bad[r] < 0:
-                        _row_step(prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
+                        row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
