@@ -240,6 +240,59 @@ def _project_square(al, ah, zl, zh):
     return ops.hull(pl, ph, nl, nh)
 
 
+# HC4Revise's projections of one node ``z = a op b`` onto its operands, ``a`` first, then ``b``
+# from the contracted ``a``; one call per node for the interpreter and the straight-line tapes
+# (:mod:`verifier.compiled.straight`) alike.  When ``a`` and ``b`` are the same node the caller
+# stores ``b``'s result last, as the node-by-node sweep does.
+@jit
+def back_add(zl, zh, al, ah, bl, bh):
+    sl, sh = ops.sub(zl, zh, bl, bh)
+    al, ah = ops.intersect(al, ah, sl, sh)
+    sl, sh = ops.sub(zl, zh, al, ah)
+    bl, bh = ops.intersect(bl, bh, sl, sh)
+    return al, ah, bl, bh
+
+
+@jit
+def back_sub(zl, zh, al, ah, bl, bh):
+    sl, sh = ops.add(zl, zh, bl, bh)
+    al, ah = ops.intersect(al, ah, sl, sh)
+    sl, sh = ops.sub(al, ah, zl, zh)
+    bl, bh = ops.intersect(bl, bh, sl, sh)
+    return al, ah, bl, bh
+
+
+@jit
+def back_mul(zl, zh, al, ah, bl, bh):
+    al, ah = _project_factor(al, ah, zl, zh, bl, bh)
+    bl, bh = _project_factor(bl, bh, zl, zh, al, ah)
+    return al, ah, bl, bh
+
+
+@jit
+def back_div(zl, zh, al, ah, bl, bh):
+    pl, ph = ops.mul(zl, zh, bl, bh)
+    al, ah = ops.intersect(al, ah, pl, ph)
+    bl, bh = _project_factor(bl, bh, al, ah, zl, zh)
+    return al, ah, bl, bh
+
+
+@jit
+def back_twice(zl, zh, al, ah):
+    sl, sh = ops.scale(0.5, zl, zh)
+    return ops.intersect(al, ah, sl, sh)
+
+
+@jit
+def back_sqrt(zl, zh, al, ah):
+    zl0 = ops.maxn(zl, 0.0)
+    sl, sh = ops.sqr(zl0, ops.maxn(zh, zl0))
+    al, ah = ops.intersect(al, ah, sl, sh)
+    if zh < 0.0:
+        al = np.inf
+    return al, ah
+
+
 @jit
 def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
     """HC4Revise: contract the input box in place with ``output_0(inputs) = 0``.
@@ -269,43 +322,21 @@ def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
         al = lo[a]
         ah = hi[a]
         if op == _ADD:
-            bl = lo[b]
-            bh = hi[b]
-            sl, sh = ops.sub(zl, zh, bl, bh)
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
-            sl, sh = ops.sub(zl, zh, lo[a], hi[a])
-            lo[b], hi[b] = ops.intersect(bl, bh, sl, sh)
+            lo[a], hi[a], lo[b], hi[b] = back_add(zl, zh, al, ah, lo[b], hi[b])
         elif op == _SUB:
-            bl = lo[b]
-            bh = hi[b]
-            sl, sh = ops.add(zl, zh, bl, bh)
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
-            sl, sh = ops.sub(lo[a], hi[a], zl, zh)
-            lo[b], hi[b] = ops.intersect(bl, bh, sl, sh)
+            lo[a], hi[a], lo[b], hi[b] = back_sub(zl, zh, al, ah, lo[b], hi[b])
         elif op == _MUL:
-            bl = lo[b]
-            bh = hi[b]
-            lo[a], hi[a] = _project_factor(al, ah, zl, zh, bl, bh)
-            lo[b], hi[b] = _project_factor(bl, bh, zl, zh, lo[a], hi[a])
+            lo[a], hi[a], lo[b], hi[b] = back_mul(zl, zh, al, ah, lo[b], hi[b])
         elif op == _DIV:
-            bl = lo[b]
-            bh = hi[b]
-            pl, ph = ops.mul(zl, zh, bl, bh)
-            lo[a], hi[a] = ops.intersect(al, ah, pl, ph)
-            lo[b], hi[b] = _project_factor(bl, bh, lo[a], hi[a], zl, zh)
+            lo[a], hi[a], lo[b], hi[b] = back_div(zl, zh, al, ah, lo[b], hi[b])
         elif op == _NEG:
             lo[a], hi[a] = ops.intersect(al, ah, -zh, -zl)
         elif op == _TWICE:
-            sl, sh = ops.scale(0.5, zl, zh)
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
+            lo[a], hi[a] = back_twice(zl, zh, al, ah)
         elif op == _SQ or (op == _CONSTPOW and value[c0 + i] == 2.0):
             lo[a], hi[a] = _project_square(al, ah, zl, zh)
         elif op == _SQRT:
-            zl0 = ops.maxn(zl, 0.0)
-            sl, sh = ops.sqr(zl0, ops.maxn(zh, zl0))
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
-            if zh < 0.0:
-                lo[a] = np.inf
+            lo[a], hi[a] = back_sqrt(zl, zh, al, ah)
         elif op == _INV:
             lo[a], hi[a] = _project_factor(al, ah, 1.0, 1.0, zl, zh)
         elif op == _ASSIGN:
