@@ -11,6 +11,14 @@ import hashlib
 from pathlib import Path
 
 
+def sources_digest() -> str:
+    """A digest of every source the compiled kernels are built from (this
+    package, and the reference modules it follows operation for operation)."""
+    here = Path(__file__).resolve().parent
+    sources = sorted(here.glob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
+    return hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
+
+
 def _drop_stale_cache() -> None:
     """Delete cached kernels compiled from other sources than these.
 
@@ -20,8 +28,7 @@ def _drop_stale_cache() -> None:
     A read-only install cannot be edited, so failing to write is harmless.
     """
     here = Path(__file__).resolve().parent
-    sources = sorted(here.glob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
-    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()[:20]
+    digest = sources_digest()[:20]
     cache = here / "__pycache__"
     stamp = cache / "kernels.stamp"
     try:

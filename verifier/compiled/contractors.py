@@ -20,12 +20,6 @@ from . import ops
 from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 from .ops import cached_jit, jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
-from .straight import _hack_module
-
-_G = _hack_module()
-fwd_f = _G.fwd_f
-hc4_f = _G.hc4_f
-fwd_vel = _G.fwd_vel
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
 # differences of the baselines follow from TB_DQ on
@@ -140,7 +134,7 @@ def hc4_pose(prog, X, ix, Q, iq, XI, ixi, n, m, sc, joints_too):
     il = sc.il
     ih = sc.ih
     _set_pose_inputs(sc, X, ix, Q, iq, XI, ixi, n, m)
-    hc4_f(n, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
+    hc4(prog, T_F, n, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         X[ix, 0, i] = il[i]
         X[ix, 1, i] = ih[i]
@@ -178,7 +172,7 @@ def newton(prog, X, ix, Q, iq, XI, ixi, on_x, n, m, sc):
     for i in range(n):
         il[off + i] = w[mid + i]
         ih[off + i] = w[mid + i]
-    fwd_f(il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
+    forward(prog, T_F, il, ih, sc.nl, sc.nh, sc.mk, sc.mv)
     for i in range(n):
         w[fl + i], w[fh + i] = output(prog, T_F, i, sc.nl, sc.nh)
     set_input(il, ih, off, V, iv, n)
@@ -220,7 +214,7 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
     # w[slack], w[slack + n], when slack >= 0) (+ slack after)
     w = sc.w
     nn = n * n
-    fwd_vel(sc.il, sc.ih, sc.nl, sc.nh, sc.mk, sc.mv)
+    forward(prog, T_VEL, sc.il, sc.ih, sc.nl, sc.nh, sc.mk, sc.mv)
     jl = off
     jh = off + nn
     bl = off + 2 * nn

@@ -16,18 +16,25 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from ..tape import OPCODES
 from . import ops
 from .ops import jit
 
-__all__ = ["Program", "TAPES", "pack", "trig_memo"]
+__all__ = ["HC4_TAPES", "Program", "TAPES", "forward", "hc4", "interpret", "interpret_hc4", "link", "pack", "trig_memo"]
 
 #: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
 TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
 # numpy integers, not Python ints: numba compiles a callee once per distinct literal int argument, and
 # these index the tape of every forward / hc4 / output call (one copy of the interpreter instead of seven)
 T_F, T_JX, T_JQ, T_VEL, T_JX_XD, T_ACCEL, T_DET = (np.int64(i) for i in range(len(TAPES)))
+#: The tapes HC4Revise contracts with (the others are only evaluated forward).
+HC4_TAPES = (int(T_F),)
+_NO_OUT = np.int64(0)
 
 _INPUT = OPCODES["OP_INPUT"]
 _CONST = OPCODES["OP_CONST"]
@@ -61,6 +68,10 @@ class Program(NamedTuple):
         Per tape (order :data:`TAPES`): first node, node count, first output entry.
     n_nodes : int
         Largest node count (size of the scratch arrays).
+    fns : int64 (2, T)
+        Machine-code addresses of the tapes' straight-line functions
+        (:mod:`verifier.compiled.straight`): row 0 the forward sweeps, row 1
+        HC4Revise (0 where a tape has none).  Set by :func:`link`.
     """
 
     code: np.ndarray
@@ -68,6 +79,7 @@ class Program(NamedTuple):
     outs: np.ndarray
     meta: np.ndarray
     n_nodes: int
+    fns: np.ndarray
 
 
 def _shared(a):
@@ -80,7 +92,7 @@ def _shared(a):
     seen = {}
     code, value = [], []
     for i, (op, x, y) in enumerate(a.code):
-        if op != _INPUT:
+        if op != _INPUT and op != _CONST:  # an input's ``a`` is a slot; a constant has no operand
             x = new_of[x]
             y = new_of[y] if y >= 0 else y
         key = (int(op), int(x), int(y), float(a.value[i]))
@@ -94,8 +106,18 @@ def _shared(a):
 
 
 def pack(model) -> Program:
-    """Concatenate the tapes of an :class:`verifier.model.IntervalModel`."""
-    arrs = [getattr(model, name).arrays() for name in TAPES]
+    """Concatenate the tapes of an :class:`verifier.model.IntervalModel` and
+    link their straight-line functions (:func:`link`)."""
+    return link([getattr(model, name).arrays() for name in TAPES])
+
+
+def link(arrs) -> Program:
+    """The :class:`Program` of the tapes ``arrs`` (:class:`verifier.tape.TapeArrays`,
+    in the order :data:`TAPES`), with the addresses of their straight-line
+    functions, generated, compiled or found in the cache
+    (:func:`verifier.compiled.straight.load`)."""
+    from .straight import load
+
     arrs = [a if name == "tape_f" else _shared(a) for name, a in zip(TAPES, arrs)]
     meta = np.zeros((len(arrs), 3), np.int64)
     c0 = o0 = 0
@@ -103,13 +125,16 @@ def pack(model) -> Program:
         meta[t] = (c0, len(a.code), o0)
         c0 += len(a.code)
         o0 += len(a.out_nodes)
-    return Program(
+    prog = Program(
         code=np.ascontiguousarray(np.concatenate([a.code for a in arrs])),
         value=np.concatenate([a.value for a in arrs]),
         outs=np.concatenate([a.out_nodes for a in arrs]),
         meta=meta,
         n_nodes=int(max(len(a.code) for a in arrs)),
+        fns=np.zeros((2, len(arrs)), np.int64),
     )
+    prog.fns[:] = load(prog)
+    return prog
 
 
 #: Entries of a thread's memo of sine and cosine bounds (a power of two).  Their
@@ -165,11 +190,41 @@ def trig(op, al, ah, mk, mv):
     return rl, rh
 
 
+@intrinsic
+def _call(typingctx, addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv):
+    """Call the straight-line function at machine address ``addr`` (C signature
+    :data:`verifier.compiled.straight.C_SIGNATURE`) on the arrays' data."""
+    f1 = types.Array(types.float64, 1, "C")
+    i8 = types.int64
+    if (addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv) != (i8, i8, i8, f1, f1, f1, f1, types.Array(i8, 2, "C"),
+                                                            types.Array(types.float64, 2, "C")):
+        return None
+
+    def codegen(context, builder, signature, args):
+        arys = [context.make_array(ty)(context, builder, v) for ty, v in zip(signature.args[3:], args[3:])]
+        slots = cgutils.unpack_tuple(builder, arys[4].shape)[0]
+        ptrs = [a.data for a in arys]
+        i64 = ir.IntType(64)
+        fnty = ir.FunctionType(ir.VoidType(), [i64, i64] + [p.type for p in ptrs] + [i64])
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], args[2]] + ptrs + [slots])
+        return context.get_dummy_value()
+
+    return types.void(addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv), codegen
+
+
 @jit
 def forward(prog, t, in_lo, in_hi, lo, hi, mk, mv):
     """Evaluate tape ``t`` of the :class:`Program` ``prog`` over the input box;
-    node bounds land in ``lo, hi``; ``mk, mv`` is the calling thread's memo
-    of sines and cosines (:func:`trig_memo`)."""
+    node bounds land in ``lo, hi`` (those of the output nodes at least);
+    ``mk, mv`` is the calling thread's memo of sines and cosines (:func:`trig_memo`).
+    Runs the tape's straight-line function (:func:`interpret` computes the same floats)."""
+    _call(prog.fns[0, t], t, _NO_OUT, in_lo, in_hi, lo, hi, mk, mv)
+
+
+@jit
+def interpret(prog, t, in_lo, in_hi, lo, hi, mk, mv):
+    """:func:`forward` by the interpreter of the program's arrays, node by node (the
+    reference of the straight-line functions; every node's bounds land in ``lo, hi``)."""
     code = prog.code
     value = prog.value
     meta = prog.meta
@@ -298,9 +353,19 @@ def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
     """HC4Revise: contract the input box in place with ``output_0(inputs) = 0``.
 
     ``n_out`` is the number of entries of output 0 (the constrained one);
-    ``mk, mv`` as in :func:`forward`.
+    ``mk, mv`` as in :func:`forward`.  Runs the tape's straight-line
+    function; tapes in :data:`HC4_TAPES` only.
     """
-    forward(prog, t, in_lo, in_hi, lo, hi, mk, mv)
+    addr = prog.fns[1, t]
+    if addr == 0:
+        raise ValueError("hc4: this tape has no straight-line HC4Revise (see verifier.compiled.tape.HC4_TAPES)")
+    _call(addr, prog.fns.shape[1] + t, n_out, in_lo, in_hi, lo, hi, mk, mv)
+
+
+@jit
+def interpret_hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
+    """:func:`hc4` by the interpreter (the reference of the straight-line functions)."""
+    interpret(prog, t, in_lo, in_hi, lo, hi, mk, mv)
     code = prog.code
     value = prog.value
     outs = prog.outs
