@@ -24,10 +24,13 @@ import numpy as np
 from crosscert.robots.errors import ModelError
 
 from ..tape import OPCODES
+from .tape import HC4_TAPES, TAPES, Program
 
-__all__ = ["C_SIGNATURE", "cache_dir", "load", "module_source", "program_key"]
+__all__ = ["MAX_STRAIGHT_NODES", "cache_dir", "link", "load", "module_source", "pack", "program_key"]
 
 _NAMES = {v: k for k, v in OPCODES.items()}
+_INPUT = OPCODES["OP_INPUT"]
+_CONST = OPCODES["OP_CONST"]
 _BINARY = {"OP_ADD": "ops.add", "OP_SUB": "ops.sub", "OP_MUL": "ops.mul", "OP_DIV": "ops.div"}
 _UNARY = {"OP_NEG": "ops.neg", "OP_SQ": "ops.sqr", "OP_SQRT": "ops.sqrt", "OP_FABS": "ops.absolute"}
 
@@ -90,11 +93,11 @@ def _backward_lines(code, value):
         elif name == "OP_TWICE":
             out.append(f"{A} = back_twice({z}, {A})")
         elif name == "OP_SQ" or (name == "OP_CONSTPOW" and value[i] == 2.0):
-            out.append(f"{A} = _project_square({A}, {z})")
+            out.append(f"{A} = project_square({A}, {z})")
         elif name == "OP_SQRT":
             out.append(f"{A} = back_sqrt({z}, {A})")
         elif name == "OP_INV":
-            out.append(f"{A} = _project_factor({A}, 1.0, 1.0, {z})")
+            out.append(f"{A} = project_factor({A}, 1.0, 1.0, {z})")
         elif name == "OP_ASSIGN":
             out.append(f"{A} = ops.intersect({A}, {z})")
         # input, constant, sin, cos, fabs, other powers: no projection (as the interpreter)
@@ -122,17 +125,67 @@ def _tape_bodies(prog, t, consts, with_hc4):
     return fwd + store, body
 
 
+def _shared(a):
+    """``a`` with repeated instructions (same opcode, operands and constant)
+    evaluated once: CasADi's derivatives repeat subexpressions (the velocity
+    tape computes each sine twice).  Forward evaluation gives the same floats;
+    HC4Revise would not (a shared node collects both projections), so the
+    contracted tape ``f`` is kept as written."""
+    new_of = np.empty(len(a.code), np.int64)
+    seen = {}
+    code, value = [], []
+    for i, (op, x, y) in enumerate(a.code):
+        if op != _INPUT and op != _CONST:  # an input's ``a`` is a slot; a constant has no operand
+            x = new_of[x]
+            y = new_of[y] if y >= 0 else y
+        key = (int(op), int(x), int(y), float(a.value[i]))
+        if key not in seen:
+            seen[key] = len(code)
+            code.append((op, x, y))
+            value.append(a.value[i])
+        new_of[i] = seen[key]
+    outs = np.where(a.out_nodes >= 0, new_of[np.maximum(a.out_nodes, 0)], -1)
+    return a._replace(code=np.array(code, np.int64).reshape(-1, 3), value=np.array(value), out_nodes=outs)
+
+
+def pack(model) -> Program:
+    """Concatenate the tapes of an :class:`verifier.model.IntervalModel` and
+    link their straight-line functions (:func:`link`)."""
+    return link([getattr(model, name).arrays() for name in TAPES])
+
+
+def link(arrs) -> Program:
+    """The :class:`Program` of the tapes ``arrs`` (:class:`verifier.tape.TapeArrays`,
+    in the order :data:`TAPES`), with the addresses of their straight-line
+    functions, generated, compiled or found in the cache
+    (:func:`load`)."""
+    arrs = [a if name == "tape_f" else _shared(a) for name, a in zip(TAPES, arrs)]
+    meta = np.zeros((len(arrs), 3), np.int64)
+    c0 = o0 = 0
+    for t, a in enumerate(arrs):
+        meta[t] = (c0, len(a.code), o0)
+        c0 += len(a.code)
+        o0 += len(a.out_nodes)
+    prog = Program(
+        code=np.ascontiguousarray(np.concatenate([a.code for a in arrs])),
+        value=np.concatenate([a.value for a in arrs]),
+        outs=np.concatenate([a.out_nodes for a in arrs]),
+        meta=meta,
+        n_nodes=int(max(len(a.code) for a in arrs)),
+        fns=np.zeros((2, len(arrs)), np.int64),
+    )
+    prog.fns[:] = load(prog)
+    return prog
+
+
 def module_source(prog) -> str:
     """Python source of the module of ``prog``'s straight-line code: one C
-    callback ``tapes`` of :data:`C_SIGNATURE` whose branch ``sel = t`` is tape
+    callback ``tapes`` of :data:`verifier.compiled.tape.C_SIGNATURE` whose branch ``sel = t`` is tape
     ``t``'s forward sweep and ``sel = T + t`` its HC4Revise (tapes of
     :data:`verifier.compiled.tape.HC4_TAPES`); ``ADDRESSES`` (2, T) holds the
     callback's address where a branch exists, else 0.  One function: numba
     compiles the interval operations it calls once."""
-    from .tape import HC4_TAPES
-
     n_tapes = len(prog.meta)
-    n_in = max([int(a) + 1 for op, a, _ in prog.code if _NAMES[int(op)] == "OP_INPUT"] + [1])
     consts, branches = [], []
     has = np.zeros((2, n_tapes), bool)
     for t in range(n_tapes):
@@ -148,9 +201,9 @@ def module_source(prog) -> str:
         "import numpy as np",
         "from numba import carray, cfunc",
         "from crosscert.verifier.compiled import ops",
-        "from crosscert.verifier.compiled.straight import C_SIGNATURE",
         "from crosscert.verifier.compiled.tape import (",
-        "    trig, back_add, back_sub, back_mul, back_div, back_twice, back_sqrt, _project_factor, _project_square)",
+        "    C_SIGNATURE, project_factor, project_square, back_add, back_div, back_mul, back_sqrt, back_sub, back_twice,",
+        "    trig)",
         "",
         f"_SIN = np.int64({OPCODES['OP_SIN']})",
         f"_COS = np.int64({OPCODES['OP_COS']})",
@@ -158,12 +211,13 @@ def module_source(prog) -> str:
         "",
         "",
         "@cfunc(C_SIGNATURE, cache=True)",
-        "def tapes(sel, n_out, in_lo_p, in_hi_p, lo_p, hi_p, mk_p, mv_p, slots):",
-        "    # the caller's arrays (sizes: the program's inputs and nodes, the memo's slots)",
-        f"    in_lo = carray(in_lo_p, ({n_in},))",
-        f"    in_hi = carray(in_hi_p, ({n_in},))",
-        f"    lo = carray(lo_p, ({prog.n_nodes},))",
-        f"    hi = carray(hi_p, ({prog.n_nodes},))",
+        "def tapes(sel, n_out, in_lo_p, in_hi_p, n_in, lo_p, hi_p, n_nodes, mk_p, mv_p, slots,",
+        "          code_p, n_code, value_p, outs_p, n_outs, meta_p, n_tapes):",
+        "    # the caller's arrays (the program's own arrays are written out below)",
+        "    in_lo = carray(in_lo_p, (n_in,))",
+        "    in_hi = carray(in_hi_p, (n_in,))",
+        "    lo = carray(lo_p, (n_nodes,))",
+        "    hi = carray(hi_p, (n_nodes,))",
         "    mk = carray(mk_p, (slots, 3))",
         "    mv = carray(mv_p, (slots, 2))",
     ]
@@ -173,13 +227,11 @@ def module_source(prog) -> str:
     return "\n".join(lines)
 
 
-#: C signature of a program's straight-line callback: ``(sel, n_out, in_lo, in_hi,
-#: lo, hi, memo keys, memo values, memo slots)``, pointers to the arrays' first
-#: elements; ``sel`` is the tape for a forward sweep, the number of tapes plus
-#: the tape for HC4Revise.
-_P = numba.types.CPointer
-C_SIGNATURE = numba.types.void(numba.types.int64, numba.types.int64, *[_P(numba.types.float64)] * 4,
-                               _P(numba.types.int64), _P(numba.types.float64), numba.types.int64)
+#: Programs with more nodes than this run in the interpreter's callback: the
+#: compilation of straight-line code grows faster than its length (on the
+#: robots of the registry, first run: 3 s of CPU for 307 nodes, 9 s for 649,
+#: 181 s for 4014; benchmarks/README.md).
+MAX_STRAIGHT_NODES = 1000
 
 
 def cache_dir() -> Path:
@@ -233,6 +285,10 @@ def load(prog) -> np.ndarray:
     code next to it, so a later process compiles nothing; a process imports it
     once (``sys.modules``, which also keeps the callbacks alive).  An
     unwritable cache directory falls back to a private temporary one."""
+    if len(prog.code) > MAX_STRAIGHT_NODES:
+        from .interpreted import interpreter
+
+        return np.full((2, len(prog.meta)), interpreter.address, np.int64)
     key = program_key(prog)
     name = f"crosscert_tapes_{key}"
     mod = sys.modules.get(name)

@@ -25,7 +25,7 @@ from ..tape import OPCODES
 from . import ops
 from .ops import jit
 
-__all__ = ["HC4_TAPES", "Program", "TAPES", "forward", "hc4", "interpret", "interpret_hc4", "link", "pack", "trig_memo"]
+__all__ = ["C_SIGNATURE", "HC4_TAPES", "Program", "TAPES", "forward", "hc4", "interpret", "interpret_hc4", "trig_memo"]
 
 #: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
 TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
@@ -82,61 +82,6 @@ class Program(NamedTuple):
     fns: np.ndarray
 
 
-def _shared(a):
-    """``a`` with repeated instructions (same opcode, operands and constant)
-    evaluated once: CasADi's derivatives repeat subexpressions (the velocity
-    tape computes each sine twice).  Forward evaluation gives the same floats;
-    HC4Revise would not (a shared node collects both projections), so the
-    contracted tape ``f`` is kept as written."""
-    new_of = np.empty(len(a.code), np.int64)
-    seen = {}
-    code, value = [], []
-    for i, (op, x, y) in enumerate(a.code):
-        if op != _INPUT and op != _CONST:  # an input's ``a`` is a slot; a constant has no operand
-            x = new_of[x]
-            y = new_of[y] if y >= 0 else y
-        key = (int(op), int(x), int(y), float(a.value[i]))
-        if key not in seen:
-            seen[key] = len(code)
-            code.append((op, x, y))
-            value.append(a.value[i])
-        new_of[i] = seen[key]
-    outs = np.where(a.out_nodes >= 0, new_of[np.maximum(a.out_nodes, 0)], -1)
-    return a._replace(code=np.array(code, np.int64).reshape(-1, 3), value=np.array(value), out_nodes=outs)
-
-
-def pack(model) -> Program:
-    """Concatenate the tapes of an :class:`verifier.model.IntervalModel` and
-    link their straight-line functions (:func:`link`)."""
-    return link([getattr(model, name).arrays() for name in TAPES])
-
-
-def link(arrs) -> Program:
-    """The :class:`Program` of the tapes ``arrs`` (:class:`verifier.tape.TapeArrays`,
-    in the order :data:`TAPES`), with the addresses of their straight-line
-    functions, generated, compiled or found in the cache
-    (:func:`verifier.compiled.straight.load`)."""
-    from .straight import load
-
-    arrs = [a if name == "tape_f" else _shared(a) for name, a in zip(TAPES, arrs)]
-    meta = np.zeros((len(arrs), 3), np.int64)
-    c0 = o0 = 0
-    for t, a in enumerate(arrs):
-        meta[t] = (c0, len(a.code), o0)
-        c0 += len(a.code)
-        o0 += len(a.out_nodes)
-    prog = Program(
-        code=np.ascontiguousarray(np.concatenate([a.code for a in arrs])),
-        value=np.concatenate([a.value for a in arrs]),
-        outs=np.concatenate([a.out_nodes for a in arrs]),
-        meta=meta,
-        n_nodes=int(max(len(a.code) for a in arrs)),
-        fns=np.zeros((2, len(arrs)), np.int64),
-    )
-    prog.fns[:] = load(prog)
-    return prog
-
-
 #: Entries of a thread's memo of sine and cosine bounds (a power of two).  Their
 #: arguments are the joints' box and its hulls with the baselines' past boxes; the
 #: joints are not contracted through sin and cos, so an argument comes back in every
@@ -190,26 +135,48 @@ def trig(op, al, ah, mk, mv):
     return rl, rh
 
 
+#: C signature of the callbacks behind :func:`verifier.compiled.tape.forward` and
+#: :func:`~verifier.compiled.tape.hc4`: ``(sel, n_out, in_lo, in_hi, n_in, lo, hi,
+#: n_nodes, memo keys, memo values, memo slots, code, code rows, value, outs,
+#: n_outs, meta, tapes)``, each array as a pointer to its first element; ``sel``
+#: is the tape for a forward sweep, the number of tapes plus the tape for
+#: HC4Revise.  A straight-line callback (:mod:`verifier.compiled.straight`) ignores
+#: the program's arrays (written out in it); the interpreter's
+#: (:mod:`verifier.compiled.interpreted`) reads them.
+_I, _F = types.int64, types.float64
+_PI, _PF = types.CPointer(_I), types.CPointer(_F)
+C_SIGNATURE = types.void(_I, _I, _PF, _PF, _I, _PF, _PF, _I, _PI, _PF, _I, _PI, _I, _PF, _PI, _I, _PI, _I)
+
+
 @intrinsic
-def _call(typingctx, addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv):
-    """Call the straight-line function at machine address ``addr`` (C signature
-    :data:`verifier.compiled.straight.C_SIGNATURE`) on the arrays' data."""
+def _call(typingctx, addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv, code, value, outs, meta):
+    """Call the callback at machine address ``addr`` (C signature
+    :data:`C_SIGNATURE`): each array as the pointer
+    to its first element followed by its length (the memo: its slots; the
+    code and meta tables: their rows)."""
     f1 = types.Array(types.float64, 1, "C")
+    i1 = types.Array(types.int64, 1, "C")
+    i2 = types.Array(types.int64, 2, "C")
     i8 = types.int64
-    if (addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv) != (i8, i8, i8, f1, f1, f1, f1, types.Array(i8, 2, "C"),
-                                                            types.Array(types.float64, 2, "C")):
+    if (addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv, code, value, outs, meta) != (
+            i8, i8, i8, f1, f1, f1, f1, i2, types.Array(types.float64, 2, "C"), i2, f1, i1, i2):
         return None
 
     def codegen(context, builder, signature, args):
-        arys = [context.make_array(ty)(context, builder, v) for ty, v in zip(signature.args[3:], args[3:])]
-        slots = cgutils.unpack_tuple(builder, arys[4].shape)[0]
-        ptrs = [a.data for a in arys]
-        i64 = ir.IntType(64)
-        fnty = ir.FunctionType(ir.VoidType(), [i64, i64] + [p.type for p in ptrs] + [i64])
-        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [args[1], args[2]] + ptrs + [slots])
+        def arr(k):
+            return context.make_array(signature.args[k])(context, builder, args[k])
+
+        def rows(a):
+            return cgutils.unpack_tuple(builder, a.shape)[0]
+
+        il, ih, nl, nh, mk_, mv_, code_, value_, outs_, meta_ = (arr(k) for k in range(3, 13))
+        c_args = [args[1], args[2], il.data, ih.data, rows(il), nl.data, nh.data, rows(nl), mk_.data, mv_.data,
+                  rows(mk_), code_.data, rows(code_), value_.data, outs_.data, rows(outs_), meta_.data, rows(meta_)]
+        fnty = ir.FunctionType(ir.VoidType(), [v.type for v in c_args])
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), c_args)
         return context.get_dummy_value()
 
-    return types.void(addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv), codegen
+    return types.void(addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv, code, value, outs, meta), codegen
 
 
 @jit
@@ -218,7 +185,7 @@ def forward(prog, t, in_lo, in_hi, lo, hi, mk, mv):
     node bounds land in ``lo, hi`` (those of the output nodes at least);
     ``mk, mv`` is the calling thread's memo of sines and cosines (:func:`trig_memo`).
     Runs the tape's straight-line function (:func:`interpret` computes the same floats)."""
-    _call(prog.fns[0, t], t, _NO_OUT, in_lo, in_hi, lo, hi, mk, mv)
+    _call(prog.fns[0, t], t, _NO_OUT, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs, prog.meta)
 
 
 @jit
@@ -278,7 +245,7 @@ def output(prog, t, e, lo, hi):
 
 
 @jit
-def _project_factor(al, ah, zl, zh, bl, bh):
+def project_factor(al, ah, zl, zh, bl, bh):
     # [a] ∩ {a : a b in [z], b in [b]}; no contraction when 0 in [b] and 0 in [z]
     ql, qh = ops.div(zl, zh, bl, bh)
     if bl <= 0.0 and bh >= 0.0 and zl <= 0.0 and zh >= 0.0:
@@ -288,7 +255,7 @@ def _project_factor(al, ah, zl, zh, bl, bh):
 
 
 @jit
-def _project_square(al, ah, zl, zh):
+def project_square(al, ah, zl, zh):
     sl, sh = ops.sqrt(zl, zh)
     pl, ph = ops.intersect(al, ah, sl, sh)
     nl, nh = ops.intersect(al, ah, -sh, -sl)
@@ -319,8 +286,8 @@ def back_sub(zl, zh, al, ah, bl, bh):
 
 @jit
 def back_mul(zl, zh, al, ah, bl, bh):
-    al, ah = _project_factor(al, ah, zl, zh, bl, bh)
-    bl, bh = _project_factor(bl, bh, zl, zh, al, ah)
+    al, ah = project_factor(al, ah, zl, zh, bl, bh)
+    bl, bh = project_factor(bl, bh, zl, zh, al, ah)
     return al, ah, bl, bh
 
 
@@ -328,7 +295,7 @@ def back_mul(zl, zh, al, ah, bl, bh):
 def back_div(zl, zh, al, ah, bl, bh):
     pl, ph = ops.mul(zl, zh, bl, bh)
     al, ah = ops.intersect(al, ah, pl, ph)
-    bl, bh = _project_factor(bl, bh, al, ah, zl, zh)
+    bl, bh = project_factor(bl, bh, al, ah, zl, zh)
     return al, ah, bl, bh
 
 
@@ -359,7 +326,8 @@ def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
     addr = prog.fns[1, t]
     if addr == 0:
         raise ValueError("hc4: this tape has no straight-line HC4Revise (see verifier.compiled.tape.HC4_TAPES)")
-    _call(addr, prog.fns.shape[1] + t, n_out, in_lo, in_hi, lo, hi, mk, mv)
+    _call(addr, prog.fns.shape[1] + t, n_out, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs,
+          prog.meta)
 
 
 @jit
@@ -399,11 +367,11 @@ def interpret_hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
         elif op == _TWICE:
             lo[a], hi[a] = back_twice(zl, zh, al, ah)
         elif op == _SQ or (op == _CONSTPOW and value[c0 + i] == 2.0):
-            lo[a], hi[a] = _project_square(al, ah, zl, zh)
+            lo[a], hi[a] = project_square(al, ah, zl, zh)
         elif op == _SQRT:
             lo[a], hi[a] = back_sqrt(zl, zh, al, ah)
         elif op == _INV:
-            lo[a], hi[a] = _project_factor(al, ah, 1.0, 1.0, zl, zh)
+            lo[a], hi[a] = project_factor(al, ah, 1.0, 1.0, zl, zh)
         elif op == _ASSIGN:
             lo[a], hi[a] = ops.intersect(al, ah, zl, zh)
         # sin, cos, fabs, other powers: no projection (sound, only weaker)
