@@ -16,6 +16,8 @@ import os
 import stat
 import sys
 import tempfile
+import threading
+import uuid
 from pathlib import Path
 
 import numba
@@ -260,20 +262,24 @@ def program_key(prog) -> str:
 
 
 def _write_atomically(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file in the same directory
-    and :func:`os.replace`; refuses to replace anything but a regular file."""
+    """Write ``text`` to ``path`` through a new file in the same directory (the
+    user's default permissions) and :func:`os.replace`; refuses to replace
+    anything but a regular file."""
     if os.path.lexists(path) and not stat.S_ISREG(os.lstat(path).st_mode):
         raise ModelError(f"{path} exists and is not a regular file; remove it or set CROSSCERT_CACHE_DIR "
-                           "to another directory")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name + ".", suffix=".tmp")
+                         "to another directory")
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
     try:
-        with os.fdopen(fd, "w") as f:
+        with open(tmp, "x") as f:
             f.write(text)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
         raise
+
+
+_LOAD_LOCK = threading.Lock()
 
 
 def load(prog) -> np.ndarray:
@@ -291,6 +297,12 @@ def load(prog) -> np.ndarray:
         return np.full((2, len(prog.meta)), interpreter.address, np.int64)
     key = program_key(prog)
     name = f"crosscert_tapes_{key}"
+    with _LOAD_LOCK:  # a module half run is in sys.modules: one thread at a time
+        return _import(name, key, prog).ADDRESSES
+
+
+def _import(name, key, prog):
+    """The generated module ``name`` of ``prog``, imported once per process."""
     mod = sys.modules.get(name)
     if mod is None:
         src = module_source(prog)
@@ -306,7 +318,7 @@ def load(prog) -> np.ndarray:
         except BaseException:
             del sys.modules[name]
             raise
-    return mod.ADDRESSES
+    return mod
 
 
 def _place(directory: Path, key: str, src: str) -> Path:
