@@ -1,8 +1,10 @@
-"""Compiled kernels of the tracker (numba): interval operations, the tape
-interpreter, interval linear algebra, contractors and the step itself.
+"""Compiled kernels of the tracker (numba): interval operations, the tapes
+(straight-line code generated per robot, or the interpreter), interval linear
+algebra, contractors and the step itself.
 
-Nothing here names a robot: a robot's tapes reach the kernels as arrays
-(:func:`verifier.compiled.straight.pack`).  Kernels are compiled once per machine
+Nothing here names a robot: a robot's tapes reach the kernels as arrays and
+the address of their code (:func:`verifier.compiled.straight.pack`; the
+generated code is cached apart, see docs/architecture.md).  Kernels are compiled once per machine
 and cached next to this package (``__pycache__``); the first call after an
 install pays the compilation (see benchmarks/README.md).
 """

@@ -1,10 +1,16 @@
-"""The tape interpreter: forward interval evaluation and HC4Revise, compiled once.
+"""A robot's tapes in the kernels: forward interval evaluation and HC4Revise.
 
 A robot's tapes (:meth:`verifier.tape.Tape.arrays`) are packed into one
-:class:`Program` of flat arrays; the kernels interpret them, so no robot needs
-a compile of its own.  Semantics are those of :class:`verifier.tape.Tape`,
-operation for operation: the numpy reference and these kernels compute the
-same floats (see :mod:`verifier.compiled.ops`).
+:class:`Program` of flat arrays (:func:`verifier.compiled.straight.pack`).
+The kernels call :func:`forward` and :func:`hc4`, which run the program's C
+callback through its address (:data:`C_SIGNATURE`): the tapes written out as
+straight-line code (:mod:`verifier.compiled.straight`), or, for long
+programs, the interpreter of this module (:func:`interpret`,
+:func:`interpret_hc4`, behind :mod:`verifier.compiled.interpreted`).  Either
+way the kernels are robot-independent and compiled once.  Semantics are those
+of :class:`verifier.tape.Tape`, operation for operation: the numpy reference,
+the interpreter and the straight-line code compute the same floats (see
+:mod:`verifier.compiled.ops`).
 
 Kernels work on ONE scenario: node bounds in scratch arrays ``lo, hi`` of
 length ``n_nodes``; inputs in a concatenated vector ``in_lo, in_hi``; the
@@ -30,7 +36,7 @@ __all__ = ["C_SIGNATURE", "HC4_TAPES", "Program", "TAPES", "forward", "hc4", "in
 #: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
 TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
 # numpy integers, not Python ints: numba compiles a callee once per distinct literal int argument, and
-# these index the tape of every forward / hc4 / output call (one copy of the interpreter instead of seven)
+# these index the tape of every forward / hc4 / output call (one compiled copy of each instead of seven)
 T_F, T_JX, T_JQ, T_VEL, T_JX_XD, T_ACCEL, T_DET = (np.int64(i) for i in range(len(TAPES)))
 #: The tapes HC4Revise contracts with (the others are only evaluated forward).
 HC4_TAPES = (int(T_F),)
