@@ -23,6 +23,7 @@ put in ``sys.modules`` after running it, ``test_a_second_process_compiles_nothin
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -141,6 +142,19 @@ def test_the_cache_writes_regular_files_only(tmp_path):
             straight._write_atomically(bad, "A = 3\n")
     assert target.read_text() == "A = 2\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["d.py", "s.py", "tapes_x.py"]  # no temporary left
+
+
+def test_an_unusable_cache_directory_falls_back_to_a_private_one(tmp_path, monkeypatch):
+    (tmp_path / "file").write_text("")
+    monkeypatch.setenv("CROSSCERT_CACHE_DIR", str(tmp_path / "file"))  # a file: no directory below it
+    path = straight._module_path("k", "A = 1\n")
+    assert path.read_text() == "A = 1\n" and not path.is_relative_to(tmp_path)
+    shutil.rmtree(path.parent)
+    monkeypatch.setenv("CROSSCERT_CACHE_DIR", str(tmp_path / "c"))
+    assert straight._module_path("k", "A = 1\n") == tmp_path / "c" / "tapes" / "tapes_k.py"
+    (tmp_path / "c" / "tapes" / "tapes_j.py").mkdir()
+    with pytest.raises(ModelError, match="not a regular file"):  # an error, not a fallback
+        straight._module_path("j", "A = 1\n")
 
 
 _CHILD = textwrap.dedent("""

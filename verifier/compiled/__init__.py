@@ -4,9 +4,9 @@ algebra, contractors and the step itself.
 
 Nothing here names a robot: a robot's tapes reach the kernels as arrays and
 the address of their code (:func:`verifier.compiled.straight.pack`; the
-generated code is cached apart, see docs/architecture.md).  Kernels are compiled once per machine
-and cached next to this package (``__pycache__``); the first call after an
-install pays the compilation (see benchmarks/README.md).
+generated code is cached apart, see docs/architecture.md).  Kernels are
+compiled once per machine and cached next to this package (``__pycache__``);
+the first call after an install pays the compilation (see benchmarks/README.md).
 """
 
 import hashlib

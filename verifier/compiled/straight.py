@@ -305,11 +305,7 @@ def _import(name, key, prog):
     """The generated module ``name`` of ``prog``, imported once per process."""
     mod = sys.modules.get(name)
     if mod is None:
-        src = module_source(prog)
-        try:
-            path = _place(cache_dir(), key, src)
-        except OSError:
-            path = _place(Path(tempfile.mkdtemp(prefix="crosscert-tapes-")), key, src)
+        path = _module_path(key, module_source(prog))
         spec = importlib.util.spec_from_file_location(name, path)
         mod = importlib.util.module_from_spec(spec)
         sys.modules[name] = mod  # before running it: numba's cache refers to the module by name
@@ -319,6 +315,15 @@ def _import(name, key, prog):
             del sys.modules[name]
             raise
     return mod
+
+
+def _module_path(key: str, src: str) -> Path:
+    """Where the module ``src`` of key ``key`` is: :func:`cache_dir`, or a new
+    private temporary directory when that one cannot be written."""
+    try:
+        return _place(cache_dir(), key, src)
+    except OSError:
+        return _place(Path(tempfile.mkdtemp(prefix="crosscert-tapes-")), key, src)
 
 
 def _place(directory: Path, key: str, src: str) -> Path:
