@@ -17,12 +17,14 @@ fails.  Without the sources' digest in the module's key,
 ``test_the_key_names_the_program_and_the_sources`` fails; without the check for
 a regular file, ``test_the_cache_writes_regular_files_only``; with the module
 put in ``sys.modules`` after running it, ``test_a_second_process_compiles_nothing``
-(numba's cache cannot name the module).
+(numba's cache cannot name the module); without ``Program.__reduce__``,
+``test_a_program_pickles_without_its_addresses``.
 """
 
 from __future__ import annotations
 
 import os
+import pickle
 import shutil
 import subprocess
 import sys
@@ -114,6 +116,18 @@ def test_hc4_refuses_a_tape_without_code():
     x = np.zeros(prog.n_nodes)
     with pytest.raises(ValueError, match="HC4_TAPES"):
         hc4(prog, t, 1, x.copy(), x.copy(), x.copy(), x.copy(), *trig_memo())
+
+
+def test_a_program_pickles_without_its_addresses():
+    """Addresses are the linking process's; a copy elsewhere makes the kernels raise, not jump."""
+    prog = IntervalModel(get_robot("dextar")).program
+    copy = pickle.loads(pickle.dumps(prog))
+    assert (copy.fns == 0).all() and all(np.array_equal(a, b) for a, b in zip(copy[:4], prog[:4]))
+    x = np.zeros(prog.n_nodes)
+    with pytest.raises(ValueError, match="link it in this process"):
+        forward(copy, 0, x.copy(), x.copy(), x.copy(), x.copy(), *trig_memo())
+    with pytest.raises(ValueError, match="link it in this process"):
+        hc4(copy, 0, 1, x.copy(), x.copy(), x.copy(), x.copy(), *trig_memo())
 
 
 def test_the_key_names_the_program_and_the_sources(monkeypatch):

@@ -87,6 +87,11 @@ class Program(NamedTuple):
     n_nodes: int
     fns: np.ndarray
 
+    def __reduce__(self):
+        # machine-code addresses are this process's: a copy in another one carries none
+        # (the kernels then raise instead of jumping to whatever lies there)
+        return Program, (*self[:5], np.zeros_like(self.fns))
+
 
 #: Entries of a thread's memo of sine and cosine bounds (a power of two).  Their
 #: arguments are the joints' box and its hulls with the baselines' past boxes; the
@@ -191,7 +196,11 @@ def forward(prog, t, in_lo, in_hi, lo, hi, mk, mv):
     node bounds land in ``lo, hi`` (those of the output nodes at least);
     ``mk, mv`` is the calling thread's memo of sines and cosines (:func:`trig_memo`).
     Runs the tape's straight-line function (:func:`interpret` computes the same floats)."""
-    _call(prog.fns[0, t], t, _NO_OUT, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs, prog.meta)
+    addr = prog.fns[0, t]
+    if addr == 0:
+        raise ValueError("forward: a program without code addresses (unpickled from another process?): "
+                         "link it in this process (verifier.compiled.straight.link, IntervalModel.program)")
+    _call(addr, t, _NO_OUT, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs, prog.meta)
 
 
 @jit
@@ -331,7 +340,9 @@ def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
     """
     addr = prog.fns[1, t]
     if addr == 0:
-        raise ValueError("hc4: this tape has no straight-line HC4Revise (see verifier.compiled.tape.HC4_TAPES)")
+        raise ValueError("hc4: no code for this tape (tapes of verifier.compiled.tape.HC4_TAPES only), or a program "
+                         "without code addresses (unpickled from another process?): link it in this process "
+                         "(verifier.compiled.straight.link, IntervalModel.program)")
     _call(addr, prog.fns.shape[1] + t, n_out, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs,
           prog.meta)
 
