@@ -6,9 +6,10 @@ compiled kernels against exact oracles instead, on *point* inputs, where an
 enclosure is only a few ulp wide and an operation rounded to nearest instead
 of outward misses the exact value about half of the time:
 
-* every node of every tape of the robot's :class:`Program` (the very arrays
-  the tracker interprets), evaluated by the compiled interpreter, must contain
-  the value of the same node evaluated with Arb balls (python-flint, 200 bits);
+* every node of every tape of the robot's :class:`Program`, evaluated by the
+  compiled interpreter, must contain the value of the same node evaluated with
+  Arb balls (python-flint, 200 bits), and the straight-line code the tracker
+  runs must give the interpreter's outputs bit for bit;
 * the compiled interval Newton step and linear enclosure on point data must
   contain the exact solution (rational arithmetic with :class:`fractions.Fraction`).
 
@@ -28,7 +29,7 @@ import pytest
 
 from crosscert.verifier.compiled import contractors as K
 from crosscert.verifier.compiled.linalg import enclosure_scratch, linear_enclosure
-from crosscert.verifier.compiled.tape import TAPES, forward, trig_memo
+from crosscert.verifier.compiled.tape import TAPES, forward, interpret, output, trig_memo
 from crosscert.verifier.tape import OPCODES
 
 OP = {v: k for k, v in OPCODES.items()}
@@ -101,7 +102,12 @@ def test_compiled_tapes_contain_arb_values_at_points(imodel):
     for _ in range(12):
         u = _inputs(imodel, rng)
         for t in range(len(TAPES)):
-            forward(prog, t, u.copy(), u.copy(), lo, hi, *trig_memo())
+            interpret(prog, t, u.copy(), u.copy(), lo, hi, *trig_memo())
+            lo2, hi2 = np.full_like(lo, np.nan), np.full_like(hi, np.nan)
+            forward(prog, t, u.copy(), u.copy(), lo2, hi2, *trig_memo())
+            o1 = prog.meta[t + 1, 2] if t + 1 < len(TAPES) else len(prog.outs)
+            for e in range(o1 - prog.meta[t, 2]):  # the straight-line code stores the outputs only
+                assert np.array_equal(np.array(output(prog, t, e, lo2, hi2)), np.array(output(prog, t, e, lo, hi)))
             for i, r in enumerate(_arb_nodes(prog, t, u)):
                 if not r.is_finite():
                     continue
@@ -153,7 +159,7 @@ def test_compiled_newton_contains_the_exact_root():
     """
     import casadi as ca
 
-    from crosscert.verifier.compiled.tape import Program
+    from crosscert.verifier.compiled.straight import link
     from crosscert.verifier.tape import Tape
 
     x = ca.SX.sym("x", 2)
@@ -162,17 +168,7 @@ def test_compiled_newton_contains_the_exact_root():
     f = ca.vertcat(x[0] ** 2 + x[1] ** 2 - q[0] ** 2 + 0 * xi[0], x[0] - x[1] - q[1])
     tapes = [Tape(ca.Function("f", [x, q, xi], [f])), Tape(ca.Function("jx", [x, q, xi], [ca.jacobian(f, x)])),
              Tape(ca.Function("jq", [x, q, xi], [ca.jacobian(f, q)]))]
-    arrs = [tp.arrays() for tp in tapes] + [tapes[0].arrays()] * (len(TAPES) - 3)
-    meta = np.zeros((len(arrs), 3), np.int64)
-    c0 = o0 = 0
-    for i, a in enumerate(arrs):
-        meta[i] = (c0, len(a.code), o0)
-        c0 += len(a.code)
-        o0 += len(a.out_nodes)
-    prog = Program(np.ascontiguousarray(np.concatenate([a.code for a in arrs]), dtype=np.int64),
-                   np.concatenate([a.value for a in arrs]).astype(np.float64),
-                   np.concatenate([a.out_nodes for a in arrs]).astype(np.int64), meta,
-                   int(max(len(a.code) for a in arrs)))
+    prog = link([tp.arrays() for tp in tapes] + [tapes[0].arrays()] * (len(TAPES) - 3))
     sc = K.Scratch(*(a[0] for a in K.scratch_arrays(1, prog.n_nodes, 2, 1, 0, 0, 1)))  # thread 0's
     rng = np.random.default_rng(7)
     tight = 0

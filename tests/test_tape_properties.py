@@ -11,7 +11,7 @@ evaluated on random boxes, from point boxes to boxes of width 2.
   docs/soundness.md it must, sin/cos within the TRIG_ULPS margin (E2);
 * agreement: the tape's flat program (:meth:`Tape.arrays`), run with the
   compiled scalar kernels through :mod:`verifier.compiled.vectorized` and by
-  the compiled interpreter itself (:func:`verifier.compiled.tape.forward`),
+  the compiled interpreter itself (:func:`verifier.compiled.tape.interpret`),
   gives the numpy tape's bounds bit for bit (sign of zero included).
 """
 
@@ -25,7 +25,7 @@ import pytest
 
 from crosscert.verifier import interval as I
 from crosscert.verifier.compiled import vectorized as V
-from crosscert.verifier.compiled.tape import Program, forward, output, trig_memo
+from crosscert.verifier.compiled.tape import Program, interpret, output, trig_memo
 from crosscert.verifier.tape import OPCODES, Tape
 
 N_SYM = 3
@@ -152,7 +152,7 @@ def _run_flat(ops, arrays, lo_in, hi_in):
 
 
 def _run_kernel(arrays, lo_in, hi_in):
-    """The compiled interpreter (verifier.compiled.tape.forward), one scenario at a time."""
+    """The compiled interpreter (verifier.compiled.tape.interpret), one scenario at a time."""
     N = len(arrays.code)
     meta = np.array([[0, N, 0]], np.int64)
     code = np.ascontiguousarray(arrays.code, dtype=np.int64)
@@ -161,9 +161,9 @@ def _run_kernel(arrays, lo_in, hi_in):
     olo, ohi = np.empty((B, n_out)), np.empty((B, n_out))
     lo, hi = np.empty(N), np.empty(N)
     mk, mv = trig_memo()
-    prog = Program(code, np.ascontiguousarray(arrays.value, dtype=np.float64), outs, meta, N)
+    prog = Program(code, np.ascontiguousarray(arrays.value, dtype=np.float64), outs, meta, N, np.zeros((2, 1), np.int64))
     for s in range(B):
-        forward(prog, 0, np.ascontiguousarray(lo_in[s]), np.ascontiguousarray(hi_in[s]), lo, hi, mk, mv)
+        interpret(prog, 0, np.ascontiguousarray(lo_in[s]), np.ascontiguousarray(hi_in[s]), lo, hi, mk, mv)
         for e in range(n_out):
             olo[s, e], ohi[s, e] = output(prog, 0, e, lo, hi)
     return olo, ohi

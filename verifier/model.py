@@ -70,8 +70,8 @@ class IntervalModel:
     @cached_property
     def program(self):
         """Every tape packed as flat arrays for the compiled kernels
-        (:func:`verifier.compiled.tape.pack`), built once per model."""
-        from .compiled.tape import pack
+        (:func:`verifier.compiled.straight.pack`), built once per model."""
+        from .compiled.straight import pack
 
         return pack(self)
 

@@ -1,14 +1,24 @@
-"""Compiled kernels of the tracker (numba): interval operations, the tape
-interpreter, interval linear algebra, contractors and the step itself.
+"""Compiled kernels of the tracker (numba): interval operations, the tapes
+(straight-line code generated per robot, or the interpreter), interval linear
+algebra, contractors and the step itself.
 
-Nothing here names a robot: a robot's tapes reach the kernels as arrays
-(:func:`verifier.compiled.tape.pack`).  Kernels are compiled once per machine
-and cached next to this package (``__pycache__``); the first call after an
-install pays the compilation (see benchmarks/README.md).
+Nothing here names a robot: a robot's tapes reach the kernels as arrays and
+the address of their code (:func:`verifier.compiled.straight.pack`; the
+generated code is cached apart, see docs/architecture.md).  Kernels are
+compiled once per machine and cached next to this package (``__pycache__``);
+the first call after an install pays the compilation (see benchmarks/README.md).
 """
 
 import hashlib
 from pathlib import Path
+
+
+def sources_digest() -> str:
+    """A digest of every source the compiled kernels are built from (this
+    package, and the reference modules it follows operation for operation)."""
+    here = Path(__file__).resolve().parent
+    sources = sorted(here.glob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
+    return hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
 
 
 def _drop_stale_cache() -> None:
@@ -20,8 +30,7 @@ def _drop_stale_cache() -> None:
     A read-only install cannot be edited, so failing to write is harmless.
     """
     here = Path(__file__).resolve().parent
-    sources = sorted(here.glob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
-    digest = hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()[:20]
+    digest = sources_digest()[:20]
     cache = here / "__pycache__"
     stamp = cache / "kernels.stamp"
     try:

@@ -1,10 +1,16 @@
-"""The tape interpreter: forward interval evaluation and HC4Revise, compiled once.
+"""A robot's tapes in the kernels: forward interval evaluation and HC4Revise.
 
 A robot's tapes (:meth:`verifier.tape.Tape.arrays`) are packed into one
-:class:`Program` of flat arrays; the kernels interpret them, so no robot needs
-a compile of its own.  Semantics are those of :class:`verifier.tape.Tape`,
-operation for operation: the numpy reference and these kernels compute the
-same floats (see :mod:`verifier.compiled.ops`).
+:class:`Program` of flat arrays (:func:`verifier.compiled.straight.pack`).
+The kernels call :func:`forward` and :func:`hc4`, which run the program's C
+callback through its address (:data:`C_SIGNATURE`): the tapes written out as
+straight-line code (:mod:`verifier.compiled.straight`), or, for long
+programs, the interpreter of this module (:func:`interpret`,
+:func:`interpret_hc4`, behind :mod:`verifier.compiled.interpreted`).  Either
+way the kernels are robot-independent and compiled once.  Semantics are those
+of :class:`verifier.tape.Tape`, operation for operation: the numpy reference,
+the interpreter and the straight-line code compute the same floats (see
+:mod:`verifier.compiled.ops`).
 
 Kernels work on ONE scenario: node bounds in scratch arrays ``lo, hi`` of
 length ``n_nodes``; inputs in a concatenated vector ``in_lo, in_hi``; the
@@ -16,18 +22,25 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from ..tape import OPCODES
 from . import ops
 from .ops import jit
 
-__all__ = ["Program", "TAPES", "pack", "trig_memo"]
+__all__ = ["C_SIGNATURE", "HC4_TAPES", "Program", "TAPES", "forward", "hc4", "interpret", "interpret_hc4", "trig_memo"]
 
 #: Order of the tapes in a :class:`Program` (attribute names of IntervalModel).
 TAPES = ("tape_f", "tape_jx", "tape_jq", "tape_vel", "tape_jx_xd", "tape_accel_rhs", "tape_det")
 # numpy integers, not Python ints: numba compiles a callee once per distinct literal int argument, and
-# these index the tape of every forward / hc4 / output call (one copy of the interpreter instead of seven)
+# these index the tape of every forward / hc4 / output call (one compiled copy of each instead of seven)
 T_F, T_JX, T_JQ, T_VEL, T_JX_XD, T_ACCEL, T_DET = (np.int64(i) for i in range(len(TAPES)))
+#: The tapes HC4Revise contracts with (the others are only evaluated forward).
+HC4_TAPES = (int(T_F),)
+_NO_OUT = np.int64(0)
 
 _INPUT = OPCODES["OP_INPUT"]
 _CONST = OPCODES["OP_CONST"]
@@ -61,6 +74,10 @@ class Program(NamedTuple):
         Per tape (order :data:`TAPES`): first node, node count, first output entry.
     n_nodes : int
         Largest node count (size of the scratch arrays).
+    fns : int64 (2, T)
+        Machine-code addresses of the tapes' straight-line functions
+        (:mod:`verifier.compiled.straight`): row 0 the forward sweeps, row 1
+        HC4Revise (0 where a tape has none).  Set by :func:`link`.
     """
 
     code: np.ndarray
@@ -68,48 +85,12 @@ class Program(NamedTuple):
     outs: np.ndarray
     meta: np.ndarray
     n_nodes: int
+    fns: np.ndarray
 
-
-def _shared(a):
-    """``a`` with repeated instructions (same opcode, operands and constant)
-    evaluated once: CasADi's derivatives repeat subexpressions (the velocity
-    tape computes each sine twice).  Forward evaluation gives the same floats;
-    HC4Revise would not (a shared node collects both projections), so the
-    contracted tape ``f`` is kept as written."""
-    new_of = np.empty(len(a.code), np.int64)
-    seen = {}
-    code, value = [], []
-    for i, (op, x, y) in enumerate(a.code):
-        if op != _INPUT:
-            x = new_of[x]
-            y = new_of[y] if y >= 0 else y
-        key = (int(op), int(x), int(y), float(a.value[i]))
-        if key not in seen:
-            seen[key] = len(code)
-            code.append((op, x, y))
-            value.append(a.value[i])
-        new_of[i] = seen[key]
-    outs = np.where(a.out_nodes >= 0, new_of[np.maximum(a.out_nodes, 0)], -1)
-    return a._replace(code=np.array(code, np.int64).reshape(-1, 3), value=np.array(value), out_nodes=outs)
-
-
-def pack(model) -> Program:
-    """Concatenate the tapes of an :class:`verifier.model.IntervalModel`."""
-    arrs = [getattr(model, name).arrays() for name in TAPES]
-    arrs = [a if name == "tape_f" else _shared(a) for name, a in zip(TAPES, arrs)]
-    meta = np.zeros((len(arrs), 3), np.int64)
-    c0 = o0 = 0
-    for t, a in enumerate(arrs):
-        meta[t] = (c0, len(a.code), o0)
-        c0 += len(a.code)
-        o0 += len(a.out_nodes)
-    return Program(
-        code=np.ascontiguousarray(np.concatenate([a.code for a in arrs])),
-        value=np.concatenate([a.value for a in arrs]),
-        outs=np.concatenate([a.out_nodes for a in arrs]),
-        meta=meta,
-        n_nodes=int(max(len(a.code) for a in arrs)),
-    )
+    def __reduce__(self):
+        # machine-code addresses are this process's: a copy in another one carries none
+        # (the kernels then raise instead of jumping to whatever lies there)
+        return Program, (*self[:5], np.zeros_like(self.fns))
 
 
 #: Entries of a thread's memo of sine and cosine bounds (a power of two).  Their
@@ -165,11 +146,67 @@ def trig(op, al, ah, mk, mv):
     return rl, rh
 
 
+#: C signature of the callbacks behind :func:`verifier.compiled.tape.forward` and
+#: :func:`~verifier.compiled.tape.hc4`: ``(sel, n_out, in_lo, in_hi, n_in, lo, hi,
+#: n_nodes, memo keys, memo values, memo slots, code, code rows, value, outs,
+#: n_outs, meta, tapes)``, each array as a pointer to its first element; ``sel``
+#: is the tape for a forward sweep, the number of tapes plus the tape for
+#: HC4Revise.  A straight-line callback (:mod:`verifier.compiled.straight`) ignores
+#: the program's arrays (written out in it); the interpreter's
+#: (:mod:`verifier.compiled.interpreted`) reads them.
+_I, _F = types.int64, types.float64
+_PI, _PF = types.CPointer(_I), types.CPointer(_F)
+C_SIGNATURE = types.void(_I, _I, _PF, _PF, _I, _PF, _PF, _I, _PI, _PF, _I, _PI, _I, _PF, _PI, _I, _PI, _I)
+
+
+@intrinsic
+def _call(typingctx, addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv, code, value, outs, meta):
+    """Call the callback at machine address ``addr`` (C signature
+    :data:`C_SIGNATURE`): each array as the pointer
+    to its first element followed by its length (the memo: its slots; the
+    code and meta tables: their rows)."""
+    f1 = types.Array(types.float64, 1, "C")
+    i1 = types.Array(types.int64, 1, "C")
+    i2 = types.Array(types.int64, 2, "C")
+    i8 = types.int64
+    if (addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv, code, value, outs, meta) != (
+            i8, i8, i8, f1, f1, f1, f1, i2, types.Array(types.float64, 2, "C"), i2, f1, i1, i2):
+        return None
+
+    def codegen(context, builder, signature, args):
+        def arr(k):
+            return context.make_array(signature.args[k])(context, builder, args[k])
+
+        def rows(a):
+            return cgutils.unpack_tuple(builder, a.shape)[0]
+
+        il, ih, nl, nh, mk_, mv_, code_, value_, outs_, meta_ = (arr(k) for k in range(3, 13))
+        c_args = [args[1], args[2], il.data, ih.data, rows(il), nl.data, nh.data, rows(nl), mk_.data, mv_.data,
+                  rows(mk_), code_.data, rows(code_), value_.data, outs_.data, rows(outs_), meta_.data, rows(meta_)]
+        fnty = ir.FunctionType(ir.VoidType(), [v.type for v in c_args])
+        builder.call(builder.inttoptr(args[0], fnty.as_pointer()), c_args)
+        return context.get_dummy_value()
+
+    return types.void(addr, sel, n_out, in_lo, in_hi, lo, hi, mk, mv, code, value, outs, meta), codegen
+
+
 @jit
 def forward(prog, t, in_lo, in_hi, lo, hi, mk, mv):
     """Evaluate tape ``t`` of the :class:`Program` ``prog`` over the input box;
-    node bounds land in ``lo, hi``; ``mk, mv`` is the calling thread's memo
-    of sines and cosines (:func:`trig_memo`)."""
+    node bounds land in ``lo, hi`` (those of the output nodes at least);
+    ``mk, mv`` is the calling thread's memo of sines and cosines (:func:`trig_memo`).
+    Runs the tape's straight-line function (:func:`interpret` computes the same floats)."""
+    addr = prog.fns[0, t]
+    if addr == 0:
+        raise ValueError("forward: a program without code addresses (unpickled from another process?): "
+                         "link it in this process (verifier.compiled.straight.link, IntervalModel.program)")
+    _call(addr, t, _NO_OUT, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs, prog.meta)
+
+
+@jit
+def interpret(prog, t, in_lo, in_hi, lo, hi, mk, mv):
+    """:func:`forward` by the interpreter of the program's arrays, node by node (the
+    reference of the straight-line functions; every node's bounds land in ``lo, hi``)."""
     code = prog.code
     value = prog.value
     meta = prog.meta
@@ -223,7 +260,7 @@ def output(prog, t, e, lo, hi):
 
 
 @jit
-def _project_factor(al, ah, zl, zh, bl, bh):
+def project_factor(al, ah, zl, zh, bl, bh):
     # [a] ∩ {a : a b in [z], b in [b]}; no contraction when 0 in [b] and 0 in [z]
     ql, qh = ops.div(zl, zh, bl, bh)
     if bl <= 0.0 and bh >= 0.0 and zl <= 0.0 and zh >= 0.0:
@@ -233,11 +270,64 @@ def _project_factor(al, ah, zl, zh, bl, bh):
 
 
 @jit
-def _project_square(al, ah, zl, zh):
+def project_square(al, ah, zl, zh):
     sl, sh = ops.sqrt(zl, zh)
     pl, ph = ops.intersect(al, ah, sl, sh)
     nl, nh = ops.intersect(al, ah, -sh, -sl)
     return ops.hull(pl, ph, nl, nh)
+
+
+# HC4Revise's projections of one node ``z = a op b`` onto its operands, ``a`` first, then ``b``
+# from the contracted ``a``; one call per node for the interpreter and the straight-line tapes
+# (:mod:`verifier.compiled.straight`) alike.  When ``a`` and ``b`` are the same node the caller
+# stores ``b``'s result last, as the node-by-node sweep does.
+@jit
+def back_add(zl, zh, al, ah, bl, bh):
+    sl, sh = ops.sub(zl, zh, bl, bh)
+    al, ah = ops.intersect(al, ah, sl, sh)
+    sl, sh = ops.sub(zl, zh, al, ah)
+    bl, bh = ops.intersect(bl, bh, sl, sh)
+    return al, ah, bl, bh
+
+
+@jit
+def back_sub(zl, zh, al, ah, bl, bh):
+    sl, sh = ops.add(zl, zh, bl, bh)
+    al, ah = ops.intersect(al, ah, sl, sh)
+    sl, sh = ops.sub(al, ah, zl, zh)
+    bl, bh = ops.intersect(bl, bh, sl, sh)
+    return al, ah, bl, bh
+
+
+@jit
+def back_mul(zl, zh, al, ah, bl, bh):
+    al, ah = project_factor(al, ah, zl, zh, bl, bh)
+    bl, bh = project_factor(bl, bh, zl, zh, al, ah)
+    return al, ah, bl, bh
+
+
+@jit
+def back_div(zl, zh, al, ah, bl, bh):
+    pl, ph = ops.mul(zl, zh, bl, bh)
+    al, ah = ops.intersect(al, ah, pl, ph)
+    bl, bh = project_factor(bl, bh, al, ah, zl, zh)
+    return al, ah, bl, bh
+
+
+@jit
+def back_twice(zl, zh, al, ah):
+    sl, sh = ops.scale(0.5, zl, zh)
+    return ops.intersect(al, ah, sl, sh)
+
+
+@jit
+def back_sqrt(zl, zh, al, ah):
+    zl0 = ops.maxn(zl, 0.0)
+    sl, sh = ops.sqr(zl0, ops.maxn(zh, zl0))
+    al, ah = ops.intersect(al, ah, sl, sh)
+    if zh < 0.0:
+        al = np.inf
+    return al, ah
 
 
 @jit
@@ -245,9 +335,22 @@ def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
     """HC4Revise: contract the input box in place with ``output_0(inputs) = 0``.
 
     ``n_out`` is the number of entries of output 0 (the constrained one);
-    ``mk, mv`` as in :func:`forward`.
+    ``mk, mv`` as in :func:`forward`.  Runs the tape's straight-line
+    function; tapes in :data:`HC4_TAPES` only.
     """
-    forward(prog, t, in_lo, in_hi, lo, hi, mk, mv)
+    addr = prog.fns[1, t]
+    if addr == 0:
+        raise ValueError("hc4: no code for this tape (tapes of verifier.compiled.tape.HC4_TAPES only), or a program "
+                         "without code addresses (unpickled from another process?): link it in this process "
+                         "(verifier.compiled.straight.link, IntervalModel.program)")
+    _call(addr, prog.fns.shape[1] + t, n_out, in_lo, in_hi, lo, hi, mk, mv, prog.code, prog.value, prog.outs,
+          prog.meta)
+
+
+@jit
+def interpret_hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
+    """:func:`hc4` by the interpreter (the reference of the straight-line functions)."""
+    interpret(prog, t, in_lo, in_hi, lo, hi, mk, mv)
     code = prog.code
     value = prog.value
     outs = prog.outs
@@ -269,45 +372,23 @@ def hc4(prog, t, n_out, in_lo, in_hi, lo, hi, mk, mv):
         al = lo[a]
         ah = hi[a]
         if op == _ADD:
-            bl = lo[b]
-            bh = hi[b]
-            sl, sh = ops.sub(zl, zh, bl, bh)
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
-            sl, sh = ops.sub(zl, zh, lo[a], hi[a])
-            lo[b], hi[b] = ops.intersect(bl, bh, sl, sh)
+            lo[a], hi[a], lo[b], hi[b] = back_add(zl, zh, al, ah, lo[b], hi[b])
         elif op == _SUB:
-            bl = lo[b]
-            bh = hi[b]
-            sl, sh = ops.add(zl, zh, bl, bh)
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
-            sl, sh = ops.sub(lo[a], hi[a], zl, zh)
-            lo[b], hi[b] = ops.intersect(bl, bh, sl, sh)
+            lo[a], hi[a], lo[b], hi[b] = back_sub(zl, zh, al, ah, lo[b], hi[b])
         elif op == _MUL:
-            bl = lo[b]
-            bh = hi[b]
-            lo[a], hi[a] = _project_factor(al, ah, zl, zh, bl, bh)
-            lo[b], hi[b] = _project_factor(bl, bh, zl, zh, lo[a], hi[a])
+            lo[a], hi[a], lo[b], hi[b] = back_mul(zl, zh, al, ah, lo[b], hi[b])
         elif op == _DIV:
-            bl = lo[b]
-            bh = hi[b]
-            pl, ph = ops.mul(zl, zh, bl, bh)
-            lo[a], hi[a] = ops.intersect(al, ah, pl, ph)
-            lo[b], hi[b] = _project_factor(bl, bh, lo[a], hi[a], zl, zh)
+            lo[a], hi[a], lo[b], hi[b] = back_div(zl, zh, al, ah, lo[b], hi[b])
         elif op == _NEG:
             lo[a], hi[a] = ops.intersect(al, ah, -zh, -zl)
         elif op == _TWICE:
-            sl, sh = ops.scale(0.5, zl, zh)
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
+            lo[a], hi[a] = back_twice(zl, zh, al, ah)
         elif op == _SQ or (op == _CONSTPOW and value[c0 + i] == 2.0):
-            lo[a], hi[a] = _project_square(al, ah, zl, zh)
+            lo[a], hi[a] = project_square(al, ah, zl, zh)
         elif op == _SQRT:
-            zl0 = ops.maxn(zl, 0.0)
-            sl, sh = ops.sqr(zl0, ops.maxn(zh, zl0))
-            lo[a], hi[a] = ops.intersect(al, ah, sl, sh)
-            if zh < 0.0:
-                lo[a] = np.inf
+            lo[a], hi[a] = back_sqrt(zl, zh, al, ah)
         elif op == _INV:
-            lo[a], hi[a] = _project_factor(al, ah, 1.0, 1.0, zl, zh)
+            lo[a], hi[a] = project_factor(al, ah, 1.0, 1.0, zl, zh)
         elif op == _ASSIGN:
             lo[a], hi[a] = ops.intersect(al, ah, zl, zh)
         # sin, cos, fabs, other powers: no projection (sound, only weaker)
