@@ -39,7 +39,7 @@ __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows
            "refute_row", "ONE_MOTION_SAMPLES"]
 
 #: Samples of the range a row is refuted over, centred on the widest pose box of its tube.
-ONE_MOTION_SAMPLES = 120
+ONE_MOTION_SAMPLES = 40
 
 
 @dataclass(frozen=True)
@@ -368,7 +368,7 @@ def _samples(X, size):
     return range(start, start + size)
 
 
-def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = True) -> bool:
+def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False) -> bool:
     """True when no single geometry of ``XI`` and single motion within ``a_max`` in the tubes ``X``, ``XD``
     ``(K, 2, n)`` explain the readings ``q`` ``(K, n)`` over ``size`` samples around the widest pose box
     (proved: :func:`prove_infeasible`)."""
