@@ -24,7 +24,6 @@ import pytest
 from adversarial import near_scenarios
 from problems import FARKAS, ONE_MOTION_PLAN, interval_model
 from crosscert.robots import DEXTAR
-from crosscert.verifier import interval as I
 from crosscert.verifier import one_motion as OM
 from crosscert.verifier.settings import TrackerSettings
 

@@ -279,7 +279,8 @@ def test_rounds_go_to_the_hypothesis_with_fewest_rows(settings, monkeypatch):
 
     monkeypatch.setattr(W, "_round", logged)
     run = simulate(1.0, False, 0)
-    res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
+    # one_motion=0: the one-motion refutation decides this run (2026-12-02), and a refutation ends the rounds
+    res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4, one_motion=0)
     assert res.verdict is Verdict.UNKNOWN and order[0][0] == 1, (order, res.summary())
     spent = {1: 0, -1: 0}
     for i, ((m, total), nxt) in enumerate(zip(order, order[1:] + [(None, None)])):

@@ -26,14 +26,14 @@ geometry parameters; SI units.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linprog
 from scipy.sparse import coo_matrix
 
 from . import interval as I
-from .constants import _difference_error
+from .constants import pack_constants
 
 __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "row_system",
            "refute_row", "ONE_MOTION_SAMPLES"]
@@ -291,16 +291,17 @@ def drift_rows(settings, q, S: int, n: int):
     ``q_k`` (column ``k n + i``): ``|(q_l − q̃_l) − (q_k − q̃_k)| <= D_j`` for ``l = k + j``, ``j`` in
     :data:`DRIFT_OFFSETS`, ``D_j`` the bound of a difference of two readings ``j`` samples apart (its owner:
     ``verifier.constants``), readings ``q`` ``(S, n)``.  As blocks ``(rows, cols, vals, b)``."""
-    a = settings.assumptions
-    if a.eps_q_fast is None:
+    if settings.eps_q_fast is None:
         return []
     blocks = []
-    two_eps = I.scale(2.0, -a.eps_q, a.eps_q)
-    for j in DRIFT_OFFSETS:
-        if j >= S:
-            break
-        D = _difference_error(a, j, two_eps)[1]
-        if np.all(D >= two_eps[1]):
+    offsets = [j for j in DRIFT_OFFSETS if j < S]
+    if not offsets:
+        return []
+    # the bounds of the tracker's displacement relation at these sample distances (their one owner)
+    diff = pack_constants(replace(settings, baselines=tuple(offsets)), n).diff_err
+    two_eps = I.scale(2.0, -settings.eps_q, settings.eps_q)[1]
+    for j, (_, D) in zip(offsets, diff):
+        if np.all(D >= two_eps):
             break  # no tighter than the boxes of the two readings
         k = np.arange(S - j)
         kk, ii = np.meshgrid(k, np.arange(n), indexing="ij")
