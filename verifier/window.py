@@ -26,6 +26,11 @@ recording may use every reading.  :func:`track_window` does so:
    the first, other than the initial one).  A hypothesis with every sub-box
    refuted is refuted.  The verdict is certified when exactly one hypothesis
    survives; both refuted means an assumption was violated (``inconsistent``).
+5.  **One motion, one geometry.**  When a hypothesis' budget of sub-boxes is
+    spent, each of its rows is tested as one constant geometry and one motion
+    over the samples around its widest pose box (:mod:`verifier.one_motion`,
+    a linear relaxation whose infeasibility is proved by a Farkas certificate);
+    the rows proved impossible are dropped, which frees budget for halving.
 
 Every pass only removes what cannot hold under the tracker's assumptions and
 the hypothesis, so a refuted hypothesis is false (docs/soundness.md, "Window
