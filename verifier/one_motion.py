@@ -26,19 +26,22 @@ geometry parameters; SI units.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import linprog
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, diags, hstack
 
 from . import interval as I
 from .constants import pack_constants
 
-__all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "row_system",
-           "refute_row", "ONE_MOTION_SAMPLES"]
+__all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "drift_rows", "row_system",
+           "refute_row", "refute_rows", "ONE_MOTION_SAMPLES", "CUT_SLOPES", "DRIFT_OFFSETS"]
 
-#: Samples of the range a row is refuted over, centred on the widest pose box of its tube.
+#: Samples of the range a row is refuted over, centred on the widest pose box of its tube (the default of
+#: ``track_window(one_motion=...)``).  Measured on the certify plan at 0.9557 m/s: 40, 60, 80, 120 and all 196
+#: samples refute the same 10 rows, at 0.1 to 1.2 s a row; the time grows faster than the sample count.
 ONE_MOTION_SAMPLES = 40
 
 
@@ -133,17 +136,14 @@ def _phase_one(system: LinearSystem):
     rhs = s.b - A @ c
     scale = np.asarray(abs(As).max(axis=1).todense()).ravel()
     scale = np.where(scale > 0, scale, 1.0)
-    D = coo_matrix((1.0 / scale, (np.arange(M), np.arange(M))), shape=(M, M)).tocsr()
-    As = D @ As
+    As = diags(1.0 / scale) @ As
     rhs = rhs / scale
-    from scipy.sparse import hstack
-
     Aub = hstack([As, coo_matrix(-np.ones((M, 1)))]).tocsr()
-    ulo = np.where(s.hi > s.lo, -1.0, 0.0)
-    bounds = np.column_stack([np.concatenate([ulo, [0.0]]), np.concatenate([-ulo, [None]])])
+    u = np.where(s.hi > s.lo, 1.0, 0.0)  # the centred, scaled unknowns in [-1, 1] (a fixed one at 0)
+    bounds = [(-w, w) for w in u] + [(0.0, None)]
     cost = np.zeros(N + 1)
     cost[-1] = 1.0
-    res = linprog(cost, A_ub=Aub, b_ub=rhs, bounds=[tuple(b) for b in bounds], method="highs")
+    res = linprog(cost, A_ub=Aub, b_ub=rhs, bounds=bounds, method="highs")
     if res.status != 0 or not res.fun > 0:
         return None
     y = -np.asarray(res.ineqlin.marginals, dtype=np.float64)  # marginals of <= rows are <= 0
@@ -164,8 +164,9 @@ def loop_closure_rows(model, X, Q, XI):
     model : verifier.model.IntervalModel
     X, Q : (lo, hi), arrays ``(S, n)``
         Pose (m) and joint (rad) boxes of ``S`` samples.
-    XI : (lo, hi), arrays ``(m,)``
-        The geometry box (shared by the samples).
+    XI : (lo, hi), arrays ``(m,)`` or ``(S, m)``
+        The geometry box (shared by the samples, or one per sample: the rows of several window rows are
+        computed in one call).
 
     Returns
     -------
@@ -184,7 +185,7 @@ def loop_closure_rows(model, X, Q, XI):
     r_j r_l]`` (a square is not negative: the diagonal terms are one-sided).
     """
     S, n = X[0].shape
-    m = len(XI[0])
+    m = np.shape(XI[0])[-1]
     N = 2 * n + m
     XIb = tuple(np.broadcast_to(v, (S, m)) for v in XI)
     lo = np.concatenate([X[0], Q[0], XIb[0]], axis=1)
@@ -282,6 +283,14 @@ def motion_rows(t_s: float, a, S: int, n: int, velocity: bool):
     return blocks
 
 
+@functools.lru_cache(maxsize=8)
+def _difference_bounds(settings, offsets: tuple, n: int):
+    """The error intervals ``(J, 2, n)`` of a difference of two readings ``j`` samples apart, ``j`` in
+    ``offsets``, as the tracker's constants hold them (their one owner: ``verifier.constants``); remembered
+    per settings object (frozen), since every row of a window asks for the same."""
+    return pack_constants(replace(settings, baselines=offsets), n).diff_err
+
+
 #: Sample distances of the coupled readings of the drift model (:func:`drift_rows`).
 DRIFT_OFFSETS = (1, 2, 4, 8, 16, 32, 64)
 
@@ -294,13 +303,11 @@ def drift_rows(settings, q, S: int, n: int):
     if settings.eps_q_fast is None:
         return []
     blocks = []
-    offsets = [j for j in DRIFT_OFFSETS if j < S]
+    offsets = tuple(j for j in DRIFT_OFFSETS if j < S)
     if not offsets:
         return []
-    # the bounds of the tracker's displacement relation at these sample distances (their one owner)
-    diff = pack_constants(replace(settings, baselines=tuple(offsets)), n).diff_err
     two_eps = I.scale(2.0, -settings.eps_q, settings.eps_q)[1]
-    for j, (_, D) in zip(offsets, diff):
+    for j, (_, D) in zip(offsets, _difference_bounds(settings, offsets, n)):
         if np.all(D >= two_eps):
             break  # no tighter than the boxes of the two readings
         k = np.arange(S - j)
@@ -315,25 +322,31 @@ def drift_rows(settings, q, S: int, n: int):
     return blocks
 
 
-def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True) -> LinearSystem | None:
+def _reading_boxes(settings, qs):
+    """``q̃ ± eps_q`` rounded outward, as the tracker's step widens a reading."""
+    eps = settings.eps_q
+    return I.sub(qs, qs, eps, eps)[0], I.add(qs, qs, eps, eps)[1]
+
+
+def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, closure=None) -> LinearSystem | None:
     """The linear system of one row over the samples ``samples`` (a contiguous ``range``).
 
     Unknowns, in order: ``ξ`` (``m``), then per sample ``x_k`` (``S n``), ``q_k`` (``S n``) and, with
     ``velocity``, ``v_k`` (``S n``); bounds: ``XI``, the tube boxes ``X``, ``XD`` ``(K, 2, n)`` and the
-    reading boxes ``q_k ± eps_q``.  ``None`` when a bound is not finite (no certificate could use it).
+    reading boxes ``q_k ± eps_q``.  ``closure``: :func:`loop_closure_rows` of these boxes when computed
+    already.  ``None`` when a bound is not finite (no certificate could use it).
     """
     ks = np.asarray(samples)
     S, n, m = len(ks), model.n, len(XI[0])
-    eps = settings.eps_q
     qs = q[ks]
-    Q = (I.sub(qs, qs, eps, eps)[0], I.add(qs, qs, eps, eps)[1])
+    Q = _reading_boxes(settings, qs)
     Xs = (X[ks, 0], X[ks, 1])
     nv = S * n if velocity else 0
     lo = np.concatenate([XI[0], Xs[0].ravel(), Q[0].ravel()] + ([XD[ks, 0].ravel()] if velocity else []))
     hi = np.concatenate([XI[1], Xs[1].ravel(), Q[1].ravel()] + ([XD[ks, 1].ravel()] if velocity else []))
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
         return None
-    Jc, blo, bhi = loop_closure_rows(model, Xs, Q, XI)
+    Jc, blo, bhi = loop_closure_rows(model, Xs, Q, XI) if closure is None else closure
     blocks = []
     # loop closure: columns x_k, q_k, ξ
     kk, ii = np.meshgrid(np.arange(S), np.arange(n), indexing="ij")
@@ -369,12 +382,38 @@ def _samples(X, size):
     return range(start, start + size)
 
 
+def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False):
+    """Which rows no single geometry and single motion explain: ``(R,)`` bool, True where proved.
+
+    Row ``r`` is the geometry box ``(XI[0][r], XI[1][r])`` (``(R, m)``) with the tubes ``X[r]``, ``XD[r]``
+    (``(R, K, 2, n)``); it is refuted when no single geometry of its box and single motion within ``a_max``
+    in its tubes explain the readings ``q`` ``(K, n)`` over ``size`` samples around its widest pose box
+    (proved: :func:`prove_infeasible`).  The loop closure of every row is linearised in one batch.
+    ``velocity``: velocity unknowns in ``XD`` and their rows (:func:`motion_rows`); off by default: on the
+    runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.
+    """
+    q = np.asarray(q, np.float64)
+    R = len(XI[0])
+    out = np.zeros(R, dtype=bool)
+    if R == 0:
+        return out
+    ks = [np.asarray(_samples(X[r], size)) for r in range(R)]
+    S = len(ks[0])
+    idx = np.concatenate(ks)
+    rows = np.repeat(np.arange(R), S)
+    Xb = (X[rows, idx, 0], X[rows, idx, 1])
+    with I.quiet_fp():
+        closure = loop_closure_rows(model, Xb, _reading_boxes(settings, q[idx]), (XI[0][rows], XI[1][rows]))
+    for r in range(R):
+        part = tuple(v[r * S:(r + 1) * S] for v in closure)
+        system = row_system(model, settings, q, (XI[0][r], XI[1][r]), X[r], XD[r], ks[r], velocity, part)
+        if system is not None:
+            y = _phase_one(system)
+            out[r] = y is not None and prove_infeasible(system, y)
+    return out
+
+
 def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False) -> bool:
-    """True when no single geometry of ``XI`` and single motion within ``a_max`` in the tubes ``X``, ``XD``
-    ``(K, 2, n)`` explain the readings ``q`` ``(K, n)`` over ``size`` samples around the widest pose box
-    (proved: :func:`prove_infeasible`)."""
-    system = row_system(model, settings, np.asarray(q, np.float64), XI, X, XD, _samples(X, size), velocity)
-    if system is None:
-        return False
-    y = _phase_one(system)
-    return y is not None and prove_infeasible(system, y)
+    """:func:`refute_rows` for one row: geometry box ``XI`` ``(m,)`` pair, tubes ``X``, ``XD`` ``(K, 2, n)``."""
+    XIr = (np.asarray(XI[0], np.float64)[None], np.asarray(XI[1], np.float64)[None])
+    return bool(refute_rows(model, settings, q, XIr, X[None], XD[None], size, velocity)[0])

@@ -50,7 +50,7 @@ from crosscert.robots.errors import InputError
 from . import interval as I
 from .linalg import point_inverse
 from .motion_model import contract_tubes
-from .one_motion import ONE_MOTION_SAMPLES, refute_row
+from .one_motion import ONE_MOTION_SAMPLES, refute_rows
 from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solution_arrays
 from .tracker import Tracker, initial_box_from_mode, verdict_of
@@ -542,10 +542,8 @@ class _Hypothesis:
 
     def refute_one_motion(self, q, samples):
         """Drop the rows that no single geometry of their sub-box and single motion in their tubes explain
-        over ``samples`` samples of the readings ``q`` (:func:`verifier.one_motion.refute_row`)."""
-        s, model = self.finals.s, self.finals.model
-        live = np.array([not refute_row(model, s, q, (self.xlo[r], self.xhi[r]), self.tx[r], self.txd[r], samples)
-                         for r in range(len(self.xlo))], dtype=bool)
+        over ``samples`` samples of the readings ``q`` (:func:`verifier.one_motion.refute_rows`)."""
+        live = ~refute_rows(self.finals.model, self.finals.s, q, (self.xlo, self.xhi), self.tx, self.txd, samples)
         if not live.any():
             self.refutation = Refutation.ONE_MOTION
         self._keep(live)
