@@ -153,10 +153,29 @@ DEFAULT_CERTIFICATION = {
     # execution class (issue 21, 2026-12-02): 0.9876 m/s (0.9822 m/s fails), the rest unchanged.  Window
     # halving along the parameter that spreads the pose most (issue 20, 2026-12-02): 0.9663 m/s (0.9610 m/s
     # fails), refutation bound 0.84375 m/s, Monte Carlo 50/50.  The acceleration bound between samples
-    # (issue 20, 2026-12-02, verifier.motion_model): 0.9610 m/s (0.9557 m/s fails), the rest unchanged.
-    "dextar": CertificationExpectation(v_min=0.9610, v_min_forward=1.198, v_min_tol=0.01, refutation_bound=0.8438,
+    # (issue 20, 2026-12-02, verifier.motion_model): 0.9610 m/s (0.9557 m/s fails), the rest unchanged.  One
+    # motion, one geometry (issue 20, 2026-12-02, verifier.one_motion): 0.9451 m/s (0.9398 m/s fails), refutation
+    # bound 0.84375 m/s, Monte Carlo 50/50, bounces from 10.0 mm as before.
+    "dextar": CertificationExpectation(v_min=0.9451, v_min_forward=1.198, v_min_tol=0.01, refutation_bound=0.8438,
                                        measured="docs/planning.md (2026-11-25, 2026-12-01), benchmarks/README.md"),
 }
+
+#: Linear systems ``A z <= b``, ``lo <= z <= hi`` (``A`` dense, one variable here) with multipliers ``y``, for the
+#: Farkas certificate of :func:`verifier.one_motion.prove_infeasible`.  ``float_only``: feasible (``z = 5.2``
+#: satisfies both rows exactly: each ``b`` is ``a z`` rounded up), yet ``yᵀ(A z - b)`` evaluated in round to
+#: nearest is ``+3.6e-15 > 0`` (exactly ``-1.3e-16``): a certificate that holds only in float arithmetic.
+#: ``infeasible``: ``z <= 0.4`` and ``z >= 0.6``.  (Found by a seeded search, 2026-12-02.)
+FARKAS = {
+    "float_only": (np.array([[5.8], [-4.4]]), np.array([30.16, -22.880000000000003]), np.array([5.2]),
+                   np.array([5.2]), np.array([1.0, 1.3181818181818181])),
+    "infeasible": (np.array([[1.0], [-1.0]]), np.array([0.4, -0.6]), np.array([0.0]), np.array([1.0]),
+                   np.array([1.0, 1.0])),
+}
+
+#: ``crosscert certify``'s plan speeds (m/s) around the one-motion refutation (verifier.one_motion, 2026-12-02):
+#: undecided without it (the bounce hypothesis survives with 10 sub-boxes), certified with it; and the
+#: refutation bound, where a verified bounce exists (the bounce hypothesis must survive).
+ONE_MOTION_PLAN = {"certified": 0.9557, "floor": 0.8438}
 
 #: Planning problems by name: ``<robot>_benchmark`` for every registered robot with a benchmark crossing.
 PLANNING = {

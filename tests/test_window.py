@@ -279,7 +279,8 @@ def test_rounds_go_to_the_hypothesis_with_fewest_rows(settings, monkeypatch):
 
     monkeypatch.setattr(W, "_round", logged)
     run = simulate(1.0, False, 0)
-    res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
+    # one_motion=0: the one-motion refutation decides this run (2026-12-02), and a refutation ends the rounds
+    res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4, one_motion=0)
     assert res.verdict is Verdict.UNKNOWN and order[0][0] == 1, (order, res.summary())
     spent = {1: 0, -1: 0}
     for i, ((m, total), nxt) in enumerate(zip(order, order[1:] + [(None, None)])):
@@ -387,13 +388,16 @@ def test_halving_follows_the_pose_spread_and_covers_the_parent():
             assert np.array_equal(left[1][others], hi[r][others]) and np.array_equal(right[0][others], lo[r][others])
 
 
-def test_acceleration_bound_between_samples_certifies_the_plan_at_0961():
+def test_acceleration_bound_between_samples_certifies_the_plan_at_0961(monkeypatch):
     """``crosscert certify``'s plan at 0.961 m/s (derived a_max 80 / 66 m/s^2): undecided by the passes
     alone (the bounce hypothesis survives with 9-10 sub-boxes), certified once every pass's tubes are
     contracted with the two-sample acceleration bound (verifier.motion_model, docs/soundness.md, "Window
     reasoning", step 8).  Removal check (2026-12-02): without the call in ``_Hypothesis.take`` this test
-    fails (``unknown``)."""
+    fails (``unknown``).  The one-motion step (step 9) is off here: it certifies this plan on its own."""
+    import crosscert.verifier.window as W
     from crosscert.planner.certify.plan import certify_speed
+
+    monkeypatch.setattr(W, "refute_rows", lambda model, s, q, XI, *a: np.zeros(len(XI[0]), dtype=bool))
     from crosscert.planner.task import benchmark_task
     from crosscert.robots import KinematicModel
 

@@ -68,6 +68,24 @@ class IntervalModel:
         self.tape_det = Tape(fun("det", [x, q, xi], [det]))
 
     @cached_property
+    def tape_jac(self) -> Tape:
+        """``df/d(x, q, xi)`` ``(n, 2n + m)`` in one tape (the columns of ``J_x``, ``J_q``, then ``J_xi``): the
+        mean-value form of the loop closure over a whole box (:mod:`verifier.one_motion`)."""
+        s = self.sx
+        z = ca.vertcat(s["x"], s["q"], s["xi"])
+        return Tape(ca.Function("jall", [s["x"], s["q"], s["xi"]], [ca.jacobian(s["f"], z)]))
+
+    @cached_property
+    def tape_hess(self) -> Tape:
+        """The Hessians of the equations of ``f`` in ``(x, q, xi)``, stacked: ``(n (2n + m), 2n + m)`` (rows
+        ``i (2n + m) .. (i + 1)(2n + m)`` are equation ``i``'s): the second-order Taylor form of the loop closure
+        over a box (:mod:`verifier.one_motion`)."""
+        s = self.sx
+        z = ca.vertcat(s["x"], s["q"], s["xi"])
+        H = ca.vertcat(*[ca.hessian(s["f"][i], z)[0] for i in range(self.n)])
+        return Tape(ca.Function("hessians", [s["x"], s["q"], s["xi"]], [H]))
+
+    @cached_property
     def program(self):
         """Every tape packed as flat arrays for the compiled kernels
         (:func:`verifier.compiled.straight.pack`), built once per model."""

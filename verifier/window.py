@@ -26,6 +26,11 @@ recording may use every reading.  :func:`track_window` does so:
    the first, other than the initial one).  A hypothesis with every sub-box
    refuted is refuted.  The verdict is certified when exactly one hypothesis
    survives; both refuted means an assumption was violated (``inconsistent``).
+5.  **One motion, one geometry.**  When a hypothesis' budget of sub-boxes is
+    spent, each of its rows is tested as one constant geometry and one motion
+    over the samples around its widest pose box (:mod:`verifier.one_motion`,
+    a linear relaxation whose infeasibility is proved by a Farkas certificate);
+    the rows proved impossible are dropped, which frees budget for halving.
 
 Every pass only removes what cannot hold under the tracker's assumptions and
 the hypothesis, so a refuted hypothesis is false (docs/soundness.md, "Window
@@ -45,6 +50,7 @@ from crosscert.robots.errors import InputError
 from . import interval as I
 from .linalg import point_inverse
 from .motion_model import contract_tubes
+from .one_motion import ONE_MOTION_SAMPLES, refute_rows
 from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solution_arrays
 from .tracker import Tracker, initial_box_from_mode, verdict_of
@@ -96,6 +102,7 @@ class Refutation(str, Enum):
     EMPTY_TUBE = "empty-tube"  #: every geometry's tubes became empty
     OTHER_MODE = "other-mode"  #: every surviving geometry certifies another mode at an end of the recording
     FORWARD = "forward"  #: the forward tracker alone certified the other final mode
+    ONE_MOTION = "one-motion"  #: no single geometry and motion within a_max explains the last rows' tubes
 
     def __str__(self) -> str:
         return self.value
@@ -299,7 +306,8 @@ def _combined_mode(modes, alive):
 def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None,
                  max_passes: int = WINDOW_MAX_PASSES, rel_tol: float = WINDOW_REL_TOL,
                  max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
-                 parallel: bool = True, goal: Verdict | None = None) -> WindowResult:
+                 parallel: bool = True, goal: Verdict | None = None,
+                 one_motion: int = ONE_MOTION_SAMPLES) -> WindowResult:
     """Verdict of a whole recording by forward-backward window passes (module docstring).
 
     Parameters
@@ -337,6 +345,11 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         verdict is the one ``None`` gives, at a fraction of the cost: the true
         hypothesis is never refuted, and its rounds are the costly ones.
         ``None``: both hypotheses.
+    one_motion : int
+        Samples of the one-motion refutation (:mod:`verifier.one_motion`): after each round, before
+        halving, a row is dropped when no single geometry of its sub-box and single motion within
+        ``a_max`` in its tubes explain the readings over this many samples around its widest pose box
+        (proved by a Farkas certificate).  0: not tried.
 
     Returns
     -------
@@ -356,6 +369,8 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         raise InputError(f"max_geometries must be a positive integer, got {max_geometries!r}")
     if not (0.0 <= rel_tol < 1.0):
         raise InputError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
+    if isinstance(one_motion, bool) or int(one_motion) != one_motion or one_motion < 0:
+        raise InputError(f"one_motion must be a non-negative number of samples, got {one_motion!r}")
     goal = _goal(goal)
     if (x0 is None) == (initial_mode is None):
         raise InputError("give exactly one of x0 and initial_mode")
@@ -401,7 +416,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         if not any(h.refuted for h in hyps):
             full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
             _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w,
-                    _targets(hyps, m0, goal))
+                    _targets(hyps, m0, goal), int(one_motion))
         else:  # refuted by the last reading alone: the other ran no pass
             for h in hyps:
                 h.complete = h.refuted
@@ -525,6 +540,14 @@ class _Hypothesis:
             self.refutation = Refutation.EMPTY_TUBE if np.all(dead) else Refutation.OTHER_MODE
         self._keep(live)
 
+    def refute_one_motion(self, q, samples):
+        """Drop the rows that no single geometry of their sub-box and single motion in their tubes explain
+        over ``samples`` samples of the readings ``q`` (:func:`verifier.one_motion.refute_rows`)."""
+        live = ~refute_rows(self.finals.model, self.finals.s, q, (self.xlo, self.xhi), self.tx, self.txd, samples)
+        if not live.any():
+            self.refutation = Refutation.ONE_MOTION
+        self._keep(live)
+
     def split(self, full_w, q_first):
         """Halve every surviving geometry sub-box along the parameter that spreads the pose most at the two
         ends of the recording (first reading ``q_first``); children start from their parent's tubes."""
@@ -607,7 +630,7 @@ def _targets(hyps, m0, goal):
     return [h for h in hyps if (h.m == m0) == (goal is Verdict.MODE_CHANGED)]
 
 
-def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=None):
+def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=None, one_motion=0):
     """Rounds on the hypotheses ``targets`` (all of ``hyps`` by default), halving each one's geometries
     after each of its rounds while they stay within ``max_geometries``, until a hypothesis is refuted or
     none can be halved.
@@ -638,6 +661,10 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=N
         before = passes.rows
         _round(h, passes, max_passes, rel_tol)
         rows[i] += passes.rows - before
+        if one_motion and not h.refuted and 2 * len(h.xlo) > max_geometries:
+            # the budget is spent: the one-motion test is the last resort, and the rows it drops give the
+            # halving room again (each row costs about as much as a few passes over the recording)
+            h.refute_one_motion(passes.q, one_motion)
         if not h.refuted and 2 * len(h.xlo) <= max_geometries:
             h.split(full_w, passes.q[0])  # may refute it: no child has a final box
         elif not h.refuted:
