@@ -19,9 +19,8 @@ from problems import PLANNING
 
 BENCHMARK = PLANNING["dextar_benchmark"]
 #: v_min at the DexTAR's a_max (80, 80) m/s^2 on the benchmark task, as the search without a guess finds it
-#: (the default search from the first certificate's v_min, 8 questions; crosscert certify 2026-12-02).  With the
-#: one-motion step of window reasoning (issue 20, 2026-12-02): 1.040144 (was 1.062375), the same without a guess.
-V_MIN_AT_ROBOT_A_MAX = 1.040144
+#: (the default search from the first certificate's v_min, 8 questions; crosscert certify 2026-12-02).
+V_MIN_AT_ROBOT_A_MAX = 1.062375
 
 
 def test_the_guess_scales_v_min_with_the_square_root_of_the_largest_a_max_ratio():
@@ -32,11 +31,9 @@ def test_the_guess_scales_v_min_with_the_square_root_of_the_largest_a_max_ratio(
     assert ac.speed_guess(0.961008, used, ref) == pytest.approx(0.961008 * math.sqrt(80.0 / 65.91))
 
 
-def test_at_the_robot_a_max_a_few_questions_give_the_full_searchs_v_min(task, kin, imodel, monkeypatch):
-    """On the benchmark task the guess lies next to the answer's last bisection bracket: three questions
-    (8 without the guess), and v_min is the one the search without a guess finds.  (Two questions before the
-    one-motion step of window reasoning, 2026-12-02: the guess 0.9451 sqrt(80 / 65.88) = 1.0415 m/s now lies
-    one cell above the answer's bracket.)"""
+def test_at_the_robot_a_max_two_questions_give_the_full_searchs_v_min(task, kin, imodel, monkeypatch):
+    """On the benchmark task the guess lies in the answer's last bisection bracket: its two ends are the
+    only questions (8 without the guess), and v_min is the one the search without a guess finds."""
     cert = certify_crossing(DEXTAR, task, kin=kin, imodel=imodel, refute=False, monte_carlo_runs=0, bounce=False)
     assert cert.v_min == pytest.approx(BENCHMARK.expected.v_min, abs=1e-4)
     asked = []
@@ -49,7 +46,7 @@ def test_at_the_robot_a_max_a_few_questions_give_the_full_searchs_v_min(task, ki
     monkeypatch.setattr(certify_mod, "certify_speed", counting)
     at = ac.certify_at_robot_a_max(DEXTAR, task, cert, refute=False, kin=kin, imodel=imodel).at_robot_a_max
     assert at.outcome is ac.ComparisonOutcome.COMPUTED and at.verdict is Verdict.MODE_CHANGED
-    assert at.v_min == V_MIN_AT_ROBOT_A_MAX and len(asked) == 3, asked
+    assert at.v_min == V_MIN_AT_ROBOT_A_MAX and len(asked) == 2, asked
     assert min(asked) < at.v_min and at.v_min - min(asked) <= 0.01
 
 

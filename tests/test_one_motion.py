@@ -209,12 +209,14 @@ def test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_fl
     from crosscert.verifier.window import Refutation
 
     kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
-    run = certify_speed(kin, interval_model(), task, PlanningBounds(), ONE_MOTION_PLAN["certified"])
+    run = certify_speed(kin, interval_model(), task, PlanningBounds(), ONE_MOTION_PLAN["certified"],
+                        one_motion=OM.ONE_MOTION_SAMPLES)
     assert run.forward.verdict is Verdict.UNKNOWN
     assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
     wrong = {h.final_mode: h for h in run.window.hypotheses}[1]
     assert wrong.refutation is Refutation.ONE_MOTION
-    floor = certify_speed(kin, interval_model(), task, PlanningBounds(), ONE_MOTION_PLAN["floor"])
+    floor = certify_speed(kin, interval_model(), task, PlanningBounds(), ONE_MOTION_PLAN["floor"],
+                          one_motion=OM.ONE_MOTION_SAMPLES)
     assert floor.window.verdict is Verdict.UNKNOWN, floor.window.summary()
 
 
