@@ -32,7 +32,6 @@ from crosscert.verifier.window import track_window
 from . import refute
 from .simulate import simulate_bounce
 from .sweep import cruise_for
-from .certify.plan import CERTIFY_ONE_MOTION
 from .generate.crossing import crossing_point_and_joints
 from .task import CrossingTask, PlanningBounds
 
@@ -167,7 +166,7 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: fl
             x0 = initial_box_from_mode(imodel, q[0], fam.m0, s)
             verdicts[d] = track_window(imodel, q, s, x0=x0, max_geometries=BOUNCE_WINDOW_GEOMETRIES,
                                        parallel=parallel, goal=Verdict.MODE_UNCHANGED,
-                                       one_motion=CERTIFY_ONE_MOTION).verdict
+                                       one_motion=fam.b.one_motion).verdict
         return verdicts[d] is Verdict.MODE_UNCHANGED
 
     if exhaustive:

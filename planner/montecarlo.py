@@ -23,7 +23,7 @@ from crosscert.verifier.tracker import initial_box_from_mode, track_batch
 from crosscert.verifier.window import Reasoning, track_window
 
 from . import execution as ex_
-from .certify.plan import CERTIFY_ONE_MOTION, execution_class
+from .certify.plan import execution_class
 from .models import interval_model, kinematic_model
 from .plan import derived_a_max
 from .simulate import Quantisation, quantise, random_geometry
@@ -192,7 +192,7 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
             if verdicts[i] is Verdict.UNKNOWN:
                 verdicts[i] = track_window(imodel, q[i], settings, x0=(x0[0][i], x0[1][i]),
                                            max_geometries=MC_WINDOW_GEOMETRIES, parallel=parallel,
-                                           goal=Verdict.MODE_CHANGED, one_motion=CERTIFY_ONE_MOTION).verdict
+                                           goal=Verdict.MODE_CHANGED, one_motion=b.one_motion).verdict
     misses, failures, wrong = [], [], []
     for i, r in enumerate(range(start, stop)):
         inside = (np.all(rec["x_lo"][i] <= plan.x) and np.all(plan.x <= rec["x_hi"][i])

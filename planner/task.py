@@ -160,6 +160,11 @@ class PlanningBounds:
         (:class:`verifier.window.Reasoning`): ``window`` (default; forward
         tracker, then window passes over the whole run when it is undecided)
         or ``forward`` (the tracker alone).
+    one_motion : int
+        Samples of the one-motion refutation in those windows
+        (``verifier.window.track_window(one_motion=...)``; 0, the default: not tried).
+        40 lowers the benchmark task's v_min from 0.961 to 0.945 m/s at about 1.5
+        times certify's time (docs/tracker.md, "One motion, one geometry").
     """
 
     eps_q: float | None = None
@@ -176,6 +181,7 @@ class PlanningBounds:
     qdd_max: float | None = None
     execution: ExecutionKind = ExecutionKind.CARTESIAN
     reasoning: Reasoning = Reasoning.WINDOW
+    one_motion: int = 0
     #: Name of the robot whose defaults :meth:`for_robot` filled in (``None``: not yet bound).
     robot_name: str | None = field(default=None, init=False, compare=False)
     #: The robot itself and these bounds before its defaults were filled in: binding to another robot
@@ -200,6 +206,7 @@ class PlanningBounds:
         set_(self, "method", parse_option(Method, "planning method", self.method))
         set_(self, "execution", parse_option(ExecutionKind, "execution class", self.execution))
         set_(self, "reasoning", parse_option(Reasoning, "reasoning", self.reasoning))
+        set_(self, "one_motion", V.count("one_motion", self.one_motion))
         if self.method is Method.DYNAMIC and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from .errors import CrosscertError, InputError
 
-__all__ = ["number", "positive", "vector", "direction", "floats", "frozen_array"]
+__all__ = ["number", "positive", "count", "vector", "direction", "floats", "frozen_array"]
 
 
 def number(name: str, value, *, lo: float | None = None, hi: float | None = None,
@@ -46,6 +46,20 @@ def positive(name: str, value, *, allow_zero: bool = False,
              error: type[CrosscertError] = InputError) -> float:
     """A finite float ``> 0`` (``>= 0`` with ``allow_zero``)."""
     return number(name, value, lo=0.0, lo_open=not allow_zero, error=error)
+
+
+def count(name: str, value, *, error: type[CrosscertError] = InputError) -> int:
+    """A non-negative integer (an ``int`` or an integral float; not a bool)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise error(f"{name} must be a non-negative integer, got {value!r}")
+    try:
+        i = int(value)
+        ok = i == value and i >= 0
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise error(f"{name} must be a non-negative integer, got {value!r}")
+    return i
 
 
 def vector(name: str, value, n: int | None = None, *, broadcast: bool = False, positive: bool = False,

@@ -155,7 +155,7 @@ DEFAULT_CERTIFICATION = {
     # fails), refutation bound 0.84375 m/s, Monte Carlo 50/50.  The acceleration bound between samples
     # (issue 20, 2026-12-02, verifier.motion_model): 0.9610 m/s (0.9557 m/s fails), the rest unchanged.  With
     # the one-motion refutation in certify's windows (issue 20, 2026-12-02, verifier.one_motion,
-    # CERTIFY_ONE_MOTION = 40): 0.9451 m/s (0.9398 m/s fails), the rest unchanged; off by default (its cost).
+    # PlanningBounds(one_motion=40)): 0.9451 m/s (0.9398 m/s fails), the rest unchanged; off by default (its cost).
     "dextar": CertificationExpectation(v_min=0.9610, v_min_forward=1.198, v_min_tol=0.01, refutation_bound=0.8438,
                                        measured="docs/planning.md (2026-11-25, 2026-12-01), benchmarks/README.md"),
 }

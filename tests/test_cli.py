@@ -457,3 +457,11 @@ def test_progress_names_each_phase_with_its_total_and_says_when_it_compiles(monk
         bar.close()
     bar.close()  # twice is harmless
     assert all(b.closed for b in bars)
+
+
+@pytest.mark.parametrize("bad", ["-1", "1.5", "x"])
+def test_certify_refuses_a_bad_one_motion_count_before_any_work(tmp_path, capsys, bad):
+    assert main(["certify", "--one-motion", bad, "--out", str(tmp_path / "c"), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--one-motion" in err and "Traceback" not in err
+    assert not (tmp_path / "c").exists()

@@ -45,6 +45,7 @@ from enum import Enum
 
 import numpy as np
 
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
 
 from . import interval as I
@@ -369,8 +370,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         raise InputError(f"max_geometries must be a positive integer, got {max_geometries!r}")
     if not (0.0 <= rel_tol < 1.0):
         raise InputError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
-    if isinstance(one_motion, bool) or int(one_motion) != one_motion or one_motion < 0:
-        raise InputError(f"one_motion must be a non-negative number of samples, got {one_motion!r}")
+    one_motion = V.count("one_motion", one_motion)
     goal = _goal(goal)
     if (x0 is None) == (initial_mode is None):
         raise InputError("give exactly one of x0 and initial_mode")

@@ -148,7 +148,7 @@ class CrossingCertificate:
                 "a_max": None if b.a_max is None else [{"value": v, "unit": u} for v, u in zip(b.a_max, self.acceleration_units)],
                 "a_margin": b.a_margin, "xi_splits": None if b.xi_splits is None else list(b.xi_splits),
                 "execution": b.execution.value, "qd_max_radps": b.qd_max, "qdd_max_radps2": b.qdd_max,
-                "reasoning": b.reasoning.value,
+                "reasoning": b.reasoning.value, "one_motion_samples": b.one_motion,
             },
             "verdict": self.verdict.value,
             "v_min_mps": self.v_min,

@@ -71,7 +71,6 @@ __all__ = [
     "certify_plan",
     "certify_plan_window",
     "CERTIFY_WINDOW_GEOMETRIES",
-    "CERTIFY_ONE_MOTION",
     "execution_class",
     "tracker_settings",
     "minimal_v_sing",
@@ -98,12 +97,6 @@ class SpeedTrial:
 #: Geometry sub-boxes per final-mode hypothesis in the window passes of a certification
 #: (the robot's partition halved up to this count; docs/tracker.md, "Window reasoning").
 CERTIFY_WINDOW_GEOMETRIES = 16
-#: Samples of the one-motion refutation in the windows of a certification (the speed search, the Monte Carlo
-#: confirmation and the bounces; ``track_window(one_motion=...)``, 0 = off).  Off: on the benchmark task 40
-#: samples lower v_min from 0.9610 to 0.9451 m/s but take ``crosscert certify`` from 10.2 to 15.7 s
-#: (docs/planning.md, 2026-12-02); ``crosscert check`` keeps the window's default.  One value for every
-#: process of a certification: not to be changed at run time (workers would not see it).
-CERTIFY_ONE_MOTION = 0
 
 
 # ------------------------------------------------------------------ planning
@@ -156,14 +149,13 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
 
 def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int,
                         *, execution: ex_.ExecutionClass | None = None, kin=None, a_max=None,
-                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES, parallel: bool = True,
-                        one_motion: int = CERTIFY_ONE_MOTION) -> WindowResult:
+                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES, parallel: bool = True) -> WindowResult:
     """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
 
     ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
     certifies every admissible execution, as for :func:`certify_plan`.  ``parallel``: the geometry
-    sub-boxes over the thread slots (the same boxes either way).  ``one_motion``: samples of the one-motion
-    refutation (:data:`CERTIFY_ONE_MOTION`).
+    sub-boxes over the thread slots (the same boxes either way).  The window's one-motion refutation
+    runs over ``bounds.one_motion`` samples (0: not tried).
     """
     robot = imodel.robot
     b = bounds.for_robot(robot)
@@ -172,7 +164,7 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
     s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
                         max_geometries=max_geometries, parallel=parallel, goal=Verdict.MODE_CHANGED,
-                        one_motion=one_motion)
+                        one_motion=b.one_motion)
 
 
 @dataclass(frozen=True, eq=False)
@@ -212,15 +204,13 @@ class CertifiedRun:
                           None if f.certified_at_step < 0 else int(f.certified_at_step), f.verdict)
 
 
-def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel: bool = True,
-                  one_motion: int = CERTIFY_ONE_MOTION) -> CertifiedRun:
+def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel: bool = True) -> CertifiedRun:
     """Plan ``task`` at ``v_sing`` (m/s) and certify that plan alone (forward run, then window passes if undecided).
 
     What the certificate of ``v_sing`` is: its verdict ``MODE_CHANGED``
     certifies every admissible execution of the plan (module docstring).
     ``parallel``: window passes over the thread slots (the same boxes; off
-    where another process holds the other cores).  ``one_motion``: samples of the window's one-motion
-    refutation (:data:`CERTIFY_ONE_MOTION`).
+    where another process holds the other cores).
     """
     b = bounds.for_robot(kin.robot)
     plan = plan_crossing(kin, task, v_sing, b)
@@ -231,7 +221,7 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
     window = None
     if forward.verdict is Verdict.UNKNOWN and b.reasoning is Reasoning.WINDOW:
         window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=acceleration.values,
-                                     parallel=parallel, one_motion=one_motion)
+                                     parallel=parallel)
     return CertifiedRun(plan, cls, acceleration, forward, window)
 
 

@@ -40,7 +40,7 @@ def certify(a) -> int:
     a_max = None if a.a_max is None else (a.a_max[0] if len(a.a_max) == 1 else a.a_max)
     bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a_max, a_peak=a.a_peak,
                             method=a.method, dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
-                            execution=a.execution)
+                            execution=a.execution, one_motion=a.one_motion)
     out = Path(a.out)
     units = {u.value for u in robot.joint_units}
     joint_unit = units.pop() if len(units) == 1 else "rad or m (per joint)"

@@ -39,7 +39,7 @@ TOP_KEYS = ("robot", "grid", "bounds", "certify")
 CERTIFY_KEYS = ("tol", "v_low", "v_high", "monte_carlo_runs", "refute", "seed", "bounce")
 #: ``[bounds]`` keys (``PlanningBounds`` fields; ``dynamics`` comes from the robot for ``method = "dynamic"``).
 BOUNDS_KEYS = ("eps_q", "tracking_error", "a_max", "a_margin", "a_peak", "t_s", "t_rest", "method", "qd_max",
-               "qdd_max", "execution", "reasoning")
+               "qdd_max", "execution", "reasoning", "one_motion")
 #: Largest grid file read, bytes (a grid of 10 000 cases fits in a few kB).
 MAX_GRID_BYTES = 1 << 20
 #: Inputs whose values are names, not numbers: they label the plot's series instead of getting a panel.
