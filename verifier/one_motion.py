@@ -35,6 +35,7 @@ from scipy.sparse import coo_matrix, diags, hstack
 
 from . import interval as I
 from .constants import pack_constants
+from .step import reading_box
 
 __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "drift_rows", "row_system",
            "refute_row", "refute_rows", "ONE_MOTION_SAMPLES", "CUT_SLOPES", "DRIFT_OFFSETS"]
@@ -322,12 +323,6 @@ def drift_rows(settings, q, S: int, n: int):
     return blocks
 
 
-def _reading_boxes(settings, qs):
-    """``q̃ ± eps_q`` rounded outward, as the tracker's step widens a reading."""
-    eps = settings.eps_q
-    return I.sub(qs, qs, eps, eps)[0], I.add(qs, qs, eps, eps)[1]
-
-
 def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, closure=None) -> LinearSystem | None:
     """The linear system of one row over the samples ``samples`` (a contiguous ``range``).
 
@@ -339,7 +334,7 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
     ks = np.asarray(samples)
     S, n, m = len(ks), model.n, len(XI[0])
     qs = q[ks]
-    Q = _reading_boxes(settings, qs)
+    Q = reading_box(qs, settings.eps_q)
     Xs = (X[ks, 0], X[ks, 1])
     nv = S * n if velocity else 0
     lo = np.concatenate([XI[0], Xs[0].ravel(), Q[0].ravel()] + ([XD[ks, 0].ravel()] if velocity else []))
@@ -403,7 +398,7 @@ def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, v
     rows = np.repeat(np.arange(R), S)
     Xb = (X[rows, idx, 0], X[rows, idx, 1])
     with I.quiet_fp():
-        closure = loop_closure_rows(model, Xb, _reading_boxes(settings, q[idx]), (XI[0][rows], XI[1][rows]))
+        closure = loop_closure_rows(model, Xb, reading_box(q[idx], settings.eps_q), (XI[0][rows], XI[1][rows]))
     for r in range(R):
         part = tuple(v[r * S:(r + 1) * S] for v in closure)
         system = row_system(model, settings, q, (XI[0][r], XI[1][r]), X[r], XD[r], ks[r], velocity, part)

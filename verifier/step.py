@@ -52,7 +52,13 @@ from .constants import JOINT_FD, PAPER, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
-           "advance", "pose_solutions", "pose_solution_arrays", "StepImpl", "NumpyStep", "CompiledStep"]
+           "advance", "pose_solutions", "pose_solution_arrays", "reading_box", "StepImpl", "NumpyStep", "CompiledStep"]
+
+
+def reading_box(q, eps):
+    """The box the tracker gives readings ``q`` (rad; m for a prismatic joint): ``q ± eps`` rounded outward,
+    ``(lo, hi)`` of ``q``'s shape (``eps`` the encoder error bound, broadcast)."""
+    return I.sub(q, q, eps, eps)[0], I.add(q, q, eps, eps)[1]
 
 
 class Backend(str, Enum):
@@ -280,7 +286,7 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
     eps = ax["eps_q"]
     alive = st.row_bad < 0
     X, XD, XI = _rows(st.x), _rows(st.xd), _rows(st.xi)
-    Q = (I.sub(qk, qk, eps, eps)[0], I.add(qk, qk, eps, eps)[1])
+    Q = reading_box(qk, eps)
     QDD = (np.full((R, n), -np.inf), np.full((R, n), np.inf))
     # from the boxes of the last sample: before the prediction replaces them
     vel = _VELOCITY[c.velocity_model]

@@ -53,7 +53,7 @@ from .linalg import point_inverse
 from .motion_model import contract_tubes
 from .one_motion import ONE_MOTION_SAMPLES, refute_rows
 from .settings import TrackerSettings, Verdict
-from .step import Backend, advance, configure, init_state, partition_xi, pose_solution_arrays
+from .step import Backend, advance, configure, init_state, partition_xi, pose_solution_arrays, reading_box
 from .tracker import Tracker, initial_box_from_mode, verdict_of
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
@@ -246,9 +246,7 @@ def _solutions(model, q_last, s, xi_row, backend, search, tol):
     """Pose solutions of the last reading ``q_last`` (rad, widened by ``eps_q``) for the geometry sub-box
     ``xi_row`` inside ``search``: boxes ``(N, 2, n)`` (m) and their modes ``(N,)`` (0: undecided), or
     ``None`` when the enumeration gave up.  One enumeration serves both final-mode hypotheses."""
-    eps = s.eps_q
-    Q = I.sub(q_last, q_last, eps, eps)[0], I.add(q_last, q_last, eps, eps)[1]
-    return pose_solution_arrays(model, Q, xi_row, search, tol=tol, backend=backend)
+    return pose_solution_arrays(model, reading_box(q_last, s.eps_q), xi_row, search, tol=tol, backend=backend)
 
 
 def _hull_of_mode(sols, mode, search):
