@@ -18,7 +18,11 @@ fails.  Without the sources' digest in the module's key,
 a regular file, ``test_the_cache_writes_regular_files_only``; with the module
 put in ``sys.modules`` after running it, ``test_a_second_process_compiles_nothing``
 (numba's cache cannot name the module); without ``Program.__reduce__``,
-``test_a_program_pickles_without_its_addresses``.
+``test_a_program_pickles_without_its_addresses``.  Without the check for a
+regular file in :func:`straight.prune`, ``test_prune_deletes_old_unused_modules_only``
+fails (a link named like a module, or among its numba files, is removed);
+with the module's own time refreshed on load instead of its use record,
+``test_writing_a_module_prunes_and_loading_one_records_its_use``.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import shutil
 import subprocess
 import sys
 import textwrap
+import time
 
 import numpy as np
 import pytest
@@ -169,6 +174,67 @@ def test_an_unusable_cache_directory_falls_back_to_a_private_one(tmp_path, monke
     (tmp_path / "c" / "tapes" / "tapes_j.py").mkdir()
     with pytest.raises(ModelError, match="not a regular file"):  # an error, not a fallback
         straight._module_path("j", "A = 1\n")
+
+
+def _old(*paths, days=40.0):
+    """Set the times of ``paths`` (links themselves) ``days`` days back."""
+    t = time.time() - 86400.0 * days
+    for p in paths:
+        os.utime(p, (t, t), follow_symlinks=False)
+
+
+def _module(directory, key, *, used=None, days=40.0):
+    """A generated module ``key`` in ``directory``, ``days`` old, with numba cache files; its use record
+    ``used`` days old (None: no record)."""
+    (directory / "__pycache__").mkdir(exist_ok=True)
+    files = [directory / f"tapes_{key}.py", directory / "__pycache__" / f"tapes_{key}.tapes-14.py311.nbi",
+             directory / "__pycache__" / f"tapes_{key}.tapes-14.py311.1.nbc"]
+    for f in files:
+        f.write_text("A = 1\n")
+    _old(*files, days=days)
+    if used is not None:
+        (directory / f"tapes_{key}.used").touch()
+        _old(directory / f"tapes_{key}.used", days=used)
+    return files
+
+
+def test_prune_deletes_old_unused_modules_only(tmp_path):
+    """Modules unused for UNUSED_DAYS go with their numba files; recent ones, recently used ones, links,
+    directories and other files stay."""
+    old = _module(tmp_path, "aa", used=35.0)
+    bare = _module(tmp_path, "bb")  # no use record: its own time counts
+    kept = _module(tmp_path, "cc", used=1.0)  # old module, loaded yesterday
+    fresh = _module(tmp_path, "dd", days=2.0)
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("keep")
+    link = tmp_path / "tapes_ee.py"
+    link.symlink_to(target)
+    (tmp_path / "tapes_ff.py").mkdir()
+    stray = tmp_path / "__pycache__" / "tapes_aa.link.nbc"  # a link among the old module's numba files
+    stray.symlink_to(target)
+    (tmp_path / "notes.txt").write_text("")
+    _old(target, link, stray, tmp_path / "tapes_ff.py", tmp_path / "notes.txt")
+    assert sorted(straight.prune(tmp_path)) == ["aa", "bb"]
+    assert not any(p.exists() for p in old + bare + [tmp_path / "tapes_aa.used"])
+    assert all(p.exists() for p in kept + fresh + [tmp_path / "tapes_cc.used"])
+    assert link.is_symlink() and stray.is_symlink() and target.read_text() == "keep"
+    assert (tmp_path / "tapes_ff.py").is_dir() and (tmp_path / "notes.txt").exists()
+    assert straight.prune(tmp_path / "missing") == []
+
+
+def test_writing_a_module_prunes_and_loading_one_records_its_use(tmp_path):
+    """A new module prunes the directory; placing an existing one refreshes its use record, not its own time
+    (which numba's cache index may stamp)."""
+    old = _module(tmp_path, "aa")
+    kept = _module(tmp_path, "bb", used=50.0)
+    path = tmp_path / "tapes_bb.py"
+    t_module = os.stat(path).st_mtime
+    assert straight._place(tmp_path, "bb", "A = 1\n") == path  # the same source: not written, nothing pruned
+    assert os.stat(path).st_mtime == t_module and time.time() - os.stat(tmp_path / "tapes_bb.used").st_mtime < 60
+    assert all(p.exists() for p in old + kept)
+    straight._place(tmp_path, "new", "A = 2\n")
+    assert not any(p.exists() for p in old) and all(p.exists() for p in kept)
+    assert (tmp_path / "tapes_new.py").read_text() == "A = 2\n" and (tmp_path / "tapes_new.used").exists()
 
 
 _CHILD = textwrap.dedent("""

@@ -17,6 +17,7 @@ import stat
 import sys
 import tempfile
 import threading
+import time
 import uuid
 from pathlib import Path
 
@@ -28,7 +29,8 @@ from crosscert.robots.errors import ModelError
 from ..tape import OPCODES
 from .tape import HC4_TAPES, TAPES, Program
 
-__all__ = ["MAX_STRAIGHT_NODES", "cache_dir", "link", "load", "module_source", "pack", "program_key"]
+__all__ = ["MAX_STRAIGHT_NODES", "UNUSED_DAYS", "cache_dir", "link", "load", "module_source", "pack", "program_key",
+           "prune"]
 
 _NAMES = {v: k for k, v in OPCODES.items()}
 _INPUT = OPCODES["OP_INPUT"]
@@ -235,6 +237,12 @@ def module_source(prog) -> str:
 #: 181 s for 4014; benchmarks/README.md).
 MAX_STRAIGHT_NODES = 1000
 
+#: A generated module not loaded for this many days is deleted (with its numba
+#: cache files) the next time a new module is written to the same directory:
+#: every edit of the package names new modules (:func:`program_key`), and
+#: several installed versions may share the directory.
+UNUSED_DAYS = 30
+
 
 def cache_dir() -> Path:
     """Where generated modules are written: ``$CROSSCERT_CACHE_DIR``, else
@@ -305,15 +313,23 @@ def _import(name, key, prog):
     """The generated module ``name`` of ``prog``, imported once per process."""
     mod = sys.modules.get(name)
     if mod is None:
-        path = _module_path(key, module_source(prog))
-        spec = importlib.util.spec_from_file_location(name, path)
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod  # before running it: numba's cache refers to the module by name
-        try:
-            spec.loader.exec_module(mod)
-        except BaseException:
-            del sys.modules[name]
-            raise
+        src = module_source(prog)
+        for attempt in (0, 1):
+            path = _module_path(key, src)
+            spec = importlib.util.spec_from_file_location(name, path)
+            mod = importlib.util.module_from_spec(spec)
+            sys.modules[name] = mod  # before running it: numba's cache refers to the module by name
+            try:
+                spec.loader.exec_module(mod)
+                break
+            except FileNotFoundError:
+                del sys.modules[name]
+                if attempt:
+                    raise
+                # another process pruned it between writing and reading it: write it again
+            except BaseException:
+                del sys.modules[name]
+                raise
     return mod
 
 
@@ -327,13 +343,75 @@ def _module_path(key: str, src: str) -> Path:
 
 
 def _place(directory: Path, key: str, src: str) -> Path:
-    """``directory/tapes_<key>.py`` holding ``src`` (written when missing or different)."""
+    """``directory/tapes_<key>.py`` holding ``src`` (written when missing or different), its use recorded;
+    writing one prunes the directory (:func:`prune`)."""
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"tapes_{key}.py"
+    _mark_used(directory, key)
     try:
         same = path.read_text() == src
     except (OSError, UnicodeDecodeError):
         same = False
     if not same:
         _write_atomically(path, src)
+        prune(directory)
     return path
+
+
+def _mark_used(directory: Path, key: str) -> None:
+    """Record that the module ``key`` is loaded now: the time of ``tapes_<key>.used`` (an empty file), not
+    the module's own, which numba's cache index may stamp (by time and size in some numba versions)."""
+    used = directory / f"tapes_{key}.used"
+    with contextlib.suppress(OSError):
+        if os.path.lexists(used) and not stat.S_ISREG(os.lstat(used).st_mode):
+            return
+        used.touch()
+
+
+def prune(directory: Path | None = None, *, max_age_days: float = UNUSED_DAYS, now: float | None = None) -> list:
+    """Delete the generated modules of ``directory`` (default :func:`cache_dir`) not loaded for
+    ``max_age_days`` days, with their use records and numba cache files.
+
+    Only regular files named as this module names them are deleted (links,
+    directories and other files are left alone); a module without a use record
+    counts from its own time.  Errors (a file another process deletes first, a
+    read-only directory) are ignored: pruning is housekeeping.
+
+    Returns
+    -------
+    list of str
+        The keys of the modules deleted.
+    """
+    directory = cache_dir() if directory is None else Path(directory)
+    limit = (time.time() if now is None else now) - 86400.0 * max_age_days
+    gone = []
+    try:
+        modules = [p for p in directory.iterdir() if p.name.startswith("tapes_") and p.name.endswith(".py")]
+    except OSError:
+        return gone
+    for path in modules:
+        key = path.name[len("tapes_"):-len(".py")]
+        try:
+            if not _regular(path):
+                continue
+            used = directory / f"tapes_{key}.used"
+            last = max(os.lstat(path).st_mtime, os.lstat(used).st_mtime if _regular(used) else 0.0)
+            if last >= limit:
+                continue
+            cached = list((directory / "__pycache__").glob(f"tapes_{key}.*"))
+        except OSError:
+            continue
+        for p in [path, directory / f"tapes_{key}.used", *cached]:
+            with contextlib.suppress(OSError):
+                if _regular(p):
+                    os.unlink(p)
+        gone.append(key)
+    return gone
+
+
+def _regular(path: Path) -> bool:
+    """``path`` exists and is a regular file (not followed if a link)."""
+    try:
+        return stat.S_ISREG(os.lstat(path).st_mode)
+    except OSError:
+        return False
