@@ -30,6 +30,12 @@ S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
 ``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
 geometries in S1).
 
+``--bounce-floor`` (``--speeds V``, default 1.0; ``--geometries N``) asks, for the bounce of each
+true geometry turning back ``d`` before the locus at ``V`` m/s, where its crossing floor is (the largest
+``d`` a verified crossing explains, ``planner.refute.crossing_floor`` bisected to 0.5 mm between 2 and
+20 mm) and whether the window (``track_window`` defaults) certifies ``mode-unchanged`` 0.5 and 1 mm above
+it: issue 20's goal is every geometry within 1 mm.  Up to a minute per geometry.
+
 ``--ceiling`` (``--speeds 1.0,0.95``, ``--starts N``, ``--geometries N``) asks, for each crossing of
 table 1, whether *any* sound method could certify it: besides the window's
 verdict it searches a bounce (a motion that stays in the initial mode, within
@@ -151,6 +157,43 @@ def ceiling(speeds, starts: int, geometries: int = 20) -> None:
         print(f"{v:5.2f}  {line}  certified {line.count('C')} / {len(line)}, provably uncertifiable {line.count('B')}, "
               f"open {line.count('.')}, conflicts {line.count('!')}", flush=True)
     print(f"  {_load('')}", flush=True)
+
+
+def bounce_floor(v: float, geometries: int = 20, step: float = 5e-4) -> None:
+    """Per geometry: the crossing floor of its bounces at ``v`` and the window's verdicts just above it
+    (module docstring, ``--bounce-floor``)."""
+    from crosscert.planner.refute import crossing_floor
+
+    kin, im, s, bench = kinematics(), interval_model(), default_settings(), benchmark_crossing()
+    starts = [None] + [random_geometry(DEXTAR, np.random.default_rng(100 + i), corners=(i % 2 == 0))
+                       for i in range(2)]
+
+    def bounce(xi, d):
+        return simulate_bounce(kin, bench.point, bench.direction, v, xi_true=xi, t_rest=0.05,
+                               working_guess=bench.q_point, seed=1, cruise=max(5e-3, cruise_for(v) - d / 2), short=d)
+
+    print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
+    print(f"[F] bounces at {v} m/s: crossing floor (largest turn-back distance a verified crossing explains, "
+          f"bisected to {1e3 * step:.1f} mm), window verdicts (track_window defaults) at floor + "
+          f"{1e3 * step:.1f} and + {2e3 * step:.1f} mm", flush=True)
+    met = 0
+    for i, xi in enumerate(_true_geometries(geometries)):
+        t0 = time.perf_counter()
+        fl = crossing_floor(kin, lambda d, xi=xi: (bounce(xi, d).q_meas, 1e-3), [0.002, 0.02], tol=step,
+                            xi_starts=starts)
+        if fl.floor is None:
+            print(f"  {i:2d}  no verified crossing at 2 mm: widen the range", flush=True)
+            continue
+        marks = ""
+        for d in (fl.floor + step, fl.floor + 2 * step):
+            r = bounce(xi, d)
+            x0 = initial_box_from_mode(im, r.q_meas[0], 1, s)
+            w = track_window(im, r.q_meas, s, x0=x0).verdict.value
+            marks += {"mode-unchanged": "U", "mode-changed": "!", "inconsistent": "X"}.get(w, ".")
+        met += "U" in marks
+        print(f"  {i:2d}  floor {1e3 * fl.floor:5.2f} mm  +{1e3 * step:.1f} / +{2e3 * step:.1f} mm: {marks}  "
+              f"{time.perf_counter() - t0:.0f} s", flush=True)
+    print(f"  certified within {2e3 * step:.1f} mm of the floor: {met} / {geometries}; {_load('')}", flush=True)
 
 
 def _load(note: str) -> str:
@@ -312,7 +355,10 @@ def _speed_lag(im, s) -> None:
 
 
 if __name__ == "__main__":
-    if "--ceiling" in sys.argv:
+    if "--bounce-floor" in sys.argv:
+        bounce_floor(float(sys.argv[sys.argv.index("--speeds") + 1].split(",")[0]) if "--speeds" in sys.argv else 1.0,
+                     int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20)
+    elif "--ceiling" in sys.argv:
         ceiling([float(v) for v in (sys.argv[sys.argv.index("--speeds") + 1] if "--speeds" in sys.argv
                                     else "1.0,0.95").split(",")],
                 int(sys.argv[sys.argv.index("--starts") + 1]) if "--starts" in sys.argv else 4,
