@@ -147,19 +147,29 @@ def test_acceleration_rows_hold_for_motions_at_the_bound(a, t_s):
 
 
 def test_drift_rows_hold_for_errors_at_the_edges_of_the_drift_model():
-    """Reading errors ``e_k = ±eps_fast + rate t_k`` (the fast part alternating at its bound, the slow part
-    drifting at its rate): the true joints ``q̃_k - e_k`` satisfy every drift row exactly."""
+    """Reading errors ``e_k = s_k + f_k``, the fast part ``f_k`` alternating at its bound, the slow part ``s_k``
+    drifting at its rate (both times 0.999): the true joints ``q̃_k - e_k`` and the true slow part satisfy every
+    drift row exactly (in rational arithmetic), and ``|s_k|`` is within the returned bound.  Fails when the
+    fast bound or the drift step is tightened (times 0.99) or not rounded outward."""
     fast, rate, eps, t_s, S = 9.23997839e-05, 0.02856415, 0.00130629, 1e-3, 80
     s = TrackerSettings.for_robot(DEXTAR, eps_q=eps, eps_q_fast=fast, drift_rate=rate, t_s=t_s)
     rng = np.random.default_rng(3)
     q_true = np.cumsum(rng.uniform(-1e-3, 1e-3, (S, 2)), axis=0)
     signs = np.where(np.arange(S) % 2 == 0, 1.0, -1.0)[:, None] * np.array([1.0, -1.0])
-    e = 0.999 * (fast * signs + rate * (np.arange(S)[:, None] * t_s) - 0.5 * rate * S * t_s)
-    q_meas = q_true + e
-    blocks = OM.drift_rows(s, q_meas, S, 2)
-    assert blocks
-    system = OM._stack(blocks, 2 * S, np.full(2 * S, -9.0), np.full(2 * S, 9.0))
-    z = [Fraction(float(v)) for v in q_true.ravel()]  # the stored reading errs from it by e and a rounding
+    slow = 0.999 * (rate * (np.arange(S)[:, None] * t_s) - 0.5 * rate * S * t_s) * np.ones((1, 2))
+    q_meas = q_true + 0.999 * fast * signs + slow
+    blocks, bound = OM.drift_rows(s, q_meas, S, 2)
+    assert blocks and np.all(np.abs(slow) <= bound)
+    system = OM._stack(blocks, 2 * 2 * S, np.full(4 * S, -9.0), np.full(4 * S, 9.0))
+    # the stored reading errs from q_true + e by a rounding: the true slow part is exact, the fast part absorbs it
+    z = [Fraction(float(v)) for v in q_true.ravel()] + [Fraction(float(v)) for v in slow.ravel()]
+    assert not _violations(system, z)
+    # the drift step at its bound: consecutive slow parts exactly drift_rate t_s apart (rationally)
+    step = Fraction(rate) * Fraction(t_s)
+    slow_edge = [[Fraction(k) * step * sgn for sgn in (1, -1)] for k in range(S)]
+    q_edge = [Fraction(float(v)) for v in q_meas.ravel()]
+    z = [q - sl for q, sl in zip(q_edge, [v for row in slow_edge for v in row])] + \
+        [v for row in slow_edge for v in row]
     assert not _violations(system, z)
 
 

@@ -26,19 +26,16 @@ geometry parameters; SI units.
 
 from __future__ import annotations
 
-import functools
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
-from scipy.sparse import coo_matrix, diags, hstack
+import highspy
 
 from . import interval as I
-from .constants import pack_constants
 from .step import reading_box
 
 __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "drift_rows", "row_system",
-           "refute_row", "refute_rows", "ONE_MOTION_SAMPLES", "CUT_SLOPES", "DRIFT_OFFSETS"]
+           "refute_row", "refute_rows", "ONE_MOTION_SAMPLES", "CUT_SLOPES"]
 
 #: Samples of the range a row is refuted over, centred on the widest pose box of its tube (the default of
 #: ``track_window(one_motion=...)``).  Measured on the certify plan at 0.9557 m/s: 40, 60, 80, 120 and all 196
@@ -123,38 +120,99 @@ def prove_infeasible(system: LinearSystem, y) -> bool:
     return bool(np.isfinite(left) and np.isfinite(yb) and left > yb)
 
 
+class _Solver:
+    """One HiGHS instance for the phase-one programs of a batch of rows, each warm-started from the basis of
+    the last program of the same shape (the rows of a window have the same structure, their coefficients and
+    bounds differ a little).  A float search only: :func:`prove_infeasible` decides."""
+
+    def __init__(self):
+        self.highs = highspy._Highs()  # the bare solver: no banner, no callbacks
+        for name, value in (("output_flag", False), ("presolve", "off"), ("simplex_strategy", 4),
+                            ("threads", 1)):
+            self.highs.setOptionValue(name, value)
+        self.basis = {}
+
+    def phase_one(self, system: LinearSystem):
+        """Dual multipliers ``y`` ``(M,)`` of ``min t  s.t.  A z − t <= b`` over the box (rows and columns
+        scaled, variables centred), or ``None`` when the solver found ``t <= 0`` or failed."""
+        s = system
+        M, N = s.shape
+        c = 0.5 * (s.lo + s.hi)
+        r = 0.5 * (s.hi - s.lo)
+        r = np.where(r > 0, r, 1.0)
+        order = np.lexsort((s.cols, s.rows))
+        rows, cols = s.rows[order], s.cols[order]
+        vals = s.vals[order] * r[cols]
+        rhs = s.b - np.bincount(s.rows, weights=s.vals * c[s.cols], minlength=M)
+        counts = np.bincount(rows, minlength=M)
+        scale = np.zeros(M)
+        np.maximum.at(scale, rows, np.abs(vals))
+        scale = np.where(scale > 0, scale, 1.0)
+        # row i: its entries scaled by 1/scale_i, then the column t with -1
+        start = np.concatenate(([0], np.cumsum(counts + 1)))
+        last = start[1:] - 1
+        index = np.full(start[-1], N, dtype=np.int32)
+        value = np.full(start[-1], -1.0)
+        keep = np.ones(start[-1], dtype=bool)
+        keep[last] = False
+        index[keep] = cols
+        value[keep] = vals / scale[rows]
+        lp = highspy.HighsLp()
+        lp.num_col_, lp.num_row_ = N + 1, M
+        cost = np.zeros(N + 1)
+        cost[-1] = 1.0
+        u = np.where(s.hi > s.lo, 1.0, 0.0)  # the centred, scaled unknowns in [-1, 1] (a fixed one at 0)
+        lp.col_cost_ = cost
+        lp.col_lower_ = np.concatenate([-u, [0.0]])
+        lp.col_upper_ = np.concatenate([u, [highspy.kHighsInf]])
+        lp.row_lower_ = np.full(M, -highspy.kHighsInf)
+        lp.row_upper_ = rhs / scale
+        A = lp.a_matrix_
+        A.format_ = highspy.MatrixFormat.kRowwise
+        A.num_col_, A.num_row_ = N + 1, M
+        A.start_, A.index_, A.value_ = start.astype(np.int32), index, value
+        h = self.highs
+        h.passModel(lp)
+        if (M, N) in self.basis:
+            h.setBasis(self.basis[(M, N)])
+        h.run()
+        if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
+            return None
+        self.basis[(M, N)] = h.getBasis()
+        if not h.getInfo().objective_function_value > 0:
+            return None
+        y = -np.asarray(h.getSolution().row_dual, dtype=np.float64)  # duals of <= rows are <= 0
+        return y / scale
+
+
 def _phase_one(system: LinearSystem):
-    """Dual multipliers ``y`` ``(M,)`` of ``min t  s.t.  A z − t <= b`` over the box (rows and columns
-    scaled, variables centred), or ``None`` when the solver found ``t <= 0`` or failed.  A float search only:
-    :func:`prove_infeasible` decides."""
-    s = system
-    M, N = s.shape
-    c = 0.5 * (s.lo + s.hi)
-    r = 0.5 * (s.hi - s.lo)
-    r = np.where(r > 0, r, 1.0)
-    A = coo_matrix((s.vals, (s.rows, s.cols)), shape=(M, N)).tocsr()
-    As = A.multiply(r[None, :]).tocsr()
-    rhs = s.b - A @ c
-    scale = np.asarray(abs(As).max(axis=1).todense()).ravel()
-    scale = np.where(scale > 0, scale, 1.0)
-    As = diags(1.0 / scale) @ As
-    rhs = rhs / scale
-    Aub = hstack([As, coo_matrix(-np.ones((M, 1)))]).tocsr()
-    u = np.where(s.hi > s.lo, 1.0, 0.0)  # the centred, scaled unknowns in [-1, 1] (a fixed one at 0)
-    bounds = [(-w, w) for w in u] + [(0.0, None)]
-    cost = np.zeros(N + 1)
-    cost[-1] = 1.0
-    res = linprog(cost, A_ub=Aub, b_ub=rhs, bounds=bounds, method="highs")
-    if res.status != 0 or not res.fun > 0:
-        return None
-    y = -np.asarray(res.ineqlin.marginals, dtype=np.float64)  # marginals of <= rows are <= 0
-    return y / scale
+    """:meth:`_Solver.phase_one` with a solver of its own."""
+    return _Solver().phase_one(system)
 
 
 def _enclose_dot(J, c):
     """Enclosure of ``J c`` for float ``J`` ``(B, n, N)`` and float ``c`` ``(B, N)``: ``(B, n)``."""
     p = I.mul(J, J, c[:, None, :], c[:, None, :])
     return _tree_sum(*p)
+
+
+def _mul_up(a, b):
+    """Upper bound of the product of non-negative floats ``a``, ``b`` (broadcast), exactly 0 where either is 0
+    (also for an infinite other factor: the interval convention ``0 * inf = 0``); NaN propagates."""
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+        p = a * b
+    return np.where((a == 0.0) | (b == 0.0), 0.0, I._up(p))
+
+
+def _sum_up(v):
+    """Upper bound of the sum of non-negative floats along the last axis (pairwise, every addition rounded up;
+    an exact 0 stays 0); NaN propagates."""
+    while v.shape[-1] > 1:
+        if v.shape[-1] % 2:
+            v = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], axis=-1)  # + 0: exact
+        with np.errstate(over="ignore"):
+            v = I._up_keep0(v[..., 0::2] + v[..., 1::2])
+    return v[..., 0]
 
 
 def loop_closure_rows(model, X, Q, XI):
@@ -183,7 +241,10 @@ def loop_closure_rows(model, X, Q, XI):
     equation ``f_i(z) = f_i(c) + g·d + ½ dᵀ H(ζ) d`` with the gradient ``g`` at ``c`` and the Hessian at a
     point ``ζ`` of the segment, so in the enclosures ``[g]``, ``[H]`` over the box.  With ``Jc`` the midpoint
     of ``[g]``: ``Jc z ∈ Jc c − [f(c)] − ([g] − Jc)[−r, r] − ½ Σ_j [H_jj][0, r_j²] − ½ Σ_{j≠l} [H_jl][−r_j r_l,
-    r_j r_l]`` (a square is not negative: the diagonal terms are one-sided).
+    r_j r_l]`` (a square is not negative: the diagonal terms are one-sided).  Every term of the remainder is
+    a non-negative magnitude times ``r_j r_l`` (``|[H_jl]|`` off the diagonal, ``max(H̄_jj, 0)`` for the
+    upper and ``max(−H_jj, 0)`` for the lower side on it), so both sides are sums of products rounded up.
+    A NaN in an enclosure (outside the tapes' domain) makes both sides of its equation infinite.
     """
     S, n = X[0].shape
     m = np.shape(XI[0])[-1]
@@ -201,22 +262,25 @@ def loop_closure_rows(model, X, Q, XI):
         Hlo, Hhi = Hlo.reshape(S, n, N, N), Hhi.reshape(S, n, N, N)
         Jc = I.midpoint(*Jp)
         Jc = np.where(np.isfinite(Jc), Jc, 0.0)
-        # ([g] - Jc) d
+        # ([g] - Jc) d, |d_j| <= r_j: within +-e1
         Elo, Ehi = I.sub(*Jp, Jc, Jc)
-        mag = np.maximum(np.abs(Elo), np.abs(Ehi))
-        e1 = _tree_sum(*I.mul(mag, mag, r[:, None, :], r[:, None, :]))[1]
-        # 1/2 d' H d: every product d_j d_l in [-r_j r_l, r_j r_l], and in [0, r_j^2] on the diagonal
-        rr = I.mul(r[:, :, None], r[:, :, None], r[:, None, :], r[:, None, :])[1]
-        dd_lo = np.where(np.eye(N, dtype=bool), 0.0, -rr)
-        half = I.scale(0.5, Hlo, Hhi)  # exact
-        Rlo, Rhi = I.mul(*half, dd_lo[:, None], rr[:, None])
-        Rlo, Rhi = _tree_sum(Rlo.reshape(S, n, N * N), Rhi.reshape(S, n, N * N))
+        e1 = _sum_up(_mul_up(np.maximum(np.abs(Elo), np.abs(Ehi)), r[:, None, :]))
+        # 1/2 d' H d: d_j d_l in [-r_j r_l, r_j r_l], and in [0, r_j^2] on the diagonal
+        rr = _mul_up(r[:, :, None], r[:, None, :])[:, None]  # (S, 1, N, N)
+        diag = np.eye(N, dtype=bool)
+        mag = np.maximum(np.abs(Hlo), np.abs(Hhi))
+        up = _sum_up(_mul_up(np.where(diag, np.maximum(Hhi, 0.0), mag), rr).reshape(S, n, N * N))
+        down = _sum_up(_mul_up(np.where(diag, np.maximum(-Hlo, 0.0), mag), rr).reshape(S, n, N * N))
+        Rhi, Rlo = I._up(0.5 * up), -I._up(0.5 * down)  # 0.5 x is exact unless subnormal: rounded up anyway
         Jcc = _enclose_dot(Jc, c)
-        b = I.sub(*I.sub(*Jcc, *F), Rlo, Rhi)
-        blo = I.sub(*b, e1, e1)[0]
-        bhi = I.add(*b, e1, e1)[1]
-    blo = np.where(np.isnan(blo), -np.inf, blo)
-    bhi = np.where(np.isnan(bhi), np.inf, bhi)
+        b = I.sub(*Jcc, *F)
+        blo = I.sub(b[0], b[0], Rhi, Rhi)[0]
+        bhi = I.sub(b[1], b[1], Rlo, Rlo)[1]
+        blo = I.sub(blo, blo, e1, e1)[0]
+        bhi = I.add(bhi, bhi, e1, e1)[1]
+    bad = np.isnan(blo) | np.isnan(bhi) | np.isnan(Hlo).any(axis=(2, 3)) | np.isnan(Hhi).any(axis=(2, 3))
+    blo = np.where(bad, -np.inf, blo)
+    bhi = np.where(bad, np.inf, bhi)
     return Jc, blo, bhi
 
 
@@ -284,52 +348,54 @@ def motion_rows(t_s: float, a, S: int, n: int, velocity: bool):
     return blocks
 
 
-@functools.lru_cache(maxsize=8)
-def _difference_bounds(settings, offsets: tuple, n: int):
-    """The error intervals ``(J, 2, n)`` of a difference of two readings ``j`` samples apart, ``j`` in
-    ``offsets``, as the tracker's constants hold them (their one owner: ``verifier.constants``); remembered
-    per settings object (frozen), since every row of a window asks for the same."""
-    return pack_constants(replace(settings, baselines=offsets), n).diff_err
-
-
-#: Sample distances of the coupled readings of the drift model (:func:`drift_rows`).
-DRIFT_OFFSETS = (1, 2, 4, 8, 16, 32, 64)
-
-
 def drift_rows(settings, q, S: int, n: int):
-    """Inequalities of the drift model of the reading error (when the settings have one) on the joint unknowns
-    ``q_k`` (column ``k n + i``): ``|(q_l − q̃_l) − (q_k − q̃_k)| <= D_j`` for ``l = k + j``, ``j`` in
-    :data:`DRIFT_OFFSETS`, ``D_j`` the bound of a difference of two readings ``j`` samples apart (its owner:
-    ``verifier.constants``), readings ``q`` ``(S, n)``.  As blocks ``(rows, cols, vals, b)``."""
+    """Inequalities of the drift model of the reading error (A9, when the settings have one) on the joint
+    unknowns ``q_k`` and the slow part ``s_k`` of the error: ``e_k = q̃_k − q_k = s_k + f_k`` with
+    ``|f_k| <= eps_q_fast`` and ``|s_{k+1} − s_k| <= drift_rate t_s``, readings ``q`` ``(S, n)``.
+
+    Returns ``(blocks, bound)``: blocks ``(rows, cols, vals, b)`` with ``q_k`` at column ``k n + i`` and
+    ``s_k`` at ``S n + k n + i`` (the caller offsets them), and ``bound`` ``(n,)``, ``|s_k| <= bound``
+    (``eps_q + eps_q_fast`` rounded up: ``|e_k| <= eps_q``, A3); ``([], None)`` without a drift model.
+    The chain of consecutive ``s`` implies the bound of every pair ``j`` samples apart
+    (``2 eps_q_fast + drift_rate j t_s``, the tracker's difference bound), with ``O(S)`` rows.
+    """
     if settings.eps_q_fast is None:
-        return []
+        return [], None
+    fast = np.broadcast_to(np.asarray(settings.eps_q_fast, np.float64), (n,))
+    rate = np.broadcast_to(np.asarray(settings.drift_rate, np.float64), (n,))
+    eps = np.broadcast_to(np.asarray(settings.eps_q, np.float64), (n,))
+    step = I.mul(rate, rate, settings.t_s, settings.t_s)[1]  # drift_rate t_s, rounded up
+    bound = I.add(eps, eps, fast, fast)[1]
     blocks = []
-    offsets = tuple(j for j in DRIFT_OFFSETS if j < S)
-    if not offsets:
-        return []
-    two_eps = I.scale(2.0, -settings.eps_q, settings.eps_q)[1]
-    for j, (_, D) in zip(offsets, _difference_bounds(settings, offsets, n)):
-        if np.all(D >= two_eps):
-            break  # no tighter than the boxes of the two readings
-        k = np.arange(S - j)
-        kk, ii = np.meshgrid(k, np.arange(n), indexing="ij")
+    kk, ii = np.meshgrid(np.arange(S), np.arange(n), indexing="ij")
+    kk, ii = kk.ravel(), ii.ravel()
+    nr = len(kk)
+    # q_k + s_k = q̃_k - f_k in [q̃_k - fast, q̃_k + fast]
+    hi = I.add(q[kk, ii], q[kk, ii], fast[ii], fast[ii])[1]
+    lo = I.sub(q[kk, ii], q[kk, ii], fast[ii], fast[ii])[0]
+    cols = np.stack([kk * n + ii, S * n + kk * n + ii], 1).ravel()
+    rr = np.repeat(np.arange(nr), 2)
+    blocks.append((rr, cols, np.ones(2 * nr), hi))
+    blocks.append((rr, cols, -np.ones(2 * nr), -lo))
+    if S >= 2:
+        kk, ii = np.meshgrid(np.arange(S - 1), np.arange(n), indexing="ij")
         kk, ii = kk.ravel(), ii.ravel()
-        ql, qk = q[kk + j, ii], q[kk, ii]
-        dlo, dhi = I.sub(ql, ql, qk, qk)
         nr = len(kk)
-        cols = np.stack([(kk + j) * n + ii, kk * n + ii], 1).ravel()
-        for sign, bound in ((1.0, I.add(dlo, dhi, -D[ii], D[ii])[1]), (-1.0, -I.sub(dlo, dhi, D[ii], D[ii])[0])):
-            blocks.append((np.repeat(np.arange(nr), 2), cols, np.tile(np.array([sign, -sign]), nr), bound))
-    return blocks
+        cols = np.stack([S * n + (kk + 1) * n + ii, S * n + kk * n + ii], 1).ravel()
+        rr = np.repeat(np.arange(nr), 2)
+        for sign in (1.0, -1.0):
+            blocks.append((rr, cols, np.tile(np.array([sign, -sign]), nr), step[ii]))
+    return blocks, bound
 
 
 def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, closure=None) -> LinearSystem | None:
     """The linear system of one row over the samples ``samples`` (a contiguous ``range``).
 
-    Unknowns, in order: ``ξ`` (``m``), then per sample ``x_k`` (``S n``), ``q_k`` (``S n``) and, with
-    ``velocity``, ``v_k`` (``S n``); bounds: ``XI``, the tube boxes ``X``, ``XD`` ``(K, 2, n)`` and the
-    reading boxes ``q_k ± eps_q``.  ``closure``: :func:`loop_closure_rows` of these boxes when computed
-    already.  ``None`` when a bound is not finite (no certificate could use it).
+    Unknowns, in order: ``ξ`` (``m``), then per sample ``x_k`` (``S n``), ``q_k`` (``S n``), with
+    ``velocity`` ``v_k`` (``S n``), and with a drift model the slow part ``s_k`` of the reading error
+    (``S n``, :func:`drift_rows`); bounds: ``XI``, the tube boxes ``X``, ``XD`` ``(K, 2, n)``, the reading
+    boxes ``q_k ± eps_q`` and ``|s_k| <= eps_q + eps_q_fast``.  ``closure``: :func:`loop_closure_rows` of
+    these boxes when computed already.  ``None`` when a bound is not finite (no certificate could use it).
     """
     ks = np.asarray(samples)
     S, n, m = len(ks), model.n, len(XI[0])
@@ -337,8 +403,14 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
     Q = reading_box(qs, settings.eps_q)
     Xs = (X[ks, 0], X[ks, 1])
     nv = S * n if velocity else 0
-    lo = np.concatenate([XI[0], Xs[0].ravel(), Q[0].ravel()] + ([XD[ks, 0].ravel()] if velocity else []))
-    hi = np.concatenate([XI[1], Xs[1].ravel(), Q[1].ravel()] + ([XD[ks, 1].ravel()] if velocity else []))
+    drift, sbound = drift_rows(settings, qs, S, n)
+    ns = 0 if sbound is None else S * n
+    lo = [XI[0], Xs[0].ravel(), Q[0].ravel()] + ([XD[ks, 0].ravel()] if velocity else [])
+    hi = [XI[1], Xs[1].ravel(), Q[1].ravel()] + ([XD[ks, 1].ravel()] if velocity else [])
+    if ns:
+        lo.append(np.tile(-sbound, S))
+        hi.append(np.tile(sbound, S))
+    lo, hi = np.concatenate(lo), np.concatenate(hi)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
         return None
     Jc, blo, bhi = loop_closure_rows(model, Xs, Q, XI) if closure is None else closure
@@ -357,15 +429,16 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
     rr = np.repeat(np.arange(nr), width)
     blocks.append((rr, cols[ok].ravel(), coef[ok].ravel(), bhi[kk, ii][ok]))
     blocks.append((rr, cols[ok].ravel(), -coef[ok].ravel(), -blo[kk, ii][ok]))
-    # drift of the reading error: q_l - q_k within the readings' difference and its error bound
-    for r, c, v, b in drift_rows(settings, qs, S, n):
-        blocks.append((r, m + S * n + np.asarray(c), v, b))
+    # drift of the reading error: q_k at m + S n + k n + i, s_k at m + 2 S n + nv + k n + i
+    for r, c, v, b in drift:
+        c = np.asarray(c)
+        blocks.append((r, m + S * n + c + np.where(c >= S * n, nv, 0), v, b))
     # motion: x at m + k n + i, v at m + 2 S n + k n + i
     for r, c, v, b in motion_rows(settings.t_s, settings.a_max, S, n, velocity):
         c = np.asarray(c)
         c = np.where(c < S * n, m + c, m + S * n + c)  # v columns: S n + ... -> m + 2 S n + ...
         blocks.append((r, c, v, b))
-    return _stack(blocks, m + 2 * S * n + nv, lo, hi)
+    return _stack(blocks, m + 2 * S * n + nv + ns, lo, hi)
 
 
 def _samples(X, size):
@@ -399,11 +472,12 @@ def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, v
     Xb = (X[rows, idx, 0], X[rows, idx, 1])
     with I.quiet_fp():
         closure = loop_closure_rows(model, Xb, reading_box(q[idx], settings.eps_q), (XI[0][rows], XI[1][rows]))
+    solver = _Solver()
     for r in range(R):
         part = tuple(v[r * S:(r + 1) * S] for v in closure)
         system = row_system(model, settings, q, (XI[0][r], XI[1][r]), X[r], XD[r], ks[r], velocity, part)
         if system is not None:
-            y = _phase_one(system)
+            y = solver.phase_one(system)
             out[r] = y is not None and prove_infeasible(system, y)
     return out
 
