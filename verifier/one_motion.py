@@ -35,7 +35,7 @@ from . import interval as I
 from .step import reading_box
 
 __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "drift_rows", "row_system",
-           "refute_row", "refute_rows", "ONE_MOTION_SAMPLES", "CUT_SLOPES"]
+           "refute_row", "refute_rows", "one_motion_rows", "certified_minimum", "ONE_MOTION_SAMPLES", "CUT_SLOPES"]
 
 #: Samples of the range a row is refuted over, centred on the widest pose box of its tube (the default of
 #: ``track_window(one_motion=...)``).  Measured on the certify plan at 0.9557 m/s: 40, 60, 80, 120 and all 196
@@ -85,39 +85,66 @@ def _tree_sum(lo, hi, axis=-1):
     return lo[..., 0], hi[..., 0]
 
 
-def prove_infeasible(system: LinearSystem, y) -> bool:
-    """True when the multipliers ``y`` ``(M,)`` prove that no ``z`` in the box satisfies ``A z <= b``.
-
-    For ``y >= 0`` every solution would satisfy ``yᵀ(A z − b) <= 0``; the lower bound of
-    ``min over the box of (yᵀA) z − yᵀb``, with ``yᵀA`` and ``yᵀb`` enclosed by outward-rounded interval
-    arithmetic and the minimum of each term ``[c_j] z_j`` taken over ``z_j``'s bounds, being positive
-    proves there is none (a Farkas certificate).  ``y`` is any float vector: negative or non-finite
-    entries are replaced by 0 (any ``y >= 0`` is admissible), so the solver that produced it is not
-    trusted.
-    """
+def _dual_bound(system: LinearSystem, y, cost=None):
+    """``(left, yb)`` for multipliers ``y`` ``(M,)``: ``left`` a lower bound of ``min over the box of
+    (cost + yᵀA) z`` and ``yb`` an upper bound of ``yᵀb``, enclosed with outward rounding; ``(nan, nan)``
+    when ``y`` is unusable.  Every ``z`` of the box with ``A z <= b`` has ``cost·z >= left − yb`` (weak duality:
+    ``yᵀ(A z − b) <= 0`` for ``y >= 0``).  ``y`` is any float vector: negative or non-finite entries are
+    replaced by 0 (any ``y >= 0`` is admissible), so the solver that produced it is not trusted.
+    ``cost`` ``(N,)`` floats (exact as given), 0 by default."""
     s = system
     y = np.asarray(y, dtype=np.float64)
     y = np.where(np.isfinite(y) & (y > 0), y, 0.0)
     M, N = s.shape
-    if y.shape != (M,) or not np.any(y > 0):
-        return False
+    if y.shape != (M,):
+        return np.nan, np.nan
     with I.quiet_fp():
-        # yᵀA column by column: products enclosed, then summed per column (padded to equal counts with 0)
+        # cost + yᵀA column by column: products enclosed, then summed per column with the cost (padded with 0)
         plo, phi = I.mul(y[s.rows], y[s.rows], s.vals, s.vals)
         order = np.argsort(s.cols, kind="stable")
         cols = s.cols[order]
         counts = np.bincount(cols, minlength=N)
-        width = max(int(counts.max()) if counts.size else 0, 1)
+        width = (int(counts.max()) if counts.size else 0) + 1
         start = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        slot = np.arange(len(cols)) - start[cols]
+        slot = np.arange(len(cols)) - start[cols] + 1
         Clo, Chi = np.zeros((N, width)), np.zeros((N, width))
+        if cost is not None:
+            Clo[:, 0] = Chi[:, 0] = np.asarray(cost, dtype=np.float64)
         Clo[cols, slot], Chi[cols, slot] = plo[order], phi[order]
         clo, chi = _tree_sum(Clo, Chi)
         # min over z_j in [lo_j, hi_j] of c_j z_j, c_j in [clo_j, chi_j]: the lower bound of the product
         tlo = I.mul(clo, chi, s.lo, s.hi)[0]
         left = _tree_sum(tlo, tlo)[0]
         yb = _tree_sum(*I.mul(y, y, s.b, s.b))[1]
+    return float(left), float(yb)
+
+
+def prove_infeasible(system: LinearSystem, y) -> bool:
+    """True when the multipliers ``y`` ``(M,)`` prove that no ``z`` in the box satisfies ``A z <= b``.
+
+    For ``y >= 0`` every solution would satisfy ``yᵀ(A z − b) <= 0``; the lower bound of
+    ``min over the box of (yᵀA) z − yᵀb``, with ``yᵀA`` and ``yᵀb`` enclosed by outward-rounded interval
+    arithmetic and the minimum of each term ``[c_j] z_j`` taken over ``z_j``'s bounds, being positive
+    proves there is none (a Farkas certificate; :func:`_dual_bound`).  ``y`` is any float vector: negative
+    or non-finite entries are replaced by 0, so the solver that produced it is not trusted.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    if y.shape != (system.shape[0],) or not np.any(np.isfinite(y) & (y > 0)):
+        return False
+    left, yb = _dual_bound(system, y)
     return bool(np.isfinite(left) and np.isfinite(yb) and left > yb)
+
+
+def certified_minimum(system: LinearSystem, y, cost) -> float:
+    """A lower bound of ``cost·z`` over ``{z in the box : A z <= b}`` proved from the multipliers ``y`` (any
+    floats; :func:`_dual_bound`), ``-inf`` when they prove nothing finite.  Weak duality with outward
+    rounding (the safe bounds of Neumaier and Shcherbina): for ``y >= 0`` and every feasible ``z``,
+    ``cost·z >= cost·z + yᵀ(A z − b) >= min over the box of (cost + yᵀA) z − yᵀb``."""
+    left, yb = _dual_bound(system, y, cost)
+    if not (np.isfinite(left) and np.isfinite(yb)):
+        return -np.inf
+    with I.quiet_fp():
+        return float(I.sub(left, left, yb, yb)[0])
 
 
 class _Solver:
@@ -131,6 +158,7 @@ class _Solver:
                             ("threads", 1)):
             self.highs.setOptionValue(name, value)
         self.basis = {}
+        self.feasible = False
 
     def phase_one(self, system: LinearSystem):
         """Dual multipliers ``y`` ``(M,)`` of ``min t  s.t.  A z − t <= b`` over the box (rows and columns
@@ -176,13 +204,45 @@ class _Solver:
         if (M, N) in self.basis:
             h.setBasis(self.basis[(M, N)])
         h.run()
+        self.feasible = False
         if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
             return None
         self.basis[(M, N)] = h.getBasis()
+        self.feasible = not h.getInfo().objective_function_value > 0
+        self.scale, self.r = scale, r
         if not h.getInfo().objective_function_value > 0:
             return None
         y = -np.asarray(h.getSolution().row_dual, dtype=np.float64)  # duals of <= rows are <= 0
         return y / scale
+
+    def bounds(self, system: LinearSystem, columns):
+        """Proved bounds ``(lo, hi)`` of the unknowns ``columns`` over ``{z in the box : A z <= b}``, right
+        after a :meth:`phase_one` of ``system`` that found it feasible (its model and basis, ``t`` fixed at 0):
+        for each column and sign the program ``min ±z_j`` proposes multipliers and :func:`certified_minimum`
+        proves the bound (the box's where it proves nothing tighter)."""
+        h = self.highs
+        M, N = system.shape
+        lo, hi = system.lo[columns].copy(), system.hi[columns].copy()
+        h.changeColBounds(N, 0.0, 0.0)  # t = 0: the system itself
+        zero = np.zeros(N + 1)
+        every = np.arange(N + 1, dtype=np.int32)
+        for i, j in enumerate(columns):
+            for sign in (1.0, -1.0):
+                cost = zero.copy()
+                cost[j] = sign * self.r[j]  # min ±z_j: z_j = c_j + r_j u_j
+                h.changeColsCost(N + 1, every, cost)
+                h.run()
+                if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
+                    continue
+                y = -np.asarray(h.getSolution().row_dual, dtype=np.float64) / self.scale
+                c = np.zeros(N)
+                c[j] = sign
+                bound = certified_minimum(system, y, c)
+                if sign > 0:
+                    lo[i] = max(lo[i], bound)
+                else:
+                    hi[i] = min(hi[i], -bound)
+        return lo, hi
 
 
 def _phase_one(system: LinearSystem):
@@ -450,21 +510,32 @@ def _samples(X, size):
     return range(start, start + size)
 
 
-def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False):
-    """Which rows no single geometry and single motion explain: ``(R,)`` bool, True where proved.
+def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False,
+                    contract: bool = True):
+    """Refute and contract rows, one geometry and one motion at a time.
 
     Row ``r`` is the geometry box ``(XI[0][r], XI[1][r])`` (``(R, m)``) with the tubes ``X[r]``, ``XD[r]``
     (``(R, K, 2, n)``); it is refuted when no single geometry of its box and single motion within ``a_max``
     in its tubes explain the readings ``q`` ``(K, n)`` over ``size`` samples around its widest pose box
-    (proved: :func:`prove_infeasible`).  The loop closure of every row is linearised in one batch.
-    ``velocity``: velocity unknowns in ``XD`` and their rows (:func:`motion_rows`); off by default: on the
-    runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.
+    (proved: :func:`prove_infeasible`).  With ``contract``, the geometry box of a row not refuted is narrowed
+    to proved bounds of each parameter over the same relaxation (:meth:`_Solver.bounds`): every geometry
+    that explains the row with one motion stays in it.  The loop closure of every row is linearised in one
+    batch.  ``velocity``: velocity unknowns in ``XD`` and their rows (:func:`motion_rows`); off by default:
+    on the runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.
+
+    Returns
+    -------
+    refuted : ndarray ``(R,)`` bool
+    xi_lo, xi_hi : ndarray ``(R, m)``
+        The rows' geometry boxes, contracted (inside ``XI``; meaningless for a refuted row).
     """
     q = np.asarray(q, np.float64)
     R = len(XI[0])
     out = np.zeros(R, dtype=bool)
+    xlo, xhi = np.array(XI[0], dtype=np.float64), np.array(XI[1], dtype=np.float64)
     if R == 0:
-        return out
+        return out, xlo, xhi
+    m = xlo.shape[1]
     ks = [np.asarray(_samples(X[r], size)) for r in range(R)]
     S = len(ks[0])
     idx = np.concatenate(ks)
@@ -475,11 +546,23 @@ def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, v
     solver = _Solver()
     for r in range(R):
         part = tuple(v[r * S:(r + 1) * S] for v in closure)
-        system = row_system(model, settings, q, (XI[0][r], XI[1][r]), X[r], XD[r], ks[r], velocity, part)
-        if system is not None:
-            y = solver.phase_one(system)
-            out[r] = y is not None and prove_infeasible(system, y)
-    return out
+        system = row_system(model, settings, q, (xlo[r], xhi[r]), X[r], XD[r], ks[r], velocity, part)
+        if system is None:
+            continue
+        y = solver.phase_one(system)
+        if y is not None:
+            out[r] = prove_infeasible(system, y)
+        elif contract and solver.feasible:
+            lo, hi = solver.bounds(system, np.arange(m))  # ξ: the first m unknowns
+            xlo[r], xhi[r] = np.maximum(xlo[r], lo), np.minimum(xhi[r], hi)
+            out[r] = bool(np.any(xlo[r] > xhi[r]))  # no geometry left: refuted too
+    return out, xlo, xhi
+
+
+def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False):
+    """Which rows no single geometry and single motion explain: ``(R,)`` bool, True where proved
+    (:func:`one_motion_rows` without contraction)."""
+    return one_motion_rows(model, settings, q, XI, X, XD, size, velocity, contract=False)[0]
 
 
 def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False) -> bool:
