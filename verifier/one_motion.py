@@ -75,48 +75,60 @@ def _stack(parts, n_cols, lo, hi):
 
 
 def _tree_sum(lo, hi, axis=-1):
-    """Outward-rounded sum of intervals along ``axis`` (pairwise, every addition rounded outward)."""
+    """Outward-rounded sum of intervals along ``axis`` (pairwise, every addition rounded outward; padded once
+    with exact zeros to a power of two)."""
     lo, hi = np.moveaxis(lo, axis, -1), np.moveaxis(hi, axis, -1)
+    size = lo.shape[-1]
+    full = 1 << max(size - 1, 0).bit_length()
+    if full != size:
+        pad = [(0, 0)] * (lo.ndim - 1) + [(0, full - size)]
+        lo, hi = np.pad(lo, pad), np.pad(hi, pad)  # + [0, 0]: exact
     while lo.shape[-1] > 1:
-        if lo.shape[-1] % 2:
-            pad = [(0, 0)] * (lo.ndim - 1) + [(0, 1)]
-            lo, hi = np.pad(lo, pad), np.pad(hi, pad)  # + [0, 0]: exact
         lo, hi = I.add(lo[..., 0::2], hi[..., 0::2], lo[..., 1::2], hi[..., 1::2])
     return lo[..., 0], hi[..., 0]
 
 
 def _dual_bound(system: LinearSystem, y, cost=None):
-    """``(left, yb)`` for multipliers ``y`` ``(M,)``: ``left`` a lower bound of ``min over the box of
-    (cost + yᵀA) z`` and ``yb`` an upper bound of ``yᵀb``, enclosed with outward rounding; ``(nan, nan)``
-    when ``y`` is unusable.  Every ``z`` of the box with ``A z <= b`` has ``cost·z >= left − yb`` (weak duality:
-    ``yᵀ(A z − b) <= 0`` for ``y >= 0``).  ``y`` is any float vector: negative or non-finite entries are
+    """``(left, yb)`` for multipliers ``y`` ``(M,)`` or ``(B, M)``: ``left`` a lower bound of ``min over the
+    box of (cost + yᵀA) z`` and ``yb`` an upper bound of ``yᵀb``, enclosed with outward rounding (``()`` or
+    ``(B,)``).  Every ``z`` of the box with ``A z <= b`` has ``cost·z >= left − yb`` (weak duality:
+    ``yᵀ(A z − b) <= 0`` for ``y >= 0``).  ``y`` is any float array: negative or non-finite entries are
     replaced by 0 (any ``y >= 0`` is admissible), so the solver that produced it is not trusted.
-    ``cost`` ``(N,)`` floats (exact as given), 0 by default."""
+    ``cost`` ``(N,)`` or ``(B, N)`` floats (exact as given), 0 by default."""
     s = system
-    y = np.asarray(y, dtype=np.float64)
-    y = np.where(np.isfinite(y) & (y > 0), y, 0.0)
     M, N = s.shape
-    if y.shape != (M,):
-        return np.nan, np.nan
+    y = np.asarray(y, dtype=np.float64)
+    one = y.ndim == 1
+    y = np.atleast_2d(y)
+    y = np.where(np.isfinite(y) & (y > 0), y, 0.0)
+    B = y.shape[0]
     with I.quiet_fp():
         # cost + yᵀA column by column: products enclosed, then summed per column with the cost (padded with 0)
-        plo, phi = I.mul(y[s.rows], y[s.rows], s.vals, s.vals)
+        plo, phi = I.mul(y[:, s.rows], y[:, s.rows], s.vals, s.vals)
         order = np.argsort(s.cols, kind="stable")
         cols = s.cols[order]
+        plo, phi = plo[:, order], phi[:, order]
         counts = np.bincount(cols, minlength=N)
-        width = (int(counts.max()) if counts.size else 0) + 1
         start = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        slot = np.arange(len(cols)) - start[cols] + 1
-        Clo, Chi = np.zeros((N, width)), np.zeros((N, width))
-        if cost is not None:
-            Clo[:, 0] = Chi[:, 0] = np.asarray(cost, dtype=np.float64)
-        Clo[cols, slot], Chi[cols, slot] = plo[order], phi[order]
-        clo, chi = _tree_sum(Clo, Chi)
+        slot = np.arange(len(cols)) - start[cols] + 1  # slot 0: the cost
+        cost = np.zeros((B, N)) if cost is None else np.broadcast_to(np.asarray(cost, dtype=np.float64), (B, N))
+        clo, chi = np.empty((B, N)), np.empty((B, N))
+        # columns grouped by their count rounded up to a power of two: a few dense blocks, little padding
+        group = np.array([(int(c)).bit_length() for c in counts])
+        for g in np.unique(group):
+            mine = np.nonzero(group == g)[0]
+            where = np.full(N, -1)
+            where[mine] = np.arange(len(mine))
+            Clo, Chi = np.zeros((B, len(mine), 1 << int(g))), np.zeros((B, len(mine), 1 << int(g)))
+            Clo[:, :, 0] = Chi[:, :, 0] = cost[:, mine]
+            e = where[cols] >= 0
+            Clo[:, where[cols[e]], slot[e]], Chi[:, where[cols[e]], slot[e]] = plo[:, e], phi[:, e]
+            clo[:, mine], chi[:, mine] = _tree_sum(Clo, Chi)
         # min over z_j in [lo_j, hi_j] of c_j z_j, c_j in [clo_j, chi_j]: the lower bound of the product
         tlo = I.mul(clo, chi, s.lo, s.hi)[0]
         left = _tree_sum(tlo, tlo)[0]
         yb = _tree_sum(*I.mul(y, y, s.b, s.b))[1]
-    return float(left), float(yb)
+    return (left[0], yb[0]) if one else (left, yb)
 
 
 def prove_infeasible(system: LinearSystem, y) -> bool:
@@ -135,16 +147,15 @@ def prove_infeasible(system: LinearSystem, y) -> bool:
     return bool(np.isfinite(left) and np.isfinite(yb) and left > yb)
 
 
-def certified_minimum(system: LinearSystem, y, cost) -> float:
-    """A lower bound of ``cost·z`` over ``{z in the box : A z <= b}`` proved from the multipliers ``y`` (any
-    floats; :func:`_dual_bound`), ``-inf`` when they prove nothing finite.  Weak duality with outward
-    rounding (the safe bounds of Neumaier and Shcherbina): for ``y >= 0`` and every feasible ``z``,
-    ``cost·z >= cost·z + yᵀ(A z − b) >= min over the box of (cost + yᵀA) z − yᵀb``."""
+def certified_minimum(system: LinearSystem, y, cost):
+    """Lower bounds of ``cost·z`` over ``{z in the box : A z <= b}`` proved from the multipliers ``y`` (any
+    floats, ``(M,)`` or one row per cost ``(B, M)``; :func:`_dual_bound`), ``-inf`` where they prove nothing
+    finite.  Weak duality with outward rounding (the safe bounds of Neumaier and Shcherbina): for ``y >= 0``
+    and every feasible ``z``, ``cost·z >= cost·z + yᵀ(A z − b) >= min over the box of (cost + yᵀA) z − yᵀb``."""
     left, yb = _dual_bound(system, y, cost)
-    if not (np.isfinite(left) and np.isfinite(yb)):
-        return -np.inf
     with I.quiet_fp():
-        return float(I.sub(left, left, yb, yb)[0])
+        low = I.sub(left, left, yb, yb)[0]
+    return np.where(np.isfinite(left) & np.isfinite(yb) & ~np.isnan(low), low, -np.inf)
 
 
 class _Solver:
@@ -222,26 +233,23 @@ class _Solver:
         proves the bound (the box's where it proves nothing tighter)."""
         h = self.highs
         M, N = system.shape
-        lo, hi = system.lo[columns].copy(), system.hi[columns].copy()
+        columns = np.asarray(columns)
         h.changeColBounds(N, 0.0, 0.0)  # t = 0: the system itself
-        zero = np.zeros(N + 1)
         every = np.arange(N + 1, dtype=np.int32)
+        C = len(columns)
+        Y, cost = np.zeros((2 * C, M)), np.zeros((2 * C, N))
         for i, j in enumerate(columns):
-            for sign in (1.0, -1.0):
-                cost = zero.copy()
-                cost[j] = sign * self.r[j]  # min ±z_j: z_j = c_j + r_j u_j
-                h.changeColsCost(N + 1, every, cost)
+            for k, sign in ((2 * i, 1.0), (2 * i + 1, -1.0)):
+                c = np.zeros(N + 1)
+                c[j] = sign * self.r[j]  # min ±z_j: z_j = c_j + r_j u_j
+                h.changeColsCost(N + 1, every, c)
                 h.run()
-                if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
-                    continue
-                y = -np.asarray(h.getSolution().row_dual, dtype=np.float64) / self.scale
-                c = np.zeros(N)
-                c[j] = sign
-                bound = certified_minimum(system, y, c)
-                if sign > 0:
-                    lo[i] = max(lo[i], bound)
-                else:
-                    hi[i] = min(hi[i], -bound)
+                cost[k, j] = sign
+                if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
+                    Y[k] = -np.asarray(h.getSolution().row_dual, dtype=np.float64) / self.scale
+        low = certified_minimum(system, Y, cost)  # Y = 0 proves only the box
+        lo = np.maximum(system.lo[columns], low[0::2])
+        hi = np.minimum(system.hi[columns], -low[1::2])
         return lo, hi
 
 
