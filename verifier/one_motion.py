@@ -104,9 +104,12 @@ def _dual_bound(system: LinearSystem, y, cost=None):
     B = y.shape[0]
     with I.quiet_fp():
         # cost + yᵀA column by column: products enclosed, then summed per column with the cost (padded with 0)
-        plo, phi = I.mul(y[:, s.rows], y[:, s.rows], s.vals, s.vals)
-        order = np.argsort(s.cols, kind="stable")
-        cols = s.cols[order]
+        # only the entries of rows some y uses: the others' products are exactly 0
+        use = np.any(y > 0, axis=0)[s.rows]
+        rows, cols, vals = s.rows[use], s.cols[use], s.vals[use]
+        plo, phi = I.mul(y[:, rows], y[:, rows], vals, vals)
+        order = np.argsort(cols, kind="stable")
+        cols = cols[order]
         plo, phi = plo[:, order], phi[:, order]
         counts = np.bincount(cols, minlength=N)
         start = np.concatenate(([0], np.cumsum(counts)[:-1]))
@@ -127,7 +130,8 @@ def _dual_bound(system: LinearSystem, y, cost=None):
         # min over z_j in [lo_j, hi_j] of c_j z_j, c_j in [clo_j, chi_j]: the lower bound of the product
         tlo = I.mul(clo, chi, s.lo, s.hi)[0]
         left = _tree_sum(tlo, tlo)[0]
-        yb = _tree_sum(*I.mul(y, y, s.b, s.b))[1]
+        live = np.any(y > 0, axis=0)
+        yb = _tree_sum(*I.mul(y[:, live], y[:, live], s.b[live], s.b[live]))[1]
     return (left[0], yb[0]) if one else (left, yb)
 
 
