@@ -175,7 +175,9 @@ FARKAS = {
 #: ``crosscert certify``'s plan speeds (m/s) around the one-motion refutation (verifier.one_motion, 2026-12-02):
 #: undecided without it (the bounce hypothesis survives with 10 sub-boxes), certified with it; and the
 #: refutation bound, where a verified bounce exists (the bounce hypothesis must survive).
-ONE_MOTION_PLAN = {"certified": 0.9557, "floor": 0.8438}
+#: ``contracted``: undecided by the refutation alone, certified once the one-motion relaxation also narrows the
+#: rows' sub-boxes (2026-12-02, issue 20).
+ONE_MOTION_PLAN = {"certified": 0.9557, "contracted": 0.9300, "floor": 0.8438}
 
 #: Planning problems by name: ``<robot>_benchmark`` for every registered robot with a benchmark crossing.
 PLANNING = {

@@ -270,3 +270,63 @@ def test_the_interval_sum_is_outward():
     for r in range(3):
         exact = sum(Fraction(float(t)) for t in v[r])
         assert Fraction(float(lo[r])) <= exact <= Fraction(float(hi[r]))
+
+
+def test_a_certified_minimum_is_below_the_true_minimum():
+    """Weak duality with outward rounding: ``FARKAS["float_only"]`` (``z = 5.2`` feasible, a certificate that
+    holds only in round to nearest) gives no bound above ``0`` for the cost 0 nor above ``5.2`` for ``z``
+    itself; on ``z_0 + z_1 >= 0.7`` over ``[0, 1]²`` the solver's multipliers prove ``min z_0 + z_1`` from below
+    to within ``1e-12`` and never above the exact minimum."""
+    A, b, lo, hi, y = FARKAS["float_only"]
+    system, _ = _system("float_only")
+    for cost, exact in (([0.0], Fraction(0)), ([1.0], Fraction(float(lo[0])))):
+        low = float(OM.certified_minimum(system, y, np.array(cost)))
+        assert Fraction(low) <= exact, (cost, low)
+    tie = OM.LinearSystem(np.array([0, 0]), np.array([0, 1]), np.array([-1.0, -1.0]), np.array([-0.7]),
+                          np.zeros(2), np.ones(2))
+    solver = OM._Solver()
+    assert solver.phase_one(tie) is None and solver.feasible
+    lo2, hi2 = solver.bounds(tie, [0, 1])  # each in [0, 1]: z_0 >= 0.7 - 1 < 0, no narrowing
+    assert np.all(lo2 <= 0.0) and np.all(hi2 >= 1.0)
+    y2 = np.array([1.0])
+    low = float(OM.certified_minimum(tie, y2, np.array([1.0, 1.0])))
+    assert Fraction(low) <= Fraction(0.7) and low > 0.7 - 1e-12
+
+
+def test_the_contractor_keeps_the_true_geometry(scenarios, settings):
+    """Tubes holding an adversarial true motion, the true geometry at a corner of ``[ξ]`` and the sub-box with
+    the truth at its corner: the contracted sub-box keeps the true geometry (over 40 samples and the whole
+    run), and the contractor narrows something (not vacuous).  Fails when a proved bound is moved inward by
+    a thousandth of the width (the truth sits on a side of the box that no bound narrows)."""
+    im = interval_model()
+    rng = np.random.default_rng(13)
+    lo, hi = im.xi_box()
+    narrowed = 0
+    for sc in scenarios:
+        X, XD = _tubes(rng, sc.x, sc.xd)
+        corner = (np.minimum(sc.xi, 0.5 * (lo + hi)), np.maximum(sc.xi, 0.5 * (lo + hi)))
+        for XI in ((lo, hi), corner):
+            for size in (40, len(sc.t)):
+                out, clo, chi = OM.one_motion_rows(im, settings, sc.q_meas, (XI[0][None], XI[1][None]), X[None],
+                                                   XD[None], size)
+                assert not out[0], sc.name
+                assert np.all((clo[0] <= sc.xi) & (sc.xi <= chi[0])), (sc.name, size, clo[0] - sc.xi, chi[0] - sc.xi)
+                assert np.all((XI[0] <= clo[0]) & (chi[0] <= XI[1]))
+                narrowed += bool(np.any(chi[0] - clo[0] < 0.99 * (XI[1] - XI[0])))
+    assert narrowed >= 4, narrowed
+
+
+def test_the_contractor_narrows_the_certify_plan_rows_and_keeps_the_floor_open():
+    """``crosscert certify``'s plan at 0.9300 m/s: undecided with the refutation alone, certified once the
+    rows' sub-boxes are narrowed to the geometries one motion explains (and another round runs with them);
+    at the refutation bound the bounce hypothesis survives.  Fails without the narrowing in
+    ``verifier.window._Hypothesis.one_motion`` (``contract=False``)."""
+    from crosscert.planner.certify.plan import certify_speed
+    from crosscert.planner.task import PlanningBounds, benchmark_task
+    from crosscert.robots import KinematicModel, get_entry
+    from crosscert.verifier.settings import Verdict
+
+    kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
+    with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES)
+    run = certify_speed(kin, interval_model(), task, with_step, ONE_MOTION_PLAN["contracted"])
+    assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
