@@ -112,6 +112,33 @@ def test_loop_closure_rows_hold_true_solutions_at_box_corners(scenarios):
                 assert Fraction(float(blo[s, i])) <= val <= Fraction(float(bhi[s, i])), (sc.name, k, i)
 
 
+def test_loop_closure_rows_hold_with_one_wide_parameter(scenarios):
+    """The true pose and joints as points and one geometry parameter wide (the truth at either end of it, the
+    others at their true values): the remainder is then that parameter's diagonal term alone, and the truth
+    at a corner attains it.  Fails when either side of the diagonal term is dropped (``max(−H_jj, 0) r_j²``
+    for the parameters of negative curvature, ``max(H̄_jj, 0) r_j²`` for the others)."""
+    im = interval_model()
+    lo_xi, hi_xi = im.xi_box()
+    m = len(lo_xi)
+    for sc in scenarios[:2]:
+        ks = np.arange(0, len(sc.t), 23)
+        X, Q = (sc.x[ks], sc.x[ks]), (sc.q_true[ks], sc.q_true[ks])
+        for j in range(m):
+            w = 0.5 * (hi_xi[j] - lo_xi[j])
+            for side in (-1.0, 1.0):
+                xlo, xhi = sc.xi.copy(), sc.xi.copy()
+                if side > 0:
+                    xhi[j] = sc.xi[j] + w
+                else:
+                    xlo[j] = sc.xi[j] - w
+                Jc, blo, bhi = OM.loop_closure_rows(im, X, Q, (xlo, xhi))
+                for s_, k in enumerate(ks):
+                    z = [Fraction(float(v)) for v in np.concatenate([sc.x[k], sc.q_true[k], sc.xi])]
+                    for i in range(im.n):
+                        val = sum(Fraction(float(c)) * zj for c, zj in zip(Jc[s_, i], z))
+                        assert Fraction(float(blo[s_, i])) <= val <= Fraction(float(bhi[s_, i])), (sc.name, j, side, i)
+
+
 def _exact_motion(a, t_s, K, switches):
     """Exact (rational) positions and velocities at ``k t_s`` of a motion at ``+a`` then ``-a`` alternately,
     switching at the times ``switches`` (rationals, s), from rest at 0."""
