@@ -30,7 +30,10 @@ recording may use every reading.  :func:`track_window` does so:
     spent, each of its rows is tested as one constant geometry and one motion
     over the samples around its widest pose box (:mod:`verifier.one_motion`,
     a linear relaxation whose infeasibility is proved by a Farkas certificate);
-    the rows proved impossible are dropped, which frees budget for halving.
+    the rows proved impossible are dropped, which frees budget for halving,
+    and the others' sub-boxes narrowed to the geometries the relaxation
+    allows (proved bounds by weak duality); a step that changed something
+    earns another round of passes with the narrowed sub-boxes.
 
 Every pass only removes what cannot hold under the tracker's assumptions and
 the hypothesis, so a refuted hypothesis is false (docs/soundness.md, "Window
@@ -350,10 +353,13 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         hypothesis is never refuted, and its rounds are the costly ones.
         ``None``: both hypotheses.
     one_motion : int
-        Samples of the one-motion refutation (:mod:`verifier.one_motion`): after each round, before
-        halving, a row is dropped when no single geometry of its sub-box and single motion within
-        ``a_max`` in its tubes explain the readings over this many samples around its widest pose box
-        (proved by a Farkas certificate).  0: not tried.
+        Samples of the one-motion step (:mod:`verifier.one_motion`): once the budget of sub-boxes is
+        spent, after each round, a row is dropped when no single geometry of its sub-box and single
+        motion within ``a_max`` in its tubes explain the readings over this many samples around its
+        widest pose box (proved by a Farkas certificate), and the others' sub-boxes are narrowed to
+        proved bounds of the geometries that can; a step that dropped or narrowed (by
+        :data:`ONE_MOTION_SHRINK`) earns another round without halving, up to :data:`ONE_MOTION_ROUNDS`.
+        0: not tried.
 
     Returns
     -------
