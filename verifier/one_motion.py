@@ -343,7 +343,8 @@ def loop_closure_rows(model, X, Q, XI):
         mag = np.maximum(np.abs(Hlo), np.abs(Hhi))
         up = _sum_up(_mul_up(np.where(diag, np.maximum(Hhi, 0.0), mag), rr).reshape(S, n, N * N))
         down = _sum_up(_mul_up(np.where(diag, np.maximum(-Hlo, 0.0), mag), rr).reshape(S, n, N * N))
-        Rhi, Rlo = I._up(0.5 * up), -I._up(0.5 * down)  # 0.5 x is exact unless subnormal: rounded up anyway
+        # 0.5 x is exact unless subnormal: rounded up anyway (an exact 0, a point box, stays 0)
+        Rhi, Rlo = I._up_keep0(0.5 * up), -I._up_keep0(0.5 * down)
         Jcc = _enclose_dot(Jc, c)
         b = I.sub(*Jcc, *F)
         blo = I.sub(b[0], b[0], Rhi, Rhi)[0]
