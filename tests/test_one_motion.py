@@ -343,11 +343,12 @@ def test_the_contractor_keeps_the_true_geometry(scenarios, settings):
     assert narrowed >= 4, narrowed
 
 
-def test_the_contractor_narrows_the_certify_plan_rows_and_keeps_the_floor_open():
+def test_the_contractor_certifies_the_certify_plan_at_0930():
     """``crosscert certify``'s plan at 0.9300 m/s: undecided with the refutation alone, certified once the
-    rows' sub-boxes are narrowed to the geometries one motion explains (and another round runs with them);
-    at the refutation bound the bounce hypothesis survives.  Fails without the narrowing in
-    ``verifier.window._Hypothesis.one_motion`` (``contract=False``)."""
+    rows' sub-boxes are narrowed to the geometries one motion explains (and another round runs with them).
+    (At the refutation bound the bounce hypothesis survives the same step:
+    ``test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_floor``.)  Fails without the
+    narrowing kept in ``verifier.window._Hypothesis.one_motion``."""
     from crosscert.planner.certify.plan import certify_speed
     from crosscert.planner.task import PlanningBounds, benchmark_task
     from crosscert.robots import KinematicModel, get_entry
