@@ -163,7 +163,7 @@ class PlanningBounds:
     one_motion : int
         Samples of the one-motion refutation in those windows
         (``verifier.window.track_window(one_motion=...)``; 0, the default: not tried).
-        40 lowers the benchmark task's v_min from 0.961 to 0.945 m/s at about 1.5
+        40 lowers the benchmark task's v_min from 0.961 to 0.929 m/s at about 2.3
         times certify's time (docs/tracker.md, "One motion, one geometry").
     """
 

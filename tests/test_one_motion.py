@@ -112,6 +112,33 @@ def test_loop_closure_rows_hold_true_solutions_at_box_corners(scenarios):
                 assert Fraction(float(blo[s, i])) <= val <= Fraction(float(bhi[s, i])), (sc.name, k, i)
 
 
+def test_loop_closure_rows_hold_with_one_wide_parameter(scenarios):
+    """The true pose and joints as points and one geometry parameter wide (the truth at either end of it, the
+    others at their true values): the remainder is then that parameter's diagonal term alone, and the truth
+    at a corner attains it.  Fails when either side of the diagonal term is dropped (``max(−H_jj, 0) r_j²``
+    for the parameters of negative curvature, ``max(H̄_jj, 0) r_j²`` for the others)."""
+    im = interval_model()
+    lo_xi, hi_xi = im.xi_box()
+    m = len(lo_xi)
+    for sc in scenarios[:2]:
+        ks = np.arange(0, len(sc.t), 23)
+        X, Q = (sc.x[ks], sc.x[ks]), (sc.q_true[ks], sc.q_true[ks])
+        for j in range(m):
+            w = 0.5 * (hi_xi[j] - lo_xi[j])
+            for side in (-1.0, 1.0):
+                xlo, xhi = sc.xi.copy(), sc.xi.copy()
+                if side > 0:
+                    xhi[j] = sc.xi[j] + w
+                else:
+                    xlo[j] = sc.xi[j] - w
+                Jc, blo, bhi = OM.loop_closure_rows(im, X, Q, (xlo, xhi))
+                for s_, k in enumerate(ks):
+                    z = [Fraction(float(v)) for v in np.concatenate([sc.x[k], sc.q_true[k], sc.xi])]
+                    for i in range(im.n):
+                        val = sum(Fraction(float(c)) * zj for c, zj in zip(Jc[s_, i], z))
+                        assert Fraction(float(blo[s_, i])) <= val <= Fraction(float(bhi[s_, i])), (sc.name, j, side, i)
+
+
 def _exact_motion(a, t_s, K, switches):
     """Exact (rational) positions and velocities at ``k t_s`` of a motion at ``+a`` then ``-a`` alternately,
     switching at the times ``switches`` (rationals, s), from rest at 0."""
@@ -147,19 +174,29 @@ def test_acceleration_rows_hold_for_motions_at_the_bound(a, t_s):
 
 
 def test_drift_rows_hold_for_errors_at_the_edges_of_the_drift_model():
-    """Reading errors ``e_k = ±eps_fast + rate t_k`` (the fast part alternating at its bound, the slow part
-    drifting at its rate): the true joints ``q̃_k - e_k`` satisfy every drift row exactly."""
+    """Reading errors ``e_k = s_k + f_k``, the fast part ``f_k`` alternating at its bound, the slow part ``s_k``
+    drifting at its rate (both times 0.999): the true joints ``q̃_k - e_k`` and the true slow part satisfy every
+    drift row exactly (in rational arithmetic), and ``|s_k|`` is within the returned bound.  Fails when the
+    fast bound or the drift step is tightened (times 0.99) or not rounded outward."""
     fast, rate, eps, t_s, S = 9.23997839e-05, 0.02856415, 0.00130629, 1e-3, 80
     s = TrackerSettings.for_robot(DEXTAR, eps_q=eps, eps_q_fast=fast, drift_rate=rate, t_s=t_s)
     rng = np.random.default_rng(3)
     q_true = np.cumsum(rng.uniform(-1e-3, 1e-3, (S, 2)), axis=0)
     signs = np.where(np.arange(S) % 2 == 0, 1.0, -1.0)[:, None] * np.array([1.0, -1.0])
-    e = 0.999 * (fast * signs + rate * (np.arange(S)[:, None] * t_s) - 0.5 * rate * S * t_s)
-    q_meas = q_true + e
-    blocks = OM.drift_rows(s, q_meas, S, 2)
-    assert blocks
-    system = OM._stack(blocks, 2 * S, np.full(2 * S, -9.0), np.full(2 * S, 9.0))
-    z = [Fraction(float(v)) for v in q_true.ravel()]  # the stored reading errs from it by e and a rounding
+    slow = 0.999 * (rate * (np.arange(S)[:, None] * t_s) - 0.5 * rate * S * t_s) * np.ones((1, 2))
+    q_meas = q_true + 0.999 * fast * signs + slow
+    blocks, bound = OM.drift_rows(s, q_meas, S, 2)
+    assert blocks and np.all(np.abs(slow) <= bound)
+    system = OM._stack(blocks, 2 * 2 * S, np.full(4 * S, -9.0), np.full(4 * S, 9.0))
+    # the stored reading errs from q_true + e by a rounding: the true slow part is exact, the fast part absorbs it
+    z = [Fraction(float(v)) for v in q_true.ravel()] + [Fraction(float(v)) for v in slow.ravel()]
+    assert not _violations(system, z)
+    # the drift step at its bound: consecutive slow parts exactly drift_rate t_s apart (rationally)
+    step = Fraction(rate) * Fraction(t_s)
+    slow_edge = [[Fraction(k) * step * sgn for sgn in (1, -1)] for k in range(S)]
+    q_edge = [Fraction(float(v)) for v in q_meas.ravel()]
+    z = [q - sl for q, sl in zip(q_edge, [v for row in slow_edge for v in row])] + \
+        [v for row in slow_edge for v in row]
     assert not _violations(system, z)
 
 
@@ -260,3 +297,64 @@ def test_the_interval_sum_is_outward():
     for r in range(3):
         exact = sum(Fraction(float(t)) for t in v[r])
         assert Fraction(float(lo[r])) <= exact <= Fraction(float(hi[r]))
+
+
+def test_a_certified_minimum_is_below_the_true_minimum():
+    """Weak duality with outward rounding: ``FARKAS["float_only"]`` (``z = 5.2`` feasible, a certificate that
+    holds only in round to nearest) gives no bound above ``0`` for the cost 0 nor above ``5.2`` for ``z``
+    itself; on ``z_0 + z_1 >= 0.7`` over ``[0, 1]²`` the solver's multipliers prove ``min z_0 + z_1`` from below
+    to within ``1e-12`` and never above the exact minimum."""
+    A, b, lo, hi, y = FARKAS["float_only"]
+    system, _ = _system("float_only")
+    for cost, exact in (([0.0], Fraction(0)), ([1.0], Fraction(float(lo[0])))):
+        low = float(OM.certified_minimum(system, y, np.array(cost)))
+        assert Fraction(low) <= exact, (cost, low)
+    tie = OM.LinearSystem(np.array([0, 0]), np.array([0, 1]), np.array([-1.0, -1.0]), np.array([-0.7]),
+                          np.zeros(2), np.ones(2))
+    solver = OM._Solver()
+    assert solver.phase_one(tie) is None and solver.feasible
+    lo2, hi2 = solver.bounds(tie, [0, 1])  # each in [0, 1]: z_0 >= 0.7 - 1 < 0, no narrowing
+    assert np.all(lo2 <= 0.0) and np.all(hi2 >= 1.0)
+    y2 = np.array([1.0])
+    low = float(OM.certified_minimum(tie, y2, np.array([1.0, 1.0])))
+    assert Fraction(low) <= Fraction(0.7) and low > 0.7 - 1e-12
+
+
+def test_the_contractor_keeps_the_true_geometry(scenarios, settings):
+    """Tubes holding an adversarial true motion, the true geometry at a corner of ``[ξ]`` and the sub-box with
+    the truth at its corner: the contracted sub-box keeps the true geometry (over 40 samples and the whole
+    run), and the contractor narrows something (not vacuous).  Fails when a proved bound is moved inward by
+    a thousandth of the width (the truth sits on a side of the box that no bound narrows)."""
+    im = interval_model()
+    rng = np.random.default_rng(13)
+    lo, hi = im.xi_box()
+    narrowed = 0
+    for sc in scenarios:
+        X, XD = _tubes(rng, sc.x, sc.xd)
+        corner = (np.minimum(sc.xi, 0.5 * (lo + hi)), np.maximum(sc.xi, 0.5 * (lo + hi)))
+        for XI in ((lo, hi), corner):
+            for size in (40, len(sc.t)):
+                out, clo, chi = OM.one_motion_rows(im, settings, sc.q_meas, (XI[0][None], XI[1][None]), X[None],
+                                                   XD[None], size)
+                assert not out[0], sc.name
+                assert np.all((clo[0] <= sc.xi) & (sc.xi <= chi[0])), (sc.name, size, clo[0] - sc.xi, chi[0] - sc.xi)
+                assert np.all((XI[0] <= clo[0]) & (chi[0] <= XI[1]))
+                narrowed += bool(np.any(chi[0] - clo[0] < 0.99 * (XI[1] - XI[0])))
+    assert narrowed >= 4, narrowed
+
+
+def test_the_contractor_certifies_the_certify_plan_at_0930():
+    """``crosscert certify``'s plan at 0.9300 m/s: undecided with the refutation alone, certified once the
+    rows' sub-boxes are narrowed to the geometries one motion explains (and another round runs with them).
+    (At the refutation bound the bounce hypothesis survives the same step:
+    ``test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_floor``.)  Fails without the
+    narrowing kept in ``verifier.window._Hypothesis.one_motion``."""
+    from crosscert.planner.certify.plan import certify_speed
+    from crosscert.planner.task import PlanningBounds, benchmark_task
+    from crosscert.robots import KinematicModel, get_entry
+    from crosscert.verifier.settings import Verdict
+
+    kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
+    with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES)
+    run = certify_speed(kin, interval_model(), task, with_step, ONE_MOTION_PLAN["contracted"])
+    assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()

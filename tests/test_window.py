@@ -397,7 +397,8 @@ def test_acceleration_bound_between_samples_certifies_the_plan_at_0961(monkeypat
     import crosscert.verifier.window as W
     from crosscert.planner.certify.plan import certify_speed
 
-    monkeypatch.setattr(W, "refute_rows", lambda model, s, q, XI, *a: np.zeros(len(XI[0]), dtype=bool))
+    monkeypatch.setattr(W, "one_motion_rows",
+                        lambda model, s, q, XI, *a: (np.zeros(len(XI[0]), dtype=bool), XI[0].copy(), XI[1].copy()))
     from crosscert.planner.task import benchmark_task
     from crosscert.robots import KinematicModel
 

@@ -26,19 +26,16 @@ geometry parameters; SI units.
 
 from __future__ import annotations
 
-import functools
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
-from scipy.sparse import coo_matrix, diags, hstack
+import highspy
 
 from . import interval as I
-from .constants import pack_constants
 from .step import reading_box
 
 __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "drift_rows", "row_system",
-           "refute_row", "refute_rows", "ONE_MOTION_SAMPLES", "CUT_SLOPES", "DRIFT_OFFSETS"]
+           "refute_row", "refute_rows", "one_motion_rows", "certified_minimum", "ONE_MOTION_SAMPLES", "CUT_SLOPES"]
 
 #: Samples of the range a row is refuted over, centred on the widest pose box of its tube (the default of
 #: ``track_window(one_motion=...)``).  Measured on the certify plan at 0.9557 m/s: 40, 60, 80, 120 and all 196
@@ -78,14 +75,64 @@ def _stack(parts, n_cols, lo, hi):
 
 
 def _tree_sum(lo, hi, axis=-1):
-    """Outward-rounded sum of intervals along ``axis`` (pairwise, every addition rounded outward)."""
+    """Outward-rounded sum of intervals along ``axis`` (pairwise, every addition rounded outward; padded once
+    with exact zeros to a power of two)."""
     lo, hi = np.moveaxis(lo, axis, -1), np.moveaxis(hi, axis, -1)
+    size = lo.shape[-1]
+    full = 1 << max(size - 1, 0).bit_length()
+    if full != size:
+        pad = [(0, 0)] * (lo.ndim - 1) + [(0, full - size)]
+        lo, hi = np.pad(lo, pad), np.pad(hi, pad)  # + [0, 0]: exact
     while lo.shape[-1] > 1:
-        if lo.shape[-1] % 2:
-            pad = [(0, 0)] * (lo.ndim - 1) + [(0, 1)]
-            lo, hi = np.pad(lo, pad), np.pad(hi, pad)  # + [0, 0]: exact
         lo, hi = I.add(lo[..., 0::2], hi[..., 0::2], lo[..., 1::2], hi[..., 1::2])
     return lo[..., 0], hi[..., 0]
+
+
+def _dual_bound(system: LinearSystem, y, cost=None):
+    """``(left, yb)`` for multipliers ``y`` ``(M,)`` or ``(B, M)``: ``left`` a lower bound of ``min over the
+    box of (cost + yᵀA) z`` and ``yb`` an upper bound of ``yᵀb``, enclosed with outward rounding (``()`` or
+    ``(B,)``).  Every ``z`` of the box with ``A z <= b`` has ``cost·z >= left − yb`` (weak duality:
+    ``yᵀ(A z − b) <= 0`` for ``y >= 0``).  ``y`` is any float array: negative or non-finite entries are
+    replaced by 0 (any ``y >= 0`` is admissible), so the solver that produced it is not trusted.
+    ``cost`` ``(N,)`` or ``(B, N)`` floats (exact as given), 0 by default."""
+    s = system
+    M, N = s.shape
+    y = np.asarray(y, dtype=np.float64)
+    one = y.ndim == 1
+    y = np.atleast_2d(y)
+    y = np.where(np.isfinite(y) & (y > 0), y, 0.0)
+    B = y.shape[0]
+    with I.quiet_fp():
+        # cost + yᵀA column by column: products enclosed, then summed per column with the cost (padded with 0)
+        # only the entries of rows some y uses: the others' products are exactly 0
+        use = np.any(y > 0, axis=0)[s.rows]
+        rows, cols, vals = s.rows[use], s.cols[use], s.vals[use]
+        plo, phi = I.mul(y[:, rows], y[:, rows], vals, vals)
+        order = np.argsort(cols, kind="stable")
+        cols = cols[order]
+        plo, phi = plo[:, order], phi[:, order]
+        counts = np.bincount(cols, minlength=N)
+        start = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        slot = np.arange(len(cols)) - start[cols] + 1  # slot 0: the cost
+        cost = np.zeros((B, N)) if cost is None else np.broadcast_to(np.asarray(cost, dtype=np.float64), (B, N))
+        clo, chi = np.empty((B, N)), np.empty((B, N))
+        # columns grouped by their count rounded up to a power of two: a few dense blocks, little padding
+        group = np.array([(int(c)).bit_length() for c in counts])
+        for g in np.unique(group):
+            mine = np.nonzero(group == g)[0]
+            where = np.full(N, -1)
+            where[mine] = np.arange(len(mine))
+            Clo, Chi = np.zeros((B, len(mine), 1 << int(g))), np.zeros((B, len(mine), 1 << int(g)))
+            Clo[:, :, 0] = Chi[:, :, 0] = cost[:, mine]
+            e = where[cols] >= 0
+            Clo[:, where[cols[e]], slot[e]], Chi[:, where[cols[e]], slot[e]] = plo[:, e], phi[:, e]
+            clo[:, mine], chi[:, mine] = _tree_sum(Clo, Chi)
+        # min over z_j in [lo_j, hi_j] of c_j z_j, c_j in [clo_j, chi_j]: the lower bound of the product
+        tlo = I.mul(clo, chi, s.lo, s.hi)[0]
+        left = _tree_sum(tlo, tlo)[0]
+        live = np.any(y > 0, axis=0)
+        yb = _tree_sum(*I.mul(y[:, live], y[:, live], s.b[live], s.b[live]))[1]
+    return (left[0], yb[0]) if one else (left, yb)
 
 
 def prove_infeasible(system: LinearSystem, y) -> bool:
@@ -94,67 +141,150 @@ def prove_infeasible(system: LinearSystem, y) -> bool:
     For ``y >= 0`` every solution would satisfy ``yᵀ(A z − b) <= 0``; the lower bound of
     ``min over the box of (yᵀA) z − yᵀb``, with ``yᵀA`` and ``yᵀb`` enclosed by outward-rounded interval
     arithmetic and the minimum of each term ``[c_j] z_j`` taken over ``z_j``'s bounds, being positive
-    proves there is none (a Farkas certificate).  ``y`` is any float vector: negative or non-finite
-    entries are replaced by 0 (any ``y >= 0`` is admissible), so the solver that produced it is not
-    trusted.
+    proves there is none (a Farkas certificate; :func:`_dual_bound`).  ``y`` is any float vector: negative
+    or non-finite entries are replaced by 0, so the solver that produced it is not trusted.
     """
-    s = system
     y = np.asarray(y, dtype=np.float64)
-    y = np.where(np.isfinite(y) & (y > 0), y, 0.0)
-    M, N = s.shape
-    if y.shape != (M,) or not np.any(y > 0):
+    if y.shape != (system.shape[0],) or not np.any(np.isfinite(y) & (y > 0)):
         return False
-    with I.quiet_fp():
-        # yᵀA column by column: products enclosed, then summed per column (padded to equal counts with 0)
-        plo, phi = I.mul(y[s.rows], y[s.rows], s.vals, s.vals)
-        order = np.argsort(s.cols, kind="stable")
-        cols = s.cols[order]
-        counts = np.bincount(cols, minlength=N)
-        width = max(int(counts.max()) if counts.size else 0, 1)
-        start = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        slot = np.arange(len(cols)) - start[cols]
-        Clo, Chi = np.zeros((N, width)), np.zeros((N, width))
-        Clo[cols, slot], Chi[cols, slot] = plo[order], phi[order]
-        clo, chi = _tree_sum(Clo, Chi)
-        # min over z_j in [lo_j, hi_j] of c_j z_j, c_j in [clo_j, chi_j]: the lower bound of the product
-        tlo = I.mul(clo, chi, s.lo, s.hi)[0]
-        left = _tree_sum(tlo, tlo)[0]
-        yb = _tree_sum(*I.mul(y, y, s.b, s.b))[1]
+    left, yb = _dual_bound(system, y)
     return bool(np.isfinite(left) and np.isfinite(yb) and left > yb)
 
 
+def certified_minimum(system: LinearSystem, y, cost):
+    """Lower bounds of ``cost·z`` over ``{z in the box : A z <= b}`` proved from the multipliers ``y`` (any
+    floats, ``(M,)`` or one row per cost ``(B, M)``; :func:`_dual_bound`), ``-inf`` where they prove nothing
+    finite.  Weak duality with outward rounding (the safe bounds of Neumaier and Shcherbina): for ``y >= 0``
+    and every feasible ``z``, ``cost·z >= cost·z + yᵀ(A z − b) >= min over the box of (cost + yᵀA) z − yᵀb``."""
+    left, yb = _dual_bound(system, y, cost)
+    with I.quiet_fp():
+        low = I.sub(left, left, yb, yb)[0]
+    return np.where(np.isfinite(left) & np.isfinite(yb) & ~np.isnan(low), low, -np.inf)
+
+
+class _Solver:
+    """One HiGHS instance for the phase-one programs of a batch of rows, each warm-started from the basis of
+    the last program of the same shape (the rows of a window have the same structure, their coefficients and
+    bounds differ a little).  A float search only: :func:`prove_infeasible` decides."""
+
+    def __init__(self):
+        self.highs = highspy._Highs()  # the bare solver: no banner, no callbacks
+        for name, value in (("output_flag", False), ("presolve", "off"), ("simplex_strategy", 4),
+                            ("threads", 1)):
+            self.highs.setOptionValue(name, value)
+        self.basis = {}
+        self.feasible = False
+
+    def phase_one(self, system: LinearSystem):
+        """Dual multipliers ``y`` ``(M,)`` of ``min t  s.t.  A z − t <= b`` over the box (rows and columns
+        scaled, variables centred), or ``None`` when the solver found ``t <= 0`` or failed."""
+        s = system
+        M, N = s.shape
+        c = 0.5 * (s.lo + s.hi)
+        r = 0.5 * (s.hi - s.lo)
+        r = np.where(r > 0, r, 1.0)
+        order = np.lexsort((s.cols, s.rows))
+        rows, cols = s.rows[order], s.cols[order]
+        vals = s.vals[order] * r[cols]
+        rhs = s.b - np.bincount(s.rows, weights=s.vals * c[s.cols], minlength=M)
+        counts = np.bincount(rows, minlength=M)
+        scale = np.zeros(M)
+        np.maximum.at(scale, rows, np.abs(vals))
+        scale = np.where(scale > 0, scale, 1.0)
+        # row i: its entries scaled by 1/scale_i, then the column t with -1
+        start = np.concatenate(([0], np.cumsum(counts + 1)))
+        last = start[1:] - 1
+        index = np.full(start[-1], N, dtype=np.int32)
+        value = np.full(start[-1], -1.0)
+        keep = np.ones(start[-1], dtype=bool)
+        keep[last] = False
+        index[keep] = cols
+        value[keep] = vals / scale[rows]
+        lp = highspy.HighsLp()
+        lp.num_col_, lp.num_row_ = N + 1, M
+        cost = np.zeros(N + 1)
+        cost[-1] = 1.0
+        u = np.where(s.hi > s.lo, 1.0, 0.0)  # the centred, scaled unknowns in [-1, 1] (a fixed one at 0)
+        lp.col_cost_ = cost
+        lp.col_lower_ = np.concatenate([-u, [0.0]])
+        lp.col_upper_ = np.concatenate([u, [highspy.kHighsInf]])
+        lp.row_lower_ = np.full(M, -highspy.kHighsInf)
+        lp.row_upper_ = rhs / scale
+        A = lp.a_matrix_
+        A.format_ = highspy.MatrixFormat.kRowwise
+        A.num_col_, A.num_row_ = N + 1, M
+        A.start_, A.index_, A.value_ = start.astype(np.int32), index, value
+        h = self.highs
+        h.passModel(lp)
+        if (M, N) in self.basis:
+            h.setBasis(self.basis[(M, N)])
+        h.run()
+        self.feasible = False
+        if h.getModelStatus() != highspy.HighsModelStatus.kOptimal:
+            return None
+        self.basis[(M, N)] = h.getBasis()
+        self.feasible = not h.getInfo().objective_function_value > 0
+        self.scale, self.r = scale, r
+        if not h.getInfo().objective_function_value > 0:
+            return None
+        y = -np.asarray(h.getSolution().row_dual, dtype=np.float64)  # duals of <= rows are <= 0
+        return y / scale
+
+    def bounds(self, system: LinearSystem, columns):
+        """Proved bounds ``(lo, hi)`` of the unknowns ``columns`` over ``{z in the box : A z <= b}``, right
+        after a :meth:`phase_one` of ``system`` that found it feasible (its model and basis, ``t`` fixed at 0):
+        for each column and sign the program ``min ±z_j`` proposes multipliers and :func:`certified_minimum`
+        proves the bound (the box's where it proves nothing tighter)."""
+        h = self.highs
+        M, N = system.shape
+        columns = np.asarray(columns)
+        h.changeColBounds(N, 0.0, 0.0)  # t = 0: the system itself
+        every = np.arange(N + 1, dtype=np.int32)
+        C = len(columns)
+        Y, cost = np.zeros((2 * C, M)), np.zeros((2 * C, N))
+        for i, j in enumerate(columns):
+            for k, sign in ((2 * i, 1.0), (2 * i + 1, -1.0)):
+                c = np.zeros(N + 1)
+                c[j] = sign * self.r[j]  # min ±z_j: z_j = c_j + r_j u_j
+                h.changeColsCost(N + 1, every, c)
+                h.run()
+                cost[k, j] = sign
+                if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
+                    Y[k] = -np.asarray(h.getSolution().row_dual, dtype=np.float64) / self.scale
+        low = certified_minimum(system, Y, cost)  # Y = 0 proves only the box
+        lo = np.maximum(system.lo[columns], low[0::2])
+        hi = np.minimum(system.hi[columns], -low[1::2])
+        return lo, hi
+
+
 def _phase_one(system: LinearSystem):
-    """Dual multipliers ``y`` ``(M,)`` of ``min t  s.t.  A z − t <= b`` over the box (rows and columns
-    scaled, variables centred), or ``None`` when the solver found ``t <= 0`` or failed.  A float search only:
-    :func:`prove_infeasible` decides."""
-    s = system
-    M, N = s.shape
-    c = 0.5 * (s.lo + s.hi)
-    r = 0.5 * (s.hi - s.lo)
-    r = np.where(r > 0, r, 1.0)
-    A = coo_matrix((s.vals, (s.rows, s.cols)), shape=(M, N)).tocsr()
-    As = A.multiply(r[None, :]).tocsr()
-    rhs = s.b - A @ c
-    scale = np.asarray(abs(As).max(axis=1).todense()).ravel()
-    scale = np.where(scale > 0, scale, 1.0)
-    As = diags(1.0 / scale) @ As
-    rhs = rhs / scale
-    Aub = hstack([As, coo_matrix(-np.ones((M, 1)))]).tocsr()
-    u = np.where(s.hi > s.lo, 1.0, 0.0)  # the centred, scaled unknowns in [-1, 1] (a fixed one at 0)
-    bounds = [(-w, w) for w in u] + [(0.0, None)]
-    cost = np.zeros(N + 1)
-    cost[-1] = 1.0
-    res = linprog(cost, A_ub=Aub, b_ub=rhs, bounds=bounds, method="highs")
-    if res.status != 0 or not res.fun > 0:
-        return None
-    y = -np.asarray(res.ineqlin.marginals, dtype=np.float64)  # marginals of <= rows are <= 0
-    return y / scale
+    """:meth:`_Solver.phase_one` with a solver of its own."""
+    return _Solver().phase_one(system)
 
 
 def _enclose_dot(J, c):
     """Enclosure of ``J c`` for float ``J`` ``(B, n, N)`` and float ``c`` ``(B, N)``: ``(B, n)``."""
     p = I.mul(J, J, c[:, None, :], c[:, None, :])
     return _tree_sum(*p)
+
+
+def _mul_up(a, b):
+    """Upper bound of the product of non-negative floats ``a``, ``b`` (broadcast), exactly 0 where either is 0
+    (also for an infinite other factor: the interval convention ``0 * inf = 0``); NaN propagates."""
+    with np.errstate(invalid="ignore", over="ignore", under="ignore"):
+        p = a * b
+    return np.where((a == 0.0) | (b == 0.0), 0.0, I._up(p))
+
+
+def _sum_up(v):
+    """Upper bound of the sum of non-negative floats along the last axis (pairwise, every addition rounded up;
+    an exact 0 stays 0); NaN propagates."""
+    while v.shape[-1] > 1:
+        if v.shape[-1] % 2:
+            v = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], axis=-1)  # + 0: exact
+        with np.errstate(over="ignore"):
+            v = I._up_keep0(v[..., 0::2] + v[..., 1::2])
+    return v[..., 0]
 
 
 def loop_closure_rows(model, X, Q, XI):
@@ -183,7 +313,10 @@ def loop_closure_rows(model, X, Q, XI):
     equation ``f_i(z) = f_i(c) + g·d + ½ dᵀ H(ζ) d`` with the gradient ``g`` at ``c`` and the Hessian at a
     point ``ζ`` of the segment, so in the enclosures ``[g]``, ``[H]`` over the box.  With ``Jc`` the midpoint
     of ``[g]``: ``Jc z ∈ Jc c − [f(c)] − ([g] − Jc)[−r, r] − ½ Σ_j [H_jj][0, r_j²] − ½ Σ_{j≠l} [H_jl][−r_j r_l,
-    r_j r_l]`` (a square is not negative: the diagonal terms are one-sided).
+    r_j r_l]`` (a square is not negative: the diagonal terms are one-sided).  Every term of the remainder is
+    a non-negative magnitude times ``r_j r_l`` (``|[H_jl]|`` off the diagonal, ``max(H̄_jj, 0)`` for the
+    upper and ``max(−H_jj, 0)`` for the lower side on it), so both sides are sums of products rounded up.
+    A NaN in an enclosure (outside the tapes' domain) makes both sides of its equation infinite.
     """
     S, n = X[0].shape
     m = np.shape(XI[0])[-1]
@@ -201,22 +334,26 @@ def loop_closure_rows(model, X, Q, XI):
         Hlo, Hhi = Hlo.reshape(S, n, N, N), Hhi.reshape(S, n, N, N)
         Jc = I.midpoint(*Jp)
         Jc = np.where(np.isfinite(Jc), Jc, 0.0)
-        # ([g] - Jc) d
+        # ([g] - Jc) d, |d_j| <= r_j: within +-e1
         Elo, Ehi = I.sub(*Jp, Jc, Jc)
-        mag = np.maximum(np.abs(Elo), np.abs(Ehi))
-        e1 = _tree_sum(*I.mul(mag, mag, r[:, None, :], r[:, None, :]))[1]
-        # 1/2 d' H d: every product d_j d_l in [-r_j r_l, r_j r_l], and in [0, r_j^2] on the diagonal
-        rr = I.mul(r[:, :, None], r[:, :, None], r[:, None, :], r[:, None, :])[1]
-        dd_lo = np.where(np.eye(N, dtype=bool), 0.0, -rr)
-        half = I.scale(0.5, Hlo, Hhi)  # exact
-        Rlo, Rhi = I.mul(*half, dd_lo[:, None], rr[:, None])
-        Rlo, Rhi = _tree_sum(Rlo.reshape(S, n, N * N), Rhi.reshape(S, n, N * N))
+        e1 = _sum_up(_mul_up(np.maximum(np.abs(Elo), np.abs(Ehi)), r[:, None, :]))
+        # 1/2 d' H d: d_j d_l in [-r_j r_l, r_j r_l], and in [0, r_j^2] on the diagonal
+        rr = _mul_up(r[:, :, None], r[:, None, :])[:, None]  # (S, 1, N, N)
+        diag = np.eye(N, dtype=bool)
+        mag = np.maximum(np.abs(Hlo), np.abs(Hhi))
+        up = _sum_up(_mul_up(np.where(diag, np.maximum(Hhi, 0.0), mag), rr).reshape(S, n, N * N))
+        down = _sum_up(_mul_up(np.where(diag, np.maximum(-Hlo, 0.0), mag), rr).reshape(S, n, N * N))
+        # 0.5 x is exact unless subnormal: rounded up anyway (an exact 0, a point box, stays 0)
+        Rhi, Rlo = I._up_keep0(0.5 * up), -I._up_keep0(0.5 * down)
         Jcc = _enclose_dot(Jc, c)
-        b = I.sub(*I.sub(*Jcc, *F), Rlo, Rhi)
-        blo = I.sub(*b, e1, e1)[0]
-        bhi = I.add(*b, e1, e1)[1]
-    blo = np.where(np.isnan(blo), -np.inf, blo)
-    bhi = np.where(np.isnan(bhi), np.inf, bhi)
+        b = I.sub(*Jcc, *F)
+        blo = I.sub(b[0], b[0], Rhi, Rhi)[0]
+        bhi = I.sub(b[1], b[1], Rlo, Rlo)[1]
+        blo = I.sub(blo, blo, e1, e1)[0]
+        bhi = I.add(bhi, bhi, e1, e1)[1]
+    bad = np.isnan(blo) | np.isnan(bhi) | np.isnan(Hlo).any(axis=(2, 3)) | np.isnan(Hhi).any(axis=(2, 3))
+    blo = np.where(bad, -np.inf, blo)
+    bhi = np.where(bad, np.inf, bhi)
     return Jc, blo, bhi
 
 
@@ -284,52 +421,54 @@ def motion_rows(t_s: float, a, S: int, n: int, velocity: bool):
     return blocks
 
 
-@functools.lru_cache(maxsize=8)
-def _difference_bounds(settings, offsets: tuple, n: int):
-    """The error intervals ``(J, 2, n)`` of a difference of two readings ``j`` samples apart, ``j`` in
-    ``offsets``, as the tracker's constants hold them (their one owner: ``verifier.constants``); remembered
-    per settings object (frozen), since every row of a window asks for the same."""
-    return pack_constants(replace(settings, baselines=offsets), n).diff_err
-
-
-#: Sample distances of the coupled readings of the drift model (:func:`drift_rows`).
-DRIFT_OFFSETS = (1, 2, 4, 8, 16, 32, 64)
-
-
 def drift_rows(settings, q, S: int, n: int):
-    """Inequalities of the drift model of the reading error (when the settings have one) on the joint unknowns
-    ``q_k`` (column ``k n + i``): ``|(q_l − q̃_l) − (q_k − q̃_k)| <= D_j`` for ``l = k + j``, ``j`` in
-    :data:`DRIFT_OFFSETS`, ``D_j`` the bound of a difference of two readings ``j`` samples apart (its owner:
-    ``verifier.constants``), readings ``q`` ``(S, n)``.  As blocks ``(rows, cols, vals, b)``."""
+    """Inequalities of the drift model of the reading error (A9, when the settings have one) on the joint
+    unknowns ``q_k`` and the slow part ``s_k`` of the error: ``e_k = q̃_k − q_k = s_k + f_k`` with
+    ``|f_k| <= eps_q_fast`` and ``|s_{k+1} − s_k| <= drift_rate t_s``, readings ``q`` ``(S, n)``.
+
+    Returns ``(blocks, bound)``: blocks ``(rows, cols, vals, b)`` with ``q_k`` at column ``k n + i`` and
+    ``s_k`` at ``S n + k n + i`` (the caller offsets them), and ``bound`` ``(n,)``, ``|s_k| <= bound``
+    (``eps_q + eps_q_fast`` rounded up: ``|e_k| <= eps_q``, A3); ``([], None)`` without a drift model.
+    The chain of consecutive ``s`` implies the bound of every pair ``j`` samples apart
+    (``2 eps_q_fast + drift_rate j t_s``, the tracker's difference bound), with ``O(S)`` rows.
+    """
     if settings.eps_q_fast is None:
-        return []
+        return [], None
+    fast = np.broadcast_to(np.asarray(settings.eps_q_fast, np.float64), (n,))
+    rate = np.broadcast_to(np.asarray(settings.drift_rate, np.float64), (n,))
+    eps = np.broadcast_to(np.asarray(settings.eps_q, np.float64), (n,))
+    step = I.mul(rate, rate, settings.t_s, settings.t_s)[1]  # drift_rate t_s, rounded up
+    bound = I.add(eps, eps, fast, fast)[1]
     blocks = []
-    offsets = tuple(j for j in DRIFT_OFFSETS if j < S)
-    if not offsets:
-        return []
-    two_eps = I.scale(2.0, -settings.eps_q, settings.eps_q)[1]
-    for j, (_, D) in zip(offsets, _difference_bounds(settings, offsets, n)):
-        if np.all(D >= two_eps):
-            break  # no tighter than the boxes of the two readings
-        k = np.arange(S - j)
-        kk, ii = np.meshgrid(k, np.arange(n), indexing="ij")
+    kk, ii = np.meshgrid(np.arange(S), np.arange(n), indexing="ij")
+    kk, ii = kk.ravel(), ii.ravel()
+    nr = len(kk)
+    # q_k + s_k = q̃_k - f_k in [q̃_k - fast, q̃_k + fast]
+    hi = I.add(q[kk, ii], q[kk, ii], fast[ii], fast[ii])[1]
+    lo = I.sub(q[kk, ii], q[kk, ii], fast[ii], fast[ii])[0]
+    cols = np.stack([kk * n + ii, S * n + kk * n + ii], 1).ravel()
+    rr = np.repeat(np.arange(nr), 2)
+    blocks.append((rr, cols, np.ones(2 * nr), hi))
+    blocks.append((rr, cols, -np.ones(2 * nr), -lo))
+    if S >= 2:
+        kk, ii = np.meshgrid(np.arange(S - 1), np.arange(n), indexing="ij")
         kk, ii = kk.ravel(), ii.ravel()
-        ql, qk = q[kk + j, ii], q[kk, ii]
-        dlo, dhi = I.sub(ql, ql, qk, qk)
         nr = len(kk)
-        cols = np.stack([(kk + j) * n + ii, kk * n + ii], 1).ravel()
-        for sign, bound in ((1.0, I.add(dlo, dhi, -D[ii], D[ii])[1]), (-1.0, -I.sub(dlo, dhi, D[ii], D[ii])[0])):
-            blocks.append((np.repeat(np.arange(nr), 2), cols, np.tile(np.array([sign, -sign]), nr), bound))
-    return blocks
+        cols = np.stack([S * n + (kk + 1) * n + ii, S * n + kk * n + ii], 1).ravel()
+        rr = np.repeat(np.arange(nr), 2)
+        for sign in (1.0, -1.0):
+            blocks.append((rr, cols, np.tile(np.array([sign, -sign]), nr), step[ii]))
+    return blocks, bound
 
 
 def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, closure=None) -> LinearSystem | None:
     """The linear system of one row over the samples ``samples`` (a contiguous ``range``).
 
-    Unknowns, in order: ``ξ`` (``m``), then per sample ``x_k`` (``S n``), ``q_k`` (``S n``) and, with
-    ``velocity``, ``v_k`` (``S n``); bounds: ``XI``, the tube boxes ``X``, ``XD`` ``(K, 2, n)`` and the
-    reading boxes ``q_k ± eps_q``.  ``closure``: :func:`loop_closure_rows` of these boxes when computed
-    already.  ``None`` when a bound is not finite (no certificate could use it).
+    Unknowns, in order: ``ξ`` (``m``), then per sample ``x_k`` (``S n``), ``q_k`` (``S n``), with
+    ``velocity`` ``v_k`` (``S n``), and with a drift model the slow part ``s_k`` of the reading error
+    (``S n``, :func:`drift_rows`); bounds: ``XI``, the tube boxes ``X``, ``XD`` ``(K, 2, n)``, the reading
+    boxes ``q_k ± eps_q`` and ``|s_k| <= eps_q + eps_q_fast``.  ``closure``: :func:`loop_closure_rows` of
+    these boxes when computed already.  ``None`` when a bound is not finite (no certificate could use it).
     """
     ks = np.asarray(samples)
     S, n, m = len(ks), model.n, len(XI[0])
@@ -337,8 +476,14 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
     Q = reading_box(qs, settings.eps_q)
     Xs = (X[ks, 0], X[ks, 1])
     nv = S * n if velocity else 0
-    lo = np.concatenate([XI[0], Xs[0].ravel(), Q[0].ravel()] + ([XD[ks, 0].ravel()] if velocity else []))
-    hi = np.concatenate([XI[1], Xs[1].ravel(), Q[1].ravel()] + ([XD[ks, 1].ravel()] if velocity else []))
+    drift, sbound = drift_rows(settings, qs, S, n)
+    ns = 0 if sbound is None else S * n
+    lo = [XI[0], Xs[0].ravel(), Q[0].ravel()] + ([XD[ks, 0].ravel()] if velocity else [])
+    hi = [XI[1], Xs[1].ravel(), Q[1].ravel()] + ([XD[ks, 1].ravel()] if velocity else [])
+    if ns:
+        lo.append(np.tile(-sbound, S))
+        hi.append(np.tile(sbound, S))
+    lo, hi = np.concatenate(lo), np.concatenate(hi)
     if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo <= hi)):
         return None
     Jc, blo, bhi = loop_closure_rows(model, Xs, Q, XI) if closure is None else closure
@@ -357,15 +502,16 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
     rr = np.repeat(np.arange(nr), width)
     blocks.append((rr, cols[ok].ravel(), coef[ok].ravel(), bhi[kk, ii][ok]))
     blocks.append((rr, cols[ok].ravel(), -coef[ok].ravel(), -blo[kk, ii][ok]))
-    # drift of the reading error: q_l - q_k within the readings' difference and its error bound
-    for r, c, v, b in drift_rows(settings, qs, S, n):
-        blocks.append((r, m + S * n + np.asarray(c), v, b))
+    # drift of the reading error: q_k at m + S n + k n + i, s_k at m + 2 S n + nv + k n + i
+    for r, c, v, b in drift:
+        c = np.asarray(c)
+        blocks.append((r, m + S * n + c + np.where(c >= S * n, nv, 0), v, b))
     # motion: x at m + k n + i, v at m + 2 S n + k n + i
     for r, c, v, b in motion_rows(settings.t_s, settings.a_max, S, n, velocity):
         c = np.asarray(c)
         c = np.where(c < S * n, m + c, m + S * n + c)  # v columns: S n + ... -> m + 2 S n + ...
         blocks.append((r, c, v, b))
-    return _stack(blocks, m + 2 * S * n + nv, lo, hi)
+    return _stack(blocks, m + 2 * S * n + nv + ns, lo, hi)
 
 
 def _samples(X, size):
@@ -377,21 +523,32 @@ def _samples(X, size):
     return range(start, start + size)
 
 
-def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False):
-    """Which rows no single geometry and single motion explain: ``(R,)`` bool, True where proved.
+def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False,
+                    contract: bool = True):
+    """Refute and contract rows, one geometry and one motion at a time.
 
     Row ``r`` is the geometry box ``(XI[0][r], XI[1][r])`` (``(R, m)``) with the tubes ``X[r]``, ``XD[r]``
     (``(R, K, 2, n)``); it is refuted when no single geometry of its box and single motion within ``a_max``
     in its tubes explain the readings ``q`` ``(K, n)`` over ``size`` samples around its widest pose box
-    (proved: :func:`prove_infeasible`).  The loop closure of every row is linearised in one batch.
-    ``velocity``: velocity unknowns in ``XD`` and their rows (:func:`motion_rows`); off by default: on the
-    runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.
+    (proved: :func:`prove_infeasible`).  With ``contract``, the geometry box of a row not refuted is narrowed
+    to proved bounds of each parameter over the same relaxation (:meth:`_Solver.bounds`): every geometry
+    that explains the row with one motion stays in it.  The loop closure of every row is linearised in one
+    batch.  ``velocity``: velocity unknowns in ``XD`` and their rows (:func:`motion_rows`); off by default:
+    on the runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.
+
+    Returns
+    -------
+    refuted : ndarray ``(R,)`` bool
+    xi_lo, xi_hi : ndarray ``(R, m)``
+        The rows' geometry boxes, contracted (inside ``XI``; meaningless for a refuted row).
     """
     q = np.asarray(q, np.float64)
     R = len(XI[0])
     out = np.zeros(R, dtype=bool)
+    xlo, xhi = np.array(XI[0], dtype=np.float64), np.array(XI[1], dtype=np.float64)
     if R == 0:
-        return out
+        return out, xlo, xhi
+    m = xlo.shape[1]
     ks = [np.asarray(_samples(X[r], size)) for r in range(R)]
     S = len(ks[0])
     idx = np.concatenate(ks)
@@ -399,13 +556,26 @@ def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, v
     Xb = (X[rows, idx, 0], X[rows, idx, 1])
     with I.quiet_fp():
         closure = loop_closure_rows(model, Xb, reading_box(q[idx], settings.eps_q), (XI[0][rows], XI[1][rows]))
+    solver = _Solver()
     for r in range(R):
         part = tuple(v[r * S:(r + 1) * S] for v in closure)
-        system = row_system(model, settings, q, (XI[0][r], XI[1][r]), X[r], XD[r], ks[r], velocity, part)
-        if system is not None:
-            y = _phase_one(system)
-            out[r] = y is not None and prove_infeasible(system, y)
-    return out
+        system = row_system(model, settings, q, (xlo[r], xhi[r]), X[r], XD[r], ks[r], velocity, part)
+        if system is None:
+            continue
+        y = solver.phase_one(system)
+        if y is not None:
+            out[r] = prove_infeasible(system, y)
+        elif contract and solver.feasible:
+            lo, hi = solver.bounds(system, np.arange(m))  # ξ: the first m unknowns
+            xlo[r], xhi[r] = np.maximum(xlo[r], lo), np.minimum(xhi[r], hi)
+            out[r] = bool(np.any(xlo[r] > xhi[r]))  # no geometry left: refuted too
+    return out, xlo, xhi
+
+
+def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False):
+    """Which rows no single geometry and single motion explain: ``(R,)`` bool, True where proved
+    (:func:`one_motion_rows` without contraction)."""
+    return one_motion_rows(model, settings, q, XI, X, XD, size, velocity, contract=False)[0]
 
 
 def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False) -> bool:

@@ -30,7 +30,10 @@ recording may use every reading.  :func:`track_window` does so:
     spent, each of its rows is tested as one constant geometry and one motion
     over the samples around its widest pose box (:mod:`verifier.one_motion`,
     a linear relaxation whose infeasibility is proved by a Farkas certificate);
-    the rows proved impossible are dropped, which frees budget for halving.
+    the rows proved impossible are dropped, which frees budget for halving,
+    and the others' sub-boxes narrowed to the geometries the relaxation
+    allows (proved bounds by weak duality); a step that changed something
+    earns another round of passes with the narrowed sub-boxes.
 
 Every pass only removes what cannot hold under the tracker's assumptions and
 the hypothesis, so a refuted hypothesis is false (docs/soundness.md, "Window
@@ -51,7 +54,7 @@ from crosscert.robots.errors import InputError
 from . import interval as I
 from .linalg import point_inverse
 from .motion_model import contract_tubes
-from .one_motion import ONE_MOTION_SAMPLES, refute_rows
+from .one_motion import ONE_MOTION_SAMPLES, one_motion_rows
 from .settings import TrackerSettings, Verdict
 from .step import Backend, advance, configure, init_state, partition_xi, pose_solution_arrays, reading_box
 from .tracker import Tracker, initial_box_from_mode, verdict_of
@@ -71,6 +74,11 @@ _LAG_FK_TOL = 1e-4
 #: Rows (hypothesis, geometry sub-box) per kernel call of :class:`FixedLagWindow`: small, so that the
 #: rows left once the answer is settled are not run (the first call holds one row of each hypothesis).
 _LAG_BATCH = 2
+#: A one-motion step that narrows some sub-box by this fraction of a parameter's width (or drops a row) earns
+#: the hypothesis another round of passes without halving, up to :data:`ONE_MOTION_ROUNDS` times.
+ONE_MOTION_SHRINK = 0.1
+#: Rounds of passes a hypothesis may run after one-motion steps when its budget of sub-boxes is spent.
+ONE_MOTION_ROUNDS = 6
 #: Velocity widths above this (m/s) count as this much when measuring progress (unbounded tubes).
 _WIDTH_CAP = 1e3
 
@@ -345,10 +353,13 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         hypothesis is never refuted, and its rounds are the costly ones.
         ``None``: both hypotheses.
     one_motion : int
-        Samples of the one-motion refutation (:mod:`verifier.one_motion`): after each round, before
-        halving, a row is dropped when no single geometry of its sub-box and single motion within
-        ``a_max`` in its tubes explain the readings over this many samples around its widest pose box
-        (proved by a Farkas certificate).  0: not tried.
+        Samples of the one-motion step (:mod:`verifier.one_motion`): once the budget of sub-boxes is
+        spent, after each round, a row is dropped when no single geometry of its sub-box and single
+        motion within ``a_max`` in its tubes explain the readings over this many samples around its
+        widest pose box (proved by a Farkas certificate), and the others' sub-boxes are narrowed to
+        proved bounds of the geometries that can; a step that dropped or narrowed (by
+        :data:`ONE_MOTION_SHRINK`) earns another round without halving, up to :data:`ONE_MOTION_ROUNDS`.
+        0: not tried.
 
     Returns
     -------
@@ -495,6 +506,7 @@ class _Hypothesis:
         self.passes = 0
         self.refutation = Refutation.NONE
         self.complete = True  # False once the rounds stopped before this hypothesis used its budget
+        self.extra = 0  # rounds run after one-motion steps without halving (ONE_MOTION_ROUNDS)
         self._final_boxes()
 
     @property
@@ -538,13 +550,25 @@ class _Hypothesis:
             self.refutation = Refutation.EMPTY_TUBE if np.all(dead) else Refutation.OTHER_MODE
         self._keep(live)
 
-    def refute_one_motion(self, q, samples):
+    def one_motion(self, q, samples) -> bool:
         """Drop the rows that no single geometry of their sub-box and single motion in their tubes explain
-        over ``samples`` samples of the readings ``q`` (:func:`verifier.one_motion.refute_rows`)."""
-        live = ~refute_rows(self.finals.model, self.finals.s, q, (self.xlo, self.xhi), self.tx, self.txd, samples)
+        over ``samples`` samples of the readings ``q``, and narrow the others' sub-boxes to the geometries
+        that can (:func:`verifier.one_motion.one_motion_rows`).  True when a row was dropped or a sub-box
+        narrowed by at least :data:`ONE_MOTION_SHRINK` along some parameter (another round may then decide
+        more)."""
+        out, lo, hi = one_motion_rows(self.finals.model, self.finals.s, q, (self.xlo, self.xhi), self.tx, self.txd,
+                                      samples)
+        w0 = self.xhi - self.xlo
+        # the proved bounds only narrow: intersecting is exact and keeps each sub-box inside its own
+        self.xlo, self.xhi = np.maximum(self.xlo, lo), np.minimum(self.xhi, hi)
+        live = ~out & np.all(self.xlo <= self.xhi, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            narrowed = np.any((self.xhi - self.xlo) < (1.0 - ONE_MOTION_SHRINK) * w0, axis=1)
+        changed = bool(np.any(~live) or np.any(narrowed[live]))
         if not live.any():
             self.refutation = Refutation.ONE_MOTION
         self._keep(live)
+        return changed
 
     def split(self, full_w, q_first):
         """Halve every surviving geometry sub-box along the parameter that spreads the pose most at the two
@@ -660,9 +684,12 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=N
         _round(h, passes, max_passes, rel_tol)
         rows[i] += passes.rows - before
         if one_motion and not h.refuted and 2 * len(h.xlo) > max_geometries:
-            # the budget is spent: the one-motion test is the last resort, and the rows it drops give the
-            # halving room again (each row costs about as much as a few passes over the recording)
-            h.refute_one_motion(passes.q, one_motion)
+            # the budget is spent: the one-motion step is the last resort; the rows it drops give the halving
+            # room again, and the sub-boxes it narrows tighten the next round's tubes
+            changed = h.one_motion(passes.q, one_motion)
+            if changed and not h.refuted and 2 * len(h.xlo) > max_geometries and h.extra < ONE_MOTION_ROUNDS:
+                h.extra += 1
+                continue  # another round with the narrowed sub-boxes, no halving
         if not h.refuted and 2 * len(h.xlo) <= max_geometries:
             h.split(full_w, passes.q[0])  # may refute it: no child has a final box
         elif not h.refuted:

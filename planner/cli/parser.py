@@ -205,9 +205,9 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
     ce.add_argument("--a-peak", type=number, default=PLAN_A_PEAK, help="peak acceleration of the planned ramps, m/s^2")
     ce.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
     ce.add_argument("--one-motion", type=count, default=0, metavar="SAMPLES",
-                    help="also refute, in the window passes, every geometry sub-box left when the budget is spent by "
-                         "one geometry and one motion over this many samples (40: v_min 0.945 instead of 0.961 m/s on "
-                         "the default task, at about 1.5 times the time; 0: off)")
+                    help="also refute and narrow, in the window passes, every geometry sub-box left when the budget is "
+                         "spent by one geometry and one motion over this many samples (40: v_min 0.929 instead of "
+                         "0.961 m/s on the default task, at about 2.3 times the time; 0: off)")
     ce.add_argument("--v-low", type=number, default=V_LOW, help="slowest speed tried, m/s")
     ce.add_argument("--v-high", type=number, help="fastest speed tried, m/s (default: the fastest the segment allows)")
     ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
