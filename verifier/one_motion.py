@@ -168,7 +168,9 @@ class _Solver:
     bounds differ a little).  A float search only: :func:`prove_infeasible` decides."""
 
     def __init__(self):
-        self.highs = highspy._Highs()  # the bare solver: no banner, no callbacks
+        # the bare solver (no banner, no callbacks) where highspy exposes it, else its public subclass;
+        # both silenced by output_flag below
+        self.highs = getattr(highspy, "_Highs", highspy.Highs)()
         for name, value in (("output_flag", False), ("presolve", "off"), ("simplex_strategy", 4),
                             ("threads", 1)):
             self.highs.setOptionValue(name, value)
