@@ -14,11 +14,16 @@ checks that ``a * b + c`` stays two rounded operations.
 
 from __future__ import annotations
 
+import collections
 import math
+import threading
+import types as pytypes
 
 import numpy as np
 from llvmlite import ir
+from numba import config as numba_config
 from numba import njit, types
+from numba.core.registry import CPUDispatcher
 from numba.extending import intrinsic
 
 from ..interval import TRIG_ULPS
@@ -29,22 +34,75 @@ MAX = float(np.finfo(np.float64).max)
 TWO_PI = 2.0 * math.pi
 _TRIG_ULPS = float(TRIG_ULPS)
 
+#: The flags of every kernel.  Without numba's runtime (``_nrt=False``): the
+#: kernels never allocate, and with the runtime every array passed to a callee
+#: costs an atomic reference-count increment and decrement, a third of the
+#: tracker's time (benchmarks/README.md).
+KERNEL_FLAGS = {"nogil": True, "_nrt": False}
+#: Options of a kernel only compiled code calls: no CPython wrapper (the
+#: unboxing of every argument, with an inlined copy of the body) and no C
+#: wrapper; numba compiles and optimises each function's library with all it
+#: calls, so the wrappers cost in every caller's compilation too.
+NO_WRAPPERS = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+
+
+class Kernel(CPUDispatcher):
+    """A numba dispatcher compiled without the CPython and C wrappers
+    (:data:`NO_WRAPPERS`): for kernels that only other compiled code calls.
+
+    numba would call such a function from Python through a null address, so a
+    call from Python (tests, a session) runs a *twin* instead: the same Python
+    function compiled with the same options and the wrappers, built on the
+    first such call.  The drivers that :mod:`verifier` calls are entry points
+    with wrappers (:data:`cached_jit`); :attr:`python_calls` counts the calls
+    that went through a twin, by kernel name (tests check that the package's
+    own calls never do)."""
+
+    python_calls: collections.Counter = collections.Counter()
+    _twin_lock = threading.Lock()
+
+    def __call__(self, *args, **kwargs):
+        twin = self.__dict__.get("_twin")
+        if twin is None:
+            with Kernel._twin_lock:
+                twin = self.__dict__.get("_twin")
+                if twin is None:
+                    f = self.py_func
+                    # a function object of its own: numba tells a recursion by the function object, and
+                    # a recursive kernel's twin calls the kernel itself
+                    fn = pytypes.FunctionType(f.__code__, f.__globals__, f.__name__, f.__defaults__, f.__closure__)
+                    fn.__qualname__, fn.__module__, fn.__doc__ = f.__qualname__, f.__module__, f.__doc__
+                    options = {k: v for k, v in self.targetoptions.items() if k not in NO_WRAPPERS}
+                    twin = self.__dict__["_twin"] = CPUDispatcher(py_func=fn, locals=self.locals,
+                                                                 targetoptions=options)
+        Kernel.python_calls[self.py_func.__qualname__] += 1
+        return twin(*args, **kwargs)
+
+
+def kernel(**options):
+    """Decorator: a :class:`Kernel` with numba's ``options`` (and :data:`NO_WRAPPERS`)."""
+
+    def build(fn):
+        if numba_config.DISABLE_JIT:
+            return fn
+        return Kernel(py_func=fn, locals={}, targetoptions={**options, **NO_WRAPPERS})
+
+    return build
+
+
 #: The decorator of every kernel called from other kernels.  Not cached on its
 #: own: numba caches the machine code of a top-level kernel (the step drivers,
 #: the first sample's branch and prune) with everything it calls, and caching
 #: each callee too would generate the machine code of its whole call tree once
-#: more per callee at the first run (most of the compilation time).  Without
-#: numba's runtime (``_nrt=False``): the kernels never allocate, and with the
-#: runtime every array passed to a callee costs an atomic reference-count
-#: increment and decrement, a third of the tracker's time (benchmarks/README.md).
-KERNEL_FLAGS = {"nogil": True, "_nrt": False}
-jit = njit(**KERNEL_FLAGS)
-#: The top-level kernels called from Python (the step drivers of
-#: :mod:`verifier.compiled.step` add ``parallel``): the caller allocates.
+#: more per callee at the first run (most of the compilation time).
+jit = kernel(**KERNEL_FLAGS)
+#: The entry points called from Python (the step drivers of
+#: :mod:`verifier.compiled.step` add ``parallel``): with numba's wrappers,
+#: cached on disk with all they call; the caller allocates.
 cached_jit = njit(cache=True, **KERNEL_FLAGS)
 #: IEEE division as numpy's (x / 0 is inf or NaN): numba's default raises
 #: ZeroDivisionError, which an empty divisor such as [0.3, 0] reached.
-_ieee_jit = njit(error_model="numpy", **KERNEL_FLAGS)
+_ieee_jit = kernel(error_model="numpy", **KERNEL_FLAGS)
 
 
 @intrinsic

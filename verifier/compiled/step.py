@@ -56,14 +56,14 @@ from .contractors import (
     velocity_gs,
 )
 from .linalg import linear_enclosure
-from .ops import KERNEL_FLAGS, jit
+from .ops import KERNEL_FLAGS, NO_WRAPPERS, jit, kernel
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 
 #: Kernels inlined into their callers' IR: no compiled function (and Python entry) of their own.  Each
 #: compiled function costs its own typing and machine code of all it calls, a second or more for the
 #: callees of the row step (benchmarks/README.md, "Compile only the velocity model in use").
-inline_jit = njit(inline="always", **KERNEL_FLAGS)
+inline_jit = kernel(inline="always", **KERNEL_FLAGS)
 
 
 class Rows(NamedTuple):
@@ -450,7 +450,7 @@ def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qd
     raise NotImplementedError("compiled code only")
 
 
-@overload(row_step, jit_options=KERNEL_FLAGS)
+@overload(row_step, jit_options={**KERNEL_FLAGS, **NO_WRAPPERS})
 def _row_step_of(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
     return _ROW_STEPS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
 
