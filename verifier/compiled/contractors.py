@@ -24,7 +24,7 @@ from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
 # differences of the baselines follow from TB_DQ on
 # numpy integers: one compiled copy of the box helpers for every slot (see verifier.compiled.tape.T_F)
-TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = (np.int64(i) for i in range(10))
+TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_SWEEP, TB_QN, TB_DQ = (np.int64(i) for i in range(11))
 #: Constant arguments of callees as numpy scalars, never Python literals: numba compiles a callee
 #: once more for every literal argument (``newton(..., True, ...)`` and ``newton(..., False, ...)``
 #: were two compilations of the whole Newton step; 19 of 88 such copies; tests/test_kernel_compilation.py).
@@ -312,6 +312,16 @@ def empty_box(B, b, k):
 
 
 @jit
+def same_box(A, a, B, b, k):
+    """Whether the boxes ``A[a]`` and ``B[b]`` (``k`` components) have the same bit patterns (``-0.0``
+    and ``0.0`` differ, a NaN matches only its own pattern): inputs a kernel cannot tell apart."""
+    for i in range(k):
+        if ops._bits(A[a, 0, i]) != ops._bits(B[b, 0, i]) or ops._bits(A[a, 1, i]) != ops._bits(B[b, 1, i]):
+            return False
+    return True
+
+
+@jit
 def inverted_box(B, b, k):
     """Whether some ``lo > hi``: the branch and prunes' test (as the
     reference's ``np.any(lo > hi)``, a NaN bound does not count)."""
@@ -330,7 +340,11 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     Pieces are split generation by generation, in the reference's order: the
     kept pieces, then every left half, then every right half.  The two
     generations live in ``sc.pieces[:cap]`` and ``sc.pieces[cap:]``, their
-    modes and split flags in ``sc.wi[wi0:]``.
+    modes and split flags in ``sc.wi[wi0:]``.  Two computations of the
+    reference are skipped because their results are known bit for bit: the
+    mode of a piece kept unsplit (its box, ``Q[iq]`` and ``XI[ixi]`` are those
+    it was computed from), and the sweeps of a piece after one that left it
+    unchanged (each would repeat it).
     """
     cap = 2 * max_pieces + 2
     P = sc.pieces
@@ -339,11 +353,13 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     wi = sc.wi
     tb = sc.tb
     N = 1
+    known = 0  # pieces 0 .. known - 1 were kept unsplit: their boxes and modes are those of the last generation
     copy_box(X, ix, P, I0, n)
     while True:
         any_split = False
         for p in range(N):
-            wi[pm + p] = mode_of(prog, P, p, Q, iq, XI, ixi, n, m, sc)
+            if p >= known:  # the mode is a function of the piece, Q[iq] and XI[ixi], none of which changed
+                wi[pm + p] = mode_of(prog, P, p, Q, iq, XI, ixi, n, m, sc)
             wmax = P[p, 1, 0] - P[p, 0, 0]
             for i in range(1, n):
                 wmax = ops.maxn(wmax, P[p, 1, i] - P[p, 0, i])
@@ -356,7 +372,9 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
         for p in range(N):
             if wi[sp + p] == 0:
                 copy_box(P, p, P, cap + M, n)
+                wi[pm + M] = wi[pm + p]  # M <= p: overwrites only modes already read
                 M += 1
+        known = M
         for side in range(2):
             for p in range(N):
                 if wi[sp + p] == 0:
@@ -376,6 +394,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
                     tb[TB_PIECE, 0, d] = mid
                 alive = True
                 for _ in range(sweeps):
+                    copy_box(tb, TB_PIECE, tb, TB_SWEEP, n)
                     hc4_pose(prog, tb, TB_PIECE, Q, iq, XI, ixi, n, m, sc, NO)
                     if inverted_box(tb, TB_PIECE, n):
                         alive = False
@@ -383,6 +402,10 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
                     newton(prog, tb, TB_PIECE, Q, iq, XI, ixi, YES, n, m, sc)
                     if inverted_box(tb, TB_PIECE, n):
                         alive = False
+                        break
+                    # a sweep that left the piece as it was: the next ones would repeat it float for float
+                    # (Q[iq], XI[ixi] are not contracted here), so they are skipped
+                    if same_box(tb, TB_PIECE, tb, TB_SWEEP, n):
                         break
                 if alive:
                     copy_box(tb, TB_PIECE, P, cap + M, n)
