@@ -137,10 +137,10 @@ def pmat_imat(w, c, ml, mh, gl, gh, n):
     for i in range(n):
         for j in range(n):
             ci = w[c + i * n]
-            lo, hi = ops.mul(ci, ci, w[ml + j], w[mh + j])
+            lo, hi = ops.pmul(ci, w[ml + j], w[mh + j])
             for k in range(1, n):
                 ck = w[c + i * n + k]
-                pl, ph = ops.mul(ck, ck, w[ml + k * n + j], w[mh + k * n + j])
+                pl, ph = ops.pmul(ck, w[ml + k * n + j], w[mh + k * n + j])
                 lo, hi = ops.add(lo, hi, pl, ph)
             w[gl + i * n + j] = lo
             w[gh + i * n + j] = hi
@@ -151,10 +151,10 @@ def pmat_ivec(w, c, vl, vh, ol, oh, n):
     """``[o] <- C [v]``."""
     for i in range(n):
         ci = w[c + i * n]
-        lo, hi = ops.mul(ci, ci, w[vl], w[vh])
+        lo, hi = ops.pmul(ci, w[vl], w[vh])
         for k in range(1, n):
             ck = w[c + i * n + k]
-            pl, ph = ops.mul(ck, ck, w[vl + k], w[vh + k])
+            pl, ph = ops.pmul(ck, w[vl + k], w[vh + k])
             lo, hi = ops.add(lo, hi, pl, ph)
         w[ol + i] = lo
         w[oh + i] = hi
