@@ -17,7 +17,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import ops
-from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
+from .linalg import gauss_seidel, pmat_imat, pmat_ivec, point_inverse, precondition, solve_preconditioned
 from .ops import cached_jit, jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 
@@ -208,10 +208,13 @@ def mode_of(prog, X, ix, Q, iq, XI, ixi, n, m, sc):
 
 
 @jit
-def _solve_vel(prog, sc, y, slack, sweeps, off, n):
+def _solve_vel(prog, sc, y, slack, sweeps, off, n, same_a):
     # evaluate the vel tape (inputs already set), then [y] (at w[y], w[y + n])
     # <- enclosure of J_x u = -J_q qd from the start box [y] (+ slack at
-    # w[slack], w[slack + n], when slack >= 0) (+ slack after)
+    # w[slack], w[slack + n], when slack >= 0) (+ slack after).  With same_a,
+    # w[off:] holds the last call's J_x and its preconditioning, untouched since:
+    # when this J_x has the same bits (the baselines' hulls often coincide), the
+    # preconditioning is the same floats and is not computed again
     w = sc.w
     nn = n * n
     forward(prog, T_VEL, sc.il, sc.ih, sc.nl, sc.nh, sc.mk, sc.mv)
@@ -223,7 +226,11 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
     yh = yl + n
     for i in range(n):
         for j in range(n):
-            w[jl + i * n + j], w[jh + i * n + j] = output(prog, T_VEL, i * n + j, sc.nl, sc.nh)
+            lo, hi = output(prog, T_VEL, i * n + j, sc.nl, sc.nh)
+            e = i * n + j
+            same_a = same_a and ops._bits(lo) == ops._bits(w[jl + e]) and ops._bits(hi) == ops._bits(w[jh + e])
+            w[jl + e] = lo
+            w[jh + e] = hi
         rl, rh = output(prog, T_VEL, nn + i, sc.nl, sc.nh)
         w[bl + i] = -rh
         w[bh + i] = -rl
@@ -233,7 +240,9 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
             w[yh + i] = w[y + n + i]
         else:
             w[yl + i], w[yh + i] = ops.add(w[y + i], w[y + n + i], w[slack + i], w[slack + n + i])
-    linear_enclosure(w, jl, jh, bl, bh, yl, yh, n, YES, sweeps, yh + n)
+    if not same_a:
+        precondition(w, jl, jh, n, yh + n)
+    solve_preconditioned(w, bl, bh, yl, yh, n, YES, sweeps, yh + n)
     for i in range(n):
         if slack < 0:
             w[y + i] = w[yl + i]
@@ -251,7 +260,7 @@ def velocity_gs(prog, X, ix, Q, iq, XI, ixi, XD, ixd, QD, iqd, n, m, sc):
     for i in range(n):
         w[i] = XD[ixd, 0, i]
         w[n + i] = XD[ixd, 1, i]
-    _solve_vel(prog, sc, I0, NO_SLACK, ONE, 2 * n, n)
+    _solve_vel(prog, sc, I0, NO_SLACK, ONE, 2 * n, n, NO)
     for i in range(n):
         XD[ixd, 0, i] = w[i]
         XD[ixd, 1, i] = w[n + i]
@@ -268,7 +277,7 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
     ``(q_k - q_{k-j}) / h_j`` (rad/s; the same for every iteration of a sample, so
     the caller divides once);
     ``baseline[j]`` holds ``h_j`` (``h_lo``, ``h_hi``, s); ``axis[i].a_max``
-    m/s^2.  Uses ``sc.w[:12 n + 7 n^2]``.
+    m/s^2.  Uses ``sc.w[:12 n + 7 n^2 + 1]``.
     """
     if n_base == 0:
         return
@@ -293,7 +302,8 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
             w[slack + i], w[slack + n + i] = ops.mul(-half_h, half_h, -a, a)
             w[u + i] = XD[ixd, 0, i]
             w[u + n + i] = XD[ixd, 1, i]
-        _solve_vel(prog, sc, u, slack, ONE, 6 * n, n)
+        # the baselines before this one wrote w[6 n:] last (nothing else runs in between)
+        _solve_vel(prog, sc, u, slack, ONE, 6 * n, n, jb > 0)
         for i in range(n):
             w[accl + i] = w[u + i] if jb == 0 else ops.maxn(w[accl + i], w[u + i])
             w[acch + i] = w[u + n + i] if jb == 0 else ops.minn(w[acch + i], w[u + n + i])
