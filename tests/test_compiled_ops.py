@@ -150,6 +150,14 @@ def test_scale_bitwise():
     _check_both("scale", I.scale(*args), args)
 
 
+def test_point_times_interval_is_mul_bitwise():
+    """``pmul(c, [b])``, two products instead of four, is ``mul([c, c], [b])`` float for float."""
+    cs = np.concatenate([np.array(SPECIAL), _random_bounds(RNG, 40)])
+    c, k = (g.ravel() for g in np.meshgrid(cs, np.arange(1500)))
+    args = (c, UNARY_ARGS[0][k], UNARY_ARGS[1][k])
+    _assert_same("pmul", _scalar(ops.pmul, *args), I.mul(c, c, args[1], args[2]), args)
+
+
 def _trig_intervals(rng):
     x = np.concatenate([
         rng.uniform(-10.0, 10.0, 10_000),

@@ -49,3 +49,31 @@ def test_point_inverse_bitwise(n):
     got = _compiled_inverse(A, n)
     bad = np.nonzero(np.any(got.view(np.int64) != want.view(np.int64), axis=(1, 2)))[0]
     assert bad.size == 0, f"{bad.size} matrices differ, first {A[bad[0]]}: {got[bad[0]]} != {want[bad[0]]}"
+
+
+@pytest.mark.parametrize("n", [2, 3])
+def test_one_preconditioning_serves_several_right_hand_sides(n):
+    """The velocity contractor preconditions a matrix once for the baselines whose ``[J_x]`` has the
+    same bits (:func:`verifier.compiled.contractors._solve_vel`): :func:`precondition` once, then
+    :func:`solve_preconditioned` for each ``[b]`` and start box, gives the reference's
+    ``linear_enclosure`` of every system bit for bit."""
+    rng = np.random.default_rng(31 + n)
+    nn = n * n
+    al, ah, bl, bh, yl, yh, t = 0, nn, 2 * nn, 2 * nn + n, 2 * nn + 2 * n, 2 * nn + 3 * n, 2 * nn + 4 * n
+    for _ in range(60):
+        mid = rng.normal(size=(n, n)) + 3 * np.eye(n)
+        rad = np.abs(rng.normal(size=(n, n))) * 10.0 ** rng.integers(-6, 0)
+        w = np.zeros(t + K.enclosure_scratch(n))
+        w[al:ah], w[ah:bl] = (mid - rad).ravel(), (mid + rad).ravel()
+        K.precondition(w, np.int64(al), np.int64(ah), np.int64(n), np.int64(t))
+        for _ in range(4):
+            b = rng.normal(size=n)
+            b_lo, b_hi = b - 0.1 * rng.random(n), b + 0.1 * rng.random(n)
+            y0 = np.abs(rng.normal(size=n)) * rng.choice([0.5, 100.0])
+            w[bl:bh], w[bh:yl], w[yl:yh], w[yh:t] = b_lo, b_hi, -y0, y0
+            K.solve_preconditioned(w, np.int64(bl), np.int64(bh), np.int64(yl), np.int64(yh), np.int64(n),
+                                   True, np.int64(1), np.int64(t))
+            want = ref.linear_enclosure((mid - rad)[None], (mid + rad)[None], b_lo[None], b_hi[None], -y0[None],
+                                        y0[None], sweeps=1)
+            for got, exp in ((w[yl:yh], want[0][0]), (w[yh:t], want[1][0])):
+                assert np.array_equal(got.view(np.int64), exp.view(np.int64)), (got, exp)

@@ -17,14 +17,14 @@ from typing import NamedTuple
 import numpy as np
 
 from . import ops
-from .linalg import gauss_seidel, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
+from .linalg import gauss_seidel, pmat_imat, pmat_ivec, point_inverse, precondition, solve_preconditioned
 from .ops import cached_jit, jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
 # differences of the baselines follow from TB_DQ on
 # numpy integers: one compiled copy of the box helpers for every slot (see verifier.compiled.tape.T_F)
-TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_QN, TB_DQ = (np.int64(i) for i in range(10))
+TB_QD, TB_XIW, TB_XS, TB_XDS, TB_ACC, TB_Q0, TB_QS, TB_PIECE, TB_SWEEP, TB_QN, TB_DQ = (np.int64(i) for i in range(11))
 #: Constant arguments of callees as numpy scalars, never Python literals: numba compiles a callee
 #: once more for every literal argument (``newton(..., True, ...)`` and ``newton(..., False, ...)``
 #: were two compilations of the whole Newton step; 19 of 88 such copies; tests/test_kernel_compilation.py).
@@ -208,10 +208,13 @@ def mode_of(prog, X, ix, Q, iq, XI, ixi, n, m, sc):
 
 
 @jit
-def _solve_vel(prog, sc, y, slack, sweeps, off, n):
+def _solve_vel(prog, sc, y, slack, sweeps, off, n, same_a):
     # evaluate the vel tape (inputs already set), then [y] (at w[y], w[y + n])
     # <- enclosure of J_x u = -J_q qd from the start box [y] (+ slack at
-    # w[slack], w[slack + n], when slack >= 0) (+ slack after)
+    # w[slack], w[slack + n], when slack >= 0) (+ slack after).  With same_a,
+    # w[off:] holds the last call's J_x and its preconditioning, untouched since:
+    # when this J_x has the same bits (the baselines' hulls often coincide), the
+    # preconditioning is the same floats and is not computed again
     w = sc.w
     nn = n * n
     forward(prog, T_VEL, sc.il, sc.ih, sc.nl, sc.nh, sc.mk, sc.mv)
@@ -223,7 +226,11 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
     yh = yl + n
     for i in range(n):
         for j in range(n):
-            w[jl + i * n + j], w[jh + i * n + j] = output(prog, T_VEL, i * n + j, sc.nl, sc.nh)
+            lo, hi = output(prog, T_VEL, i * n + j, sc.nl, sc.nh)
+            e = i * n + j
+            same_a = same_a and ops._bits(lo) == ops._bits(w[jl + e]) and ops._bits(hi) == ops._bits(w[jh + e])
+            w[jl + e] = lo
+            w[jh + e] = hi
         rl, rh = output(prog, T_VEL, nn + i, sc.nl, sc.nh)
         w[bl + i] = -rh
         w[bh + i] = -rl
@@ -233,7 +240,9 @@ def _solve_vel(prog, sc, y, slack, sweeps, off, n):
             w[yh + i] = w[y + n + i]
         else:
             w[yl + i], w[yh + i] = ops.add(w[y + i], w[y + n + i], w[slack + i], w[slack + n + i])
-    linear_enclosure(w, jl, jh, bl, bh, yl, yh, n, YES, sweeps, yh + n)
+    if not same_a:
+        precondition(w, jl, jh, n, yh + n)
+    solve_preconditioned(w, bl, bh, yl, yh, n, YES, sweeps, yh + n)
     for i in range(n):
         if slack < 0:
             w[y + i] = w[yl + i]
@@ -251,7 +260,7 @@ def velocity_gs(prog, X, ix, Q, iq, XI, ixi, XD, ixd, QD, iqd, n, m, sc):
     for i in range(n):
         w[i] = XD[ixd, 0, i]
         w[n + i] = XD[ixd, 1, i]
-    _solve_vel(prog, sc, I0, NO_SLACK, ONE, 2 * n, n)
+    _solve_vel(prog, sc, I0, NO_SLACK, ONE, 2 * n, n, NO)
     for i in range(n):
         XD[ixd, 0, i] = w[i]
         XD[ixd, 1, i] = w[n + i]
@@ -268,7 +277,7 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
     ``(q_k - q_{k-j}) / h_j`` (rad/s; the same for every iteration of a sample, so
     the caller divides once);
     ``baseline[j]`` holds ``h_j`` (``h_lo``, ``h_hi``, s); ``axis[i].a_max``
-    m/s^2.  Uses ``sc.w[:12 n + 7 n^2]``.
+    m/s^2.  Uses ``sc.w[:12 n + 7 n^2 + 1]``.
     """
     if n_base == 0:
         return
@@ -293,7 +302,8 @@ def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, 
             w[slack + i], w[slack + n + i] = ops.mul(-half_h, half_h, -a, a)
             w[u + i] = XD[ixd, 0, i]
             w[u + n + i] = XD[ixd, 1, i]
-        _solve_vel(prog, sc, u, slack, ONE, 6 * n, n)
+        # the baselines before this one wrote w[6 n:] last (nothing else runs in between)
+        _solve_vel(prog, sc, u, slack, ONE, 6 * n, n, jb > 0)
         for i in range(n):
             w[accl + i] = w[u + i] if jb == 0 else ops.maxn(w[accl + i], w[u + i])
             w[acch + i] = w[u + n + i] if jb == 0 else ops.minn(w[acch + i], w[u + n + i])
@@ -309,6 +319,16 @@ def empty_box(B, b, k):
         if not (B[b, 0, i] <= B[b, 1, i]):
             return True
     return False
+
+
+@jit
+def same_box(A, a, B, b, k):
+    """Whether the boxes ``A[a]`` and ``B[b]`` (``k`` components) have the same bit patterns (``-0.0``
+    and ``0.0`` differ, a NaN matches only its own pattern): inputs a kernel cannot tell apart."""
+    for i in range(k):
+        if ops._bits(A[a, 0, i]) != ops._bits(B[b, 0, i]) or ops._bits(A[a, 1, i]) != ops._bits(B[b, 1, i]):
+            return False
+    return True
 
 
 @jit
@@ -330,7 +350,11 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     Pieces are split generation by generation, in the reference's order: the
     kept pieces, then every left half, then every right half.  The two
     generations live in ``sc.pieces[:cap]`` and ``sc.pieces[cap:]``, their
-    modes and split flags in ``sc.wi[wi0:]``.
+    modes and split flags in ``sc.wi[wi0:]``.  Two computations of the
+    reference are skipped because their results are known bit for bit: the
+    mode of a piece kept unsplit (its box, ``Q[iq]`` and ``XI[ixi]`` are those
+    it was computed from), and the sweeps of a piece after one that left it
+    unchanged (each would repeat it).
     """
     cap = 2 * max_pieces + 2
     P = sc.pieces
@@ -339,11 +363,13 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     wi = sc.wi
     tb = sc.tb
     N = 1
+    known = 0  # pieces 0 .. known - 1 were kept unsplit: their boxes and modes are those of the last generation
     copy_box(X, ix, P, I0, n)
     while True:
         any_split = False
         for p in range(N):
-            wi[pm + p] = mode_of(prog, P, p, Q, iq, XI, ixi, n, m, sc)
+            if p >= known:  # the mode is a function of the piece, Q[iq] and XI[ixi], none of which changed
+                wi[pm + p] = mode_of(prog, P, p, Q, iq, XI, ixi, n, m, sc)
             wmax = P[p, 1, 0] - P[p, 0, 0]
             for i in range(1, n):
                 wmax = ops.maxn(wmax, P[p, 1, i] - P[p, 0, i])
@@ -356,7 +382,9 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
         for p in range(N):
             if wi[sp + p] == 0:
                 copy_box(P, p, P, cap + M, n)
+                wi[pm + M] = wi[pm + p]  # M <= p: overwrites only modes already read
                 M += 1
+        known = M
         for side in range(2):
             for p in range(N):
                 if wi[sp + p] == 0:
@@ -376,6 +404,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
                     tb[TB_PIECE, 0, d] = mid
                 alive = True
                 for _ in range(sweeps):
+                    copy_box(tb, TB_PIECE, tb, TB_SWEEP, n)
                     hc4_pose(prog, tb, TB_PIECE, Q, iq, XI, ixi, n, m, sc, NO)
                     if inverted_box(tb, TB_PIECE, n):
                         alive = False
@@ -383,6 +412,10 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
                     newton(prog, tb, TB_PIECE, Q, iq, XI, ixi, YES, n, m, sc)
                     if inverted_box(tb, TB_PIECE, n):
                         alive = False
+                        break
+                    # a sweep that left the piece as it was: the next ones would repeat it float for float
+                    # (Q[iq], XI[ixi] are not contracted here), so they are skipped
+                    if same_box(tb, TB_PIECE, tb, TB_SWEEP, n):
                         break
                 if alive:
                     copy_box(tb, TB_PIECE, P, cap + M, n)

@@ -137,10 +137,10 @@ def pmat_imat(w, c, ml, mh, gl, gh, n):
     for i in range(n):
         for j in range(n):
             ci = w[c + i * n]
-            lo, hi = ops.mul(ci, ci, w[ml + j], w[mh + j])
+            lo, hi = ops.pmul(ci, w[ml + j], w[mh + j])
             for k in range(1, n):
                 ck = w[c + i * n + k]
-                pl, ph = ops.mul(ck, ck, w[ml + k * n + j], w[mh + k * n + j])
+                pl, ph = ops.pmul(ck, w[ml + k * n + j], w[mh + k * n + j])
                 lo, hi = ops.add(lo, hi, pl, ph)
             w[gl + i * n + j] = lo
             w[gh + i * n + j] = hi
@@ -151,10 +151,10 @@ def pmat_ivec(w, c, vl, vh, ol, oh, n):
     """``[o] <- C [v]``."""
     for i in range(n):
         ci = w[c + i * n]
-        lo, hi = ops.mul(ci, ci, w[vl], w[vh])
+        lo, hi = ops.pmul(ci, w[vl], w[vh])
         for k in range(1, n):
             ck = w[c + i * n + k]
-            pl, ph = ops.mul(ck, ck, w[vl + k], w[vh + k])
+            pl, ph = ops.pmul(ck, w[vl + k], w[vh + k])
             lo, hi = ops.add(lo, hi, pl, ph)
         w[ol + i] = lo
         w[oh + i] = hi
@@ -184,7 +184,7 @@ def gauss_seidel(w, al, ah, bl, bh, yl, yh, n, sweeps):
 @jit
 def enclosure_scratch(n):
     """Scratch floats :func:`linear_enclosure` needs after its offset ``t``."""
-    return 5 * n * n + 2 * n
+    return 5 * n * n + 2 * n + 1
 
 
 @jit
@@ -192,21 +192,29 @@ def linear_enclosure(w, al, ah, bl, bh, yl, yh, n, has_y, sweeps, t):
     """Enclose ``{y : A y = b}`` into ``[y]`` in place (see
     :func:`verifier.linalg.linear_enclosure`); ``has_y`` False: ``[y]`` is
     only the Neumann-series bound.  ``w[t:]`` is scratch
-    (:func:`enclosure_scratch`)."""
+    (:func:`enclosure_scratch`).  The two halves :func:`precondition` (of
+    ``[A]`` only) and :func:`solve_preconditioned`."""
+    precondition(w, al, ah, n, t)
+    solve_preconditioned(w, bl, bh, yl, yh, n, has_y, sweeps, t)
+
+
+@jit
+def precondition(w, al, ah, n, t):
+    """The part of :func:`linear_enclosure` that depends on ``[A]`` alone: the
+    midpoint inverse ``C``, ``[G] = C [A]`` and the bound ``beta`` of
+    ``|I - [G]|``, kept in ``w[t:]`` for :func:`solve_preconditioned` (so a
+    system with the same ``[A]``, bit for bit, can skip it)."""
     nn = n * n
     mid = t
     c = t + nn
     gl = t + 2 * nn
     gh = t + 3 * nn
-    cl = t + 4 * nn
-    ch = cl + n
+    ch = t + 4 * nn + n
     for i in range(nn):
         w[mid + i] = ops.midpoint(w[al + i], w[ah + i])
     point_inverse(w, mid, c, ch + n, n)
     pmat_imat(w, c, al, ah, gl, gh, n)
-    pmat_ivec(w, c, bl, bh, cl, ch, n)
     beta = 0.0
-    cmag = 0.0
     for i in range(n):
         row = 0.0
         for k in range(n):
@@ -215,6 +223,22 @@ def linear_enclosure(w, al, ah, bl, bh, yl, yh, n, has_y, sweeps, t):
             mag = ops.maxn(abs(el), abs(eh))
             row = mag if k == 0 else ops.add(row, row, mag, mag)[1]
         beta = row if i == 0 else ops.maxn(beta, row)
+    w[t + 5 * nn + 2 * n] = beta
+
+
+@jit
+def solve_preconditioned(w, bl, bh, yl, yh, n, has_y, sweeps, t):
+    """The rest of :func:`linear_enclosure` for ``[b]``, after :func:`precondition` of ``[A]`` at ``t``."""
+    nn = n * n
+    c = t + nn
+    gl = t + 2 * nn
+    gh = t + 3 * nn
+    cl = t + 4 * nn
+    ch = cl + n
+    beta = w[t + 5 * nn + 2 * n]
+    pmat_ivec(w, c, bl, bh, cl, ch, n)
+    cmag = 0.0
+    for i in range(n):
         cm = ops.maxn(abs(w[cl + i]), abs(w[ch + i]))
         cmag = cm if i == 0 else ops.maxn(cmag, cm)
     denom = ops.sub(1.0, 1.0, beta, beta)[0]

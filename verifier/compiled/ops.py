@@ -252,9 +252,28 @@ def _mul_general(al, ah, bl, bh):
 
 
 @jit
+def pmul(c, bl, bh):
+    """``c [b]`` for a float ``c``: :func:`mul` ``(c, c, bl, bh)``, the same floats.
+
+    Its four corner products are two products computed twice (the same
+    operands, the same rounding), so two suffice; the extremes, their
+    rounding and the fallback are :func:`mul`'s.  The linear algebra's
+    products by a point matrix take this path (tests/test_compiled_ops.py).
+    """
+    if c != 0.0 and bl != 0.0 and bh != 0.0 and c == c and bl == bl and bh == bh:
+        p1 = c * bl
+        p2 = c * bh
+        lo = dn(min(p1, p2))
+        hi = up(max(p1, p2))
+        if lo != 0.0 and hi != 0.0:
+            return lo, hi
+    return _mul_general(c, c, bl, bh)
+
+
+@jit
 def scale(c, al, ah):
     """``c [a]`` for a float ``c``."""
-    return mul(c, c, al, ah)
+    return pmul(c, al, ah)
 
 
 @jit

@@ -55,7 +55,7 @@ from .contractors import (
     velocity_displacement,
     velocity_gs,
 )
-from .linalg import linear_enclosure
+from .linalg import linear_enclosure, solve_preconditioned
 from .ops import KERNEL_FLAGS, NO_WRAPPERS, jit, kernel
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
@@ -185,7 +185,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
         rl, rh = output(prog, T_ACCEL, i, sc.nl, sc.nh)
         w[bl + i] = -rh
         w[bh + i] = -rl
-    linear_enclosure(w, jl, jh, bl, bh, dl, dh, n, NO, TWO, t)
+    solve_preconditioned(w, bl, bh, dl, dh, n, NO, TWO, t)  # the same [J_q]: its preconditioning is still at t
     for i in range(n):
         lo = w[dl + i]
         hi = w[dh + i]
