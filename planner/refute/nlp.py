@@ -44,8 +44,8 @@ from .problem import (
 from .results import BounceSearch
 from .verify import DENSE_POINTS, verify_counterexample
 
-__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "search_bounce", "search_counterexample",
-           "search_crossing"]
+__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "nlp_variables", "scaled_cpu_time",
+           "search_bounce", "search_counterexample", "search_crossing"]
 
 #: Default IPOPT iteration cap per attempt: on the benchmark crossing IPOPT
 #: converges or reports infeasibility within 24..76 iterations.
@@ -59,6 +59,29 @@ IPOPT_TOL = 1e-9
 IPOPT_CONSTR_VIOL_TOL = 1e-10
 #: Sample counts of the counterexample NLPs are rounded up to a multiple of this (see _build_and_solve).
 SAMPLE_BUCKET = 32
+def nlp_variables(kin: KinematicModel, n_samples: int) -> int:
+    """Number of unknowns of the counterexample NLP of a recording of ``n_samples`` samples.
+
+    ``m + n (4K - 1)`` with ``K`` the sample count rounded up to :data:`SAMPLE_BUCKET`
+    (the size IPOPT solves, :func:`search_counterexample`).
+    """
+    K = -(-int(n_samples) // SAMPLE_BUCKET) * SAMPLE_BUCKET
+    return kin.m + kin.n * (4 * K - 1)
+
+
+def scaled_cpu_time(max_cpu_time: float, n_variables: int, cap_variables: int | None) -> float:
+    """The CPU cap (s) of one attempt: ``max_cpu_time``, scaled up in proportion for NLPs above ``cap_variables``.
+
+    IPOPT's cost per iteration grows with the NLP (a sparse factorisation
+    per iteration), so one cap in seconds that suits a few thousand unknowns
+    stops a larger NLP after a few iterations whatever its difficulty.
+    ``cap_variables`` None: ``max_cpu_time`` unchanged.
+    """
+    if cap_variables is None or n_variables <= cap_variables:
+        return float(max_cpu_time)
+    return float(max_cpu_time) * n_variables / cap_variables
+
+
 #: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
 _MAX_CHUNK = 64
 #: Smallest move between consecutive samples a chunk always accepts, as a fraction of the smallest
