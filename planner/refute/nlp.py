@@ -87,6 +87,9 @@ _MAX_CHUNK = 64
 #: Smallest move between consecutive samples a chunk always accepts, as a fraction of the smallest
 #: side of the robot's workspace box (the continuity check is relative to the last step otherwise).
 _CONTINUITY_FLOOR = 1e-3
+#: Largest jump (fraction of the smallest side of the workspace box) from the last pose to a fresh
+#: forward-kinematics solution that :func:`fk_branch_guess` takes as the same branch reappearing.
+_JUMP_FRACTION = 0.05
 
 
 def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, np.ndarray]:
@@ -165,8 +168,14 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
             mine = [s for s in sols if kin.mode(s, Q[k], xi) == m0]
             if mine:
                 # Nearest to the last pose keeps the branch; the first sample takes
-                # the lexicographically first solution of its mode.
+                # the lexicographically first solution of its mode.  A nearest one
+                # farther than _JUMP_FRACTION of the workspace is another assembly
+                # of that mode (the branch vanished for this xi): the sample is
+                # interpolated instead, a jump there would start IPOPT thousands of
+                # a_max away from feasibility.
                 x = mine[0] if prev is None else min(mine, key=lambda s: float(np.max(np.abs(s - prev))))
+                if prev is not None and float(np.max(np.abs(x - prev))) > _JUMP_FRACTION * side:
+                    x = None
         if x is not None:
             step = np.zeros(kin.n) if prev is None or not solved[k - 1] else x - prev
             X[k], solved[k], prev = x, True, x
