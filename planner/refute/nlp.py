@@ -82,6 +82,10 @@ def scaled_cpu_time(max_cpu_time: float, n_variables: int, cap_variables: int | 
     return float(max_cpu_time) * n_variables / cap_variables
 
 
+#: Unknowns above which the NLP is built from matrix symbols (CasADi's MX) with the per-sample function
+#: mapped, instead of one expanded scalar graph (SX): on the 3-RPR at 0.075 m/s (19740 unknowns) 8 CPU-s
+#: in all instead of 16, the same solution; every DexTAR plan its certification searches stays below.
+MX_FROM_VARIABLES = 8000
 #: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
 _MAX_CHUNK = 64
 #: Smallest move between consecutive samples a chunk always accepts, as a fraction of the smallest
@@ -264,23 +268,28 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
 def _build_counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind, ipopt: dict):
     """The :class:`ParametricSolver` of :func:`_counterexample_solver`, built."""
     n, m = kin.n, kin.m
-    qm, eps, amax = ca.SX.sym("qm", n, K), ca.SX.sym("eps", n), ca.SX.sym("amax", n)
-    ts, xc, xh = ca.SX.sym("ts"), ca.SX.sym("xc", m), ca.SX.sym("xh", m)
-    fs, m0 = ca.SX.sym("fscale", n), ca.SX.sym("m0")
+    # Small NLPs are expanded into one scalar graph (fastest per iteration); above MX_FROM_VARIABLES
+    # the per-sample function is mapped over matrix symbols instead: building (and differentiating)
+    # the expanded graph then costs more than the solve (25 CPU-s against 3 at 29580 unknowns).
+    S = ca.MX if nlp_variables(kin, K) > MX_FROM_VARIABLES else ca.SX
+    qm, eps, amax = S.sym("qm", n, K), S.sym("eps", n), S.sym("amax", n)
+    ts, xc, xh = S.sym("ts"), S.sym("xc", m), S.sym("xh", m)
+    fs, m0 = S.sym("fscale", n), S.sym("m0")
     p = ca.vertcat(ca.vec(qm), eps, amax, ts, xc, xh, fs, m0)
 
     # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq.
-    s = ca.SX.sym("s", m)
-    Xs = ca.SX.sym("x", n, K)
-    Vs = ca.SX.sym("v", n, K)
-    Ws = ca.SX.sym("w", n, K - 1)
-    Ds = ca.SX.sym("dq", n, K)
+    s = S.sym("s", m)
+    Xs = S.sym("x", n, K)
+    Vs = S.sym("v", n, K)
+    Ws = S.sym("w", n, K - 1)
+    Ds = S.sym("dq", n, K)
     xi = xc + xh * s
     U = ca.repmat(amax, 1, K - 1) * Ws
     Q = qm + ca.repmat(eps, 1, K) * Ds
 
-    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi, fs],
-                        [kin.sx_f / fs, kin.sx_mode / kin.sx_hadamard])
+    fs_in = fs if S is ca.SX else ca.SX.sym("fscale", n)  # the per-sample function is scalar either way
+    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi, fs_in],
+                        [kin.sx_f / fs_in, kin.sx_mode / kin.sx_hadamard])
     F, M = point.map(K)(Xs, Q, ca.repmat(xi, 1, K), ca.repmat(fs, 1, K))
     M = m0 * M
     dyn_x = ((Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U)
