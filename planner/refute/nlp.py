@@ -138,7 +138,7 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
     # continuation would (so chunks only skip work, they never jump branch).
     side = float(np.min(kin.robot.x_hi_array - kin.robot.x_lo_array))
     prev = step = None
-    k, chunk = 0, 1
+    k, chunk, refused = 0, 1, 0  # refused: samples since a jump to another assembly was refused (0: none)
     while k < K:
         if prev is not None and chunk > 1:
             ks = np.arange(k, min(K, k + chunk))
@@ -167,7 +167,9 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
             Xk, ok = kin.fk_batch(Q[k:k + 1], xi, prev[None, :])
             if ok[0] and kin.mode(Xk[0], Q[k], xi) == m0:
                 x = Xk[0]
-        if x is None:  # no continuation (first sample, or it fell into the other mode)
+        # After a refused jump, all the solutions (costly: 0.4 s a sample on the 3-RPR) are sought
+        # again only 1, 2, 4, ... samples later; the continuation above is tried at every sample.
+        if x is None and not refused & (refused - 1):  # no continuation (first sample, or it fell into the other mode)
             sols = kin.fk_all(Q[k], xi)
             mine = [s for s in sols if kin.mode(s, Q[k], xi) == m0]
             if mine:
@@ -179,8 +181,11 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
                 # a_max away from feasibility.
                 x = mine[0] if prev is None else min(mine, key=lambda s: float(np.max(np.abs(s - prev))))
                 if prev is not None and float(np.max(np.abs(x - prev))) > _JUMP_FRACTION * side:
-                    x = None
+                    x, refused = None, max(refused, 1)
+        if x is None and refused:
+            refused += 1
         if x is not None:
+            refused = 0
             step = np.zeros(kin.n) if prev is None or not solved[k - 1] else x - prev
             X[k], solved[k], prev = x, True, x
             chunk = 2
