@@ -504,9 +504,10 @@ def timed(fn, *args, **kwargs):
 #: costs bound tightness).
 REFUTE_CPU_TIME = 2.0
 #: Size (unknowns) of the largest counterexample NLP that gets :data:`REFUTE_CPU_TIME` as it is; a larger
-#: one gets it scaled by its size (:func:`planner.refute.nlp.scaled_cpu_time`).  Every search of the DexTAR
-#: task from 0.3 m/s up is below it (3845 unknowns at 0.3 m/s); the 3-RPR's plans at 0.05-0.15 m/s have
-#: 29580-10380 unknowns, where IPOPT needs 5-15 CPU-s to converge (docs/planning.md).
+#: one gets it scaled by its size (:func:`planner.refute.nlp.scaled_cpu_time`).  Every search of the
+#: two-joint benchmark task from 0.3 m/s up is below it (3845 unknowns at 0.3 m/s); the three-joint
+#: benchmark's plans at 0.05-0.15 m/s have 29580-10380 unknowns, where IPOPT needs 3-6 CPU-s to converge
+#: (docs/planning.md, "The 3-RPR's refutation search").
 REFUTE_CAP_VARIABLES = 4000
 
 

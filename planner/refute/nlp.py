@@ -83,8 +83,9 @@ def scaled_cpu_time(max_cpu_time: float, n_variables: int, cap_variables: int | 
 
 
 #: Unknowns above which the NLP is built from matrix symbols (CasADi's MX) with the per-sample function
-#: mapped, instead of one expanded scalar graph (SX): on the 3-RPR at 0.075 m/s (19740 unknowns) 8 CPU-s
-#: in all instead of 16, the same solution; every DexTAR plan its certification searches stays below.
+#: mapped, instead of one expanded scalar graph (SX): on a three-joint plan of 1644 samples (19740 unknowns)
+#: 8 CPU-s in all instead of 16, the same solution (docs/planning.md, "The 3-RPR's refutation search");
+#: the two-joint benchmark's plans that certification searches stay below.
 MX_FROM_VARIABLES = 8000
 #: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
 _MAX_CHUNK = 64
@@ -167,7 +168,7 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
             Xk, ok = kin.fk_batch(Q[k:k + 1], xi, prev[None, :])
             if ok[0] and kin.mode(Xk[0], Q[k], xi) == m0:
                 x = Xk[0]
-        # After a refused jump, all the solutions (costly: 0.4 s a sample on the 3-RPR) are sought
+        # After a refused jump, all the solutions (costly: 0.4 s a sample for three joints) are sought
         # again only 1, 2, 4, ... samples later; the continuation above is tried at every sample.
         if x is None and not refused & (refused - 1):  # no continuation (first sample, or it fell into the other mode)
             sols = kin.fk_all(Q[k], xi)
