@@ -180,6 +180,13 @@ FARKAS = {
 #: rows' sub-boxes (2026-12-02, issue 20).
 ONE_MOTION_PLAN = {"certified": 0.9557, "contracted": 0.9300, "floor": 0.8438}
 
+#: The 3-RPR benchmark task's counterexample searches on ``crosscert certify``'s own plans and bounds (issue 20,
+#: 2026-12-02; docs/robots.md, "The 3-RPR"): a verified bounce at ``refuted`` m/s from the box centre, and at
+#: ``refuted_warm`` m/s started from that one (as certify's bisection does); none found at ``not_refuted``
+#: (IPOPT: locally infeasible).  ``guess`` m/s: the plan on which the mode-``m0`` branch of certify's corner
+#: start (seed 0) vanishes for 46 samples, where the guess once jumped to the other assembly (phi = 0.46 rad).
+RPR3_REFUTATION = {"robot": "3rpr", "refuted": 0.05, "refuted_warm": 0.075, "not_refuted": 0.0875, "guess": 0.1}
+
 #: Planning problems by name: ``<robot>_benchmark`` for every registered robot with a benchmark crossing.
 PLANNING = {
     f"{name}_benchmark": PlanningProblem(f"{name}_benchmark", name, Method.SMOOTHSTEP,

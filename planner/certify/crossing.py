@@ -42,7 +42,7 @@ from ..worker import SubprocessExecutor
 from .plan import search_v_min
 
 __all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refute_speed", "Refuter", "refutation_search",
-           "REFUTE_CPU_TIME", "scan_speeds", "SCAN_FROM", "SCAN_STEP"]
+           "REFUTE_CAP_VARIABLES", "REFUTE_CPU_TIME", "scan_speeds", "SCAN_FROM", "SCAN_STEP"]
 
 log = logging.getLogger(__name__)
 
@@ -503,6 +503,12 @@ def timed(fn, *args, **kwargs):
 #: infeasibility, and a stopped attempt proves nothing either way (it only
 #: costs bound tightness).
 REFUTE_CPU_TIME = 2.0
+#: Size (unknowns) of the largest counterexample NLP that gets :data:`REFUTE_CPU_TIME` as it is; a larger
+#: one gets it scaled by its size (:func:`planner.refute.nlp.scaled_cpu_time`).  Every search of the
+#: two-joint benchmark task from 0.3 m/s up is below it (3845 unknowns at 0.3 m/s); the three-joint
+#: benchmark's plans at 0.05-0.15 m/s have 29580-10380 unknowns, where IPOPT needs 3-6 CPU-s to converge
+#: (docs/planning.md, "The 3-RPR's refutation search").
+REFUTE_CAP_VARIABLES = 4000
 
 
 def load_model(robot) -> None:
@@ -529,7 +535,8 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b, robot)
     overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
     return refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
-                                   bounds=overrides, max_cpu_time=REFUTE_CPU_TIME, warm=warm).rows[0]
+                                   bounds=overrides, max_cpu_time=REFUTE_CPU_TIME, warm=warm,
+                                   cap_variables=REFUTE_CAP_VARIABLES).rows[0]
 
 
 class Refuter:

@@ -44,8 +44,8 @@ from .problem import (
 from .results import BounceSearch
 from .verify import DENSE_POINTS, verify_counterexample
 
-__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "search_bounce", "search_counterexample",
-           "search_crossing"]
+__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "nlp_variables", "scaled_cpu_time",
+           "search_bounce", "search_counterexample", "search_crossing"]
 
 #: Default IPOPT iteration cap per attempt: on the benchmark crossing IPOPT
 #: converges or reports infeasibility within 24..76 iterations.
@@ -59,11 +59,42 @@ IPOPT_TOL = 1e-9
 IPOPT_CONSTR_VIOL_TOL = 1e-10
 #: Sample counts of the counterexample NLPs are rounded up to a multiple of this (see _build_and_solve).
 SAMPLE_BUCKET = 32
+def nlp_variables(kin: KinematicModel, n_samples: int) -> int:
+    """Number of unknowns of the counterexample NLP of a recording of ``n_samples`` samples.
+
+    ``m + n (4K - 1)`` with ``K`` the sample count rounded up to :data:`SAMPLE_BUCKET`
+    (the size IPOPT solves, :func:`search_counterexample`).
+    """
+    K = -(-int(n_samples) // SAMPLE_BUCKET) * SAMPLE_BUCKET
+    return kin.m + kin.n * (4 * K - 1)
+
+
+def scaled_cpu_time(max_cpu_time: float, n_variables: int, cap_variables: int | None) -> float:
+    """The CPU cap (s) of one attempt: ``max_cpu_time``, scaled up in proportion for NLPs above ``cap_variables``.
+
+    IPOPT's cost per iteration grows with the NLP (a sparse factorisation
+    per iteration), so one cap in seconds that suits a few thousand unknowns
+    stops a larger NLP after a few iterations whatever its difficulty.
+    ``cap_variables`` None: ``max_cpu_time`` unchanged.
+    """
+    if cap_variables is None or n_variables <= cap_variables:
+        return float(max_cpu_time)
+    return float(max_cpu_time) * n_variables / cap_variables
+
+
+#: Unknowns above which the NLP is built from matrix symbols (CasADi's MX) with the per-sample function
+#: mapped, instead of one expanded scalar graph (SX): on a three-joint plan of 1644 samples (19740 unknowns)
+#: 8 CPU-s in all instead of 16, the same solution (docs/planning.md, "The 3-RPR's refutation search");
+#: the two-joint benchmark's plans that certification searches stay below.
+MX_FROM_VARIABLES = 8000
 #: Largest chunk of samples solved in one batched Newton by :func:`fk_branch_guess`.
 _MAX_CHUNK = 64
 #: Smallest move between consecutive samples a chunk always accepts, as a fraction of the smallest
 #: side of the robot's workspace box (the continuity check is relative to the last step otherwise).
 _CONTINUITY_FLOOR = 1e-3
+#: Largest jump (fraction of the smallest side of the workspace box) from the last pose to a fresh
+#: forward-kinematics solution that :func:`fk_branch_guess` takes as the same branch reappearing.
+_JUMP_FRACTION = 0.05
 
 
 def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, np.ndarray]:
@@ -108,7 +139,7 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
     # continuation would (so chunks only skip work, they never jump branch).
     side = float(np.min(kin.robot.x_hi_array - kin.robot.x_lo_array))
     prev = step = None
-    k, chunk = 0, 1
+    k, chunk, refused = 0, 1, 0  # refused: samples since a jump to another assembly was refused (0: none)
     while k < K:
         if prev is not None and chunk > 1:
             ks = np.arange(k, min(K, k + chunk))
@@ -137,14 +168,25 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
             Xk, ok = kin.fk_batch(Q[k:k + 1], xi, prev[None, :])
             if ok[0] and kin.mode(Xk[0], Q[k], xi) == m0:
                 x = Xk[0]
-        if x is None:  # no continuation (first sample, or it fell into the other mode)
+        # After a refused jump, all the solutions (costly: 0.4 s a sample for three joints) are sought
+        # again only 1, 2, 4, ... samples later; the continuation above is tried at every sample.
+        if x is None and not refused & (refused - 1):  # no continuation (first sample, or it fell into the other mode)
             sols = kin.fk_all(Q[k], xi)
             mine = [s for s in sols if kin.mode(s, Q[k], xi) == m0]
             if mine:
                 # Nearest to the last pose keeps the branch; the first sample takes
-                # the lexicographically first solution of its mode.
+                # the lexicographically first solution of its mode.  A nearest one
+                # farther than _JUMP_FRACTION of the workspace is another assembly
+                # of that mode (the branch vanished for this xi): the sample is
+                # interpolated instead, a jump there would start IPOPT thousands of
+                # a_max away from feasibility.
                 x = mine[0] if prev is None else min(mine, key=lambda s: float(np.max(np.abs(s - prev))))
+                if prev is not None and float(np.max(np.abs(x - prev))) > _JUMP_FRACTION * side:
+                    x, refused = None, max(refused, 1)
+        if x is None and refused:
+            refused += 1
         if x is not None:
+            refused = 0
             step = np.zeros(kin.n) if prev is None or not solved[k - 1] else x - prev
             X[k], solved[k], prev = x, True, x
             chunk = 2
@@ -232,23 +274,28 @@ def _counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind
 def _build_counterexample_solver(kin: KinematicModel, K: int, kind: CounterexampleKind, ipopt: dict):
     """The :class:`ParametricSolver` of :func:`_counterexample_solver`, built."""
     n, m = kin.n, kin.m
-    qm, eps, amax = ca.SX.sym("qm", n, K), ca.SX.sym("eps", n), ca.SX.sym("amax", n)
-    ts, xc, xh = ca.SX.sym("ts"), ca.SX.sym("xc", m), ca.SX.sym("xh", m)
-    fs, m0 = ca.SX.sym("fscale", n), ca.SX.sym("m0")
+    # Small NLPs are expanded into one scalar graph (fastest per iteration); above MX_FROM_VARIABLES
+    # the per-sample function is mapped over matrix symbols instead: building (and differentiating)
+    # the expanded graph then costs more than the solve (25 CPU-s against 3 at 29580 unknowns).
+    S = ca.MX if nlp_variables(kin, K) > MX_FROM_VARIABLES else ca.SX
+    qm, eps, amax = S.sym("qm", n, K), S.sym("eps", n), S.sym("amax", n)
+    ts, xc, xh = S.sym("ts"), S.sym("xc", m), S.sym("xh", m)
+    fs, m0 = S.sym("fscale", n), S.sym("m0")
     p = ca.vertcat(ca.vec(qm), eps, amax, ts, xc, xh, fs, m0)
 
     # Decision vector, all scaled to O(1): xi = xc + xh*s, u = amax*w, q = qm + eps*dq.
-    s = ca.SX.sym("s", m)
-    Xs = ca.SX.sym("x", n, K)
-    Vs = ca.SX.sym("v", n, K)
-    Ws = ca.SX.sym("w", n, K - 1)
-    Ds = ca.SX.sym("dq", n, K)
+    s = S.sym("s", m)
+    Xs = S.sym("x", n, K)
+    Vs = S.sym("v", n, K)
+    Ws = S.sym("w", n, K - 1)
+    Ds = S.sym("dq", n, K)
     xi = xc + xh * s
     U = ca.repmat(amax, 1, K - 1) * Ws
     Q = qm + ca.repmat(eps, 1, K) * Ds
 
-    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi, fs],
-                        [kin.sx_f / fs, kin.sx_mode / kin.sx_hadamard])
+    fs_in = fs if S is ca.SX else ca.SX.sym("fscale", n)  # the per-sample function is scalar either way
+    point = ca.Function("point", [kin.sx_x, kin.sx_q, kin.sx_xi, fs_in],
+                        [kin.sx_f / fs_in, kin.sx_mode / kin.sx_hadamard])
     F, M = point.map(K)(Xs, Q, ca.repmat(xi, 1, K), ca.repmat(fs, 1, K))
     M = m0 * M
     dyn_x = ((Xs[:, 1:] - Xs[:, :-1] - ts * Vs[:, :-1] - 0.5 * ts * ts * U)

@@ -17,7 +17,7 @@ from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
 from crosscert.robots.kinematics import KinematicModel
 
-from .nlp import MAX_CPU_TIME, MAX_ITER, search_counterexample
+from .nlp import MAX_CPU_TIME, MAX_ITER, nlp_variables, scaled_cpu_time, search_counterexample
 from .problem import Counterexample, CounterexampleKind, RecordingBounds
 from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, deciding_attempt
 from .verify import DENSE_POINTS
@@ -26,7 +26,7 @@ __all__ = ["crossing_floor", "refutation_bound", "verified_counterexample"]
 
 
 def _search_recording(kin, make_recording, value, kind, *, m0, xi_starts, bounds, max_iter, max_cpu_time,
-                      dense, warm=None) -> dict:
+                      dense, warm=None, cap_variables=None) -> dict:
     """Search the recording ``make_recording(value)`` from each start until one is verified.
 
     ``warm``, a verified counterexample of a neighbouring recording, takes
@@ -36,6 +36,7 @@ def _search_recording(kin, make_recording, value, kind, *, m0, xi_starts, bounds
     """
     q_meas, t_s = make_recording(value)
     rb = RecordingBounds.for_model(kin, q_meas, t_s, m0, **(bounds or {}))
+    max_cpu_time = scaled_cpu_time(max_cpu_time, nlp_variables(kin, rb.n_samples), cap_variables)
     starts = [None] if not xi_starts else list(xi_starts)
     plan = [(xs, None) for xs in starts] if warm is None else [(None, warm)] + [(xs, None) for xs in starts[1:]]
     attempts: list[BounceSearch] = []
@@ -74,7 +75,7 @@ def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tupl
                      m0: int = 1, xi_starts: Sequence | None = None, bounds: dict | None = None,
                      max_iter: int = MAX_ITER, max_cpu_time: float = MAX_CPU_TIME, dense: int = DENSE_POINTS,
                      progress: Callable[[SpeedRefutation], None] | None = None,
-                     warm: Counterexample | None = None) -> RefutationBound:
+                     warm: Counterexample | None = None, cap_variables: int | None = None) -> RefutationBound:
     """Counterexample search at several speeds; the largest refuted speed bounds certification from below.
 
     Parameters
@@ -102,6 +103,10 @@ def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tupl
         A verified counterexample at a neighbouring speed: every speed's
         first attempt starts from it (:func:`search_counterexample`) instead
         of the first of ``xi_starts``.
+    cap_variables : int, optional
+        An attempt whose NLP has more unknowns than this gets ``max_cpu_time``
+        scaled by its size (:func:`~planner.refute.nlp.scaled_cpu_time`);
+        None: ``max_cpu_time`` for every size.
 
     Returns
     -------
@@ -120,7 +125,7 @@ def refutation_bound(kin: KinematicModel, make_recording: Callable[[float], tupl
     for speed in speeds:
         row = SpeedRefutation(speed=float(speed), **_search_recording(
             kin, make_recording, speed, CounterexampleKind.BOUNCE, m0=m0, xi_starts=xi_starts, bounds=bounds,
-            max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense, warm=warm))
+            max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense, warm=warm, cap_variables=cap_variables))
         rows.append(row)
         if progress is not None:
             progress(row)
