@@ -39,7 +39,7 @@ import numpy as np
 import pytest
 
 from crosscert.robots import available_robots, get_robot
-from crosscert.robots.errors import ModelError
+from crosscert.robots.errors import InputError, ModelError
 from crosscert.verifier.compiled import straight
 from crosscert.verifier.compiled.tape import HC4_TAPES, TAPES, forward, hc4, interpret, interpret_hc4, output, trig_memo
 from crosscert.verifier.model import IntervalModel
@@ -220,6 +220,10 @@ def test_prune_deletes_old_unused_modules_only(tmp_path):
     assert link.is_symlink() and stray.is_symlink() and target.read_text() == "keep"
     assert (tmp_path / "tapes_ff.py").is_dir() and (tmp_path / "notes.txt").exists()
     assert straight.prune(tmp_path / "missing") == []
+    for bad in (0.0, -1.0, float("nan")):
+        with pytest.raises(InputError, match="max_age_days"):  # never "delete everything"
+            straight.prune(tmp_path, max_age_days=bad)
+    assert all(p.exists() for p in kept + fresh)
 
 
 def test_writing_a_module_prunes_and_loading_one_records_its_use(tmp_path):

@@ -24,6 +24,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
+from crosscert.robots import arguments as V
 from crosscert.robots.errors import ModelError
 
 from ..tape import OPCODES
@@ -381,7 +382,13 @@ def prune(directory: Path | None = None, *, max_age_days: float = UNUSED_DAYS, n
     -------
     list of str
         The keys of the modules deleted.
+
+    Raises
+    ------
+    InputError
+        If ``max_age_days`` is not a positive number.
     """
+    max_age_days = V.positive("max_age_days", max_age_days)
     directory = cache_dir() if directory is None else Path(directory)
     limit = (time.time() if now is None else now) - 86400.0 * max_age_days
     gone = []
