@@ -17,7 +17,7 @@ Every constraint is a linear inequality ``A z <= b`` with float coefficients
 ``A`` used as they are and every rounding error put into ``b`` (outward), so
 the true ``(ξ, x_k, q_k, v_k)`` satisfies all of them when the row holds the
 truth (docs/soundness.md, "Window reasoning", step 9).  A linear program
-(scipy's HiGHS) looks for the most violated system; its verdict is never
+(HiGHS, through highspy) looks for the most violated system; its verdict is never
 trusted: its dual multipliers ``y >= 0`` are checked with interval arithmetic
 (:func:`prove_infeasible`, a Farkas certificate), and only a proved row is
 refuted.  Shapes: ``K`` samples, pose and joint dimension ``n``, ``m``
