@@ -199,6 +199,11 @@ def fk_branch_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarra
     return X, solved
 
 
+#: Relative tolerance (and, times 1 um, absolute in m) within which two branch gaps of
+#: :func:`fk_crossing_guess` are equal.
+GAP_TIE = 1e-9
+
+
 def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndarray, int]:
     """A crossing through the readings: mode-``m0`` FK up to the sample nearest the locus, mode ``-m0`` after.
 
@@ -239,12 +244,15 @@ def fk_crossing_guess(kin: KinematicModel, q_meas, xi, m0: int) -> tuple[np.ndar
     # readings pass the locus of xi; else the branches come closest at the
     # turn, often over a run of equal readings (the joints stop there):
     # switch in the middle of the first such run.
+    # Equal readings give gaps equal up to Newton's last bits, which differ between machines (libm, SIMD
+    # paths): a gap within GAP_TIE of the smallest counts as the smallest, so the run, and the switch in its
+    # middle, is the same everywhere.
     none = ~(ok_a | ok_b)
     if none.any():
         at = none
     else:
         g = np.where(ok_a & ok_b, gap, np.inf)
-        at = g <= np.min(g)
+        at = g <= np.min(g) * (1.0 + GAP_TIE) + GAP_TIE * 1e-6
     k0 = int(np.argmax(at))
     k1 = k0 + int(np.argmin(at[k0:])) if not at[k0:].all() else at.size
     k_switch = (k0 + k1 - 1) // 2
