@@ -9,7 +9,7 @@ crossing searches under the window's own settings.
 
 The recording is the 1.0 m/s benchmark crossing of true geometry 11 of
 ``benchmarks/bench_window.py`` (undecided by the window: a verified bounce
-and the truth explain it), tested with a budget of 8 sub-boxes to keep it short.
+and the truth explain it), tested with a budget of 4 sub-boxes to keep it short.
 
 Removal checks (2026-12-03, each made a test here fail): counting explained
 hypotheses as dead in the verdict (only ``CONSISTENT`` alive) -> the lying
@@ -34,6 +34,7 @@ from crosscert.planner.simulate import random_geometry, simulate_crossing
 from crosscert.planner.sweep import cruise_for
 from crosscert.robots import DEXTAR
 from crosscert.robots.dextar import benchmark_crossing
+import crosscert.verifier.window as W
 from crosscert.verifier.tracker import Verdict, initial_box_from_mode
 from crosscert.verifier.trajfile import write_trajectory
 from crosscert.verifier.window import (
@@ -45,7 +46,7 @@ from crosscert.verifier.window import (
 )
 
 #: Budget of sub-boxes of these tests (the default 64 decides the same, slower).
-BUDGET = 8
+BUDGET = 4
 
 
 @pytest.fixture(scope="module")
@@ -84,15 +85,21 @@ def _same(a, b):
                 np.testing.assert_array_equal(va, vb)
 
 
-def test_an_undecidable_recording_stops_early_with_both_modes_explained(undecidable):
+def test_an_undecidable_recording_stops_early_with_both_modes_explained(undecidable, monkeypatch):
     """Both final modes explained by verified motions (a bounce, a crossing): ``unknown``, reason
-    ``undecidable``, in fewer passes than the budget takes without the explainer."""
+    ``undecidable``, and no one-motion step (the costly part without the explainer) runs."""
     _, q = undecidable
     im, s = interval_model(), default_settings()
+    steps = []
+    real = W.one_motion_rows
+    monkeypatch.setattr(W, "one_motion_rows", lambda *a, **k: steps.append(1) or real(*a, **k))
     plain = track_window(im, q, s, initial_mode=1, max_geometries=BUDGET)
     assert plain.verdict is Verdict.UNKNOWN and plain.reason is VerdictReason.BUDGET, plain.summary()
+    assert len(steps) >= 2, steps  # each hypothesis' one-motion step ran
+    steps.clear()
     ex = RefutingExplainer()
     res = track_window(im, q, s, initial_mode=1, max_geometries=BUDGET, explainer=ex)
+    assert steps == []
     assert res.verdict is Verdict.UNKNOWN and res.reason is VerdictReason.UNDECIDABLE, res.summary()
     assert res.summary()["reason"] == "undecidable"
     assert {h.final_mode: h.status for h in res.hypotheses} == {1: HypothesisStatus.EXPLAINED,
@@ -100,7 +107,6 @@ def test_an_undecidable_recording_stops_early_with_both_modes_explained(undecida
     assert sorted(e.kind.value for e in ex.log) == sorted(k.value for k in CounterexampleKind)
     assert all(e.outcome is Explanation.EXPLAINED for e in ex.log)
     assert all(e.searches[-1].verified for e in ex.log)
-    assert sum(h.passes for h in res.hypotheses) < sum(h.passes for h in plain.hypotheses)
 
 
 def test_a_recording_decided_within_the_budget_is_the_same_with_an_explainer(undecidable):
@@ -126,36 +132,48 @@ def test_a_recording_decided_within_the_budget_is_the_same_with_an_explainer(und
     _same(c, d)
 
 
+@pytest.fixture(scope="module")
+def adversarial_runs():
+    """Adversarial runs through or near the locus (neither end on it), with their initial box and the window's
+    result without an explainer."""
+    s, im = default_settings(), interval_model()
+    out = []
+    for sc in near_scenarios(6, 7, v_cross=(0.9, 1.25), v_bounce=(0.9, 1.3)):
+        if sc.mode[-1] == 0 or sc.mode[0] == 0:  # on the locus: neither hypothesis is true
+            continue
+        x0 = initial_box_from_mode(im, sc.q_meas[0], int(sc.mode[0]), s)
+        out.append((sc, x0, track_window(im, sc.q_meas, s, x0=x0, max_geometries=BUDGET)))
+    return out
+
+
 @pytest.mark.parametrize("lie", ["always", "false-only"])
-def test_a_wrong_explainer_never_makes_a_verdict_wrong(lie):
+def test_a_wrong_explainer_never_makes_a_verdict_wrong(lie, adversarial_runs):
     """An explainer claiming ``explained`` wrongly (for every hypothesis, or only for the false one) can turn
     a verdict into ``unknown`` and nothing else, on the adversarial runs (bang-bang at 0.999 a_max,
     readings at the edges of eps_q, geometries at corners)."""
     s = default_settings()
     im = interval_model()
-    checked = asked = 0
-    for sc in near_scenarios(8, 7, v_cross=(0.9, 1.25), v_bounce=(0.9, 1.3)):
-        if sc.mode[-1] == 0 or sc.mode[0] == 0:  # on the locus: neither hypothesis is true
-            continue
-        x0 = initial_box_from_mode(im, sc.q_meas[0], int(sc.mode[0]), s)
+    checked = asked = changed = 0
+    for sc, x0, honest in adversarial_runs:
         true_final = int(sc.mode[-1])
 
         def answer(r, true_final=true_final):
             return Explanation.EXPLAINED if lie == "always" or r.final_mode != true_final else Explanation.NOT_FOUND
 
         liar = _Counting(answer)
-        honest = track_window(im, sc.q_meas, s, x0=x0, max_geometries=BUDGET)
         res = track_window(im, sc.q_meas, s, x0=x0, max_geometries=BUDGET, explainer=liar)
         asked += len(liar.requests)
         crossed = sc.mode[0] != sc.mode[-1]
         wrong = Verdict.MODE_UNCHANGED if crossed else Verdict.MODE_CHANGED
         assert res.verdict is not wrong and res.verdict is not Verdict.INCONSISTENT, (sc.name, res.summary())
         assert res.verdict in (honest.verdict, Verdict.UNKNOWN), (sc.name, res.summary(), honest.summary())
+        changed += res.verdict is not honest.verdict
         for h in res.hypotheses:
             if h.final_mode == true_final:
                 assert h.status is not HypothesisStatus.REFUTED, (sc.name, res.summary())
         checked += 1
     assert checked and asked, (checked, asked)  # not vacuous: the explainer was asked
+    print(f"{lie}: {checked} runs, {asked} questions, {changed} verdicts turned unknown")
 
 
 def _request(q, s, final_mode, x0=None):
