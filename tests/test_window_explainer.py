@@ -198,6 +198,7 @@ def test_the_explainer_claims_nothing_outside_what_its_check_covers(undecidable)
     w = ex.log[0].searches[-1].counterexample.x[0]
     away = (w + 1e-3, w + 2e-3)  # a 1 mm box beside the witness' first pose
     assert ex(_request(q, s, 1, x0=away)) is Explanation.NOT_FOUND
+    assert RefutingExplainer(max_variables=100)(_request(q, s, 1)) is Explanation.NOT_SEARCHED
     assert [e.outcome for e in ex.log] == [Explanation.EXPLAINED, Explanation.NOT_COVERED, Explanation.NOT_COVERED,
                                            Explanation.NOT_FOUND]
 

@@ -154,6 +154,7 @@ class Explanation(str, Enum):
     #: reading, and the explainer's independent check accepted it
     EXPLAINED = "explained"
     NOT_FOUND = "not-found"  #: no such motion found (which proves nothing)
+    NOT_SEARCHED = "not-searched"  #: the explainer did not search (e.g. the problem is beyond its size limit)
     #: the settings assume something the explainer's witness is not checked against (it makes no claim)
     NOT_COVERED = "not-covered"
 

@@ -40,7 +40,7 @@ from .problem import CounterexampleKind, RecordingBounds
 from .results import BounceSearch
 from .verify import DENSE_POINTS
 
-__all__ = ["EXPLAIN_CPU_TIME", "EXPLAIN_STARTS", "ExplainAttempt", "RefutingExplainer"]
+__all__ = ["EXPLAIN_CPU_TIME", "EXPLAIN_MAX_VARIABLES", "EXPLAIN_STARTS", "ExplainAttempt", "RefutingExplainer"]
 
 #: IPOPT CPU cap per search of the explainer, s (scaled up above :data:`EXPLAIN_CAP_VARIABLES` unknowns): a
 #: search that stops proves nothing, the window then goes on as without an explainer.
@@ -49,6 +49,11 @@ EXPLAIN_CPU_TIME = 2.0
 EXPLAIN_CAP_VARIABLES = 4000
 #: Surviving sub-boxes whose centres seed a search, at most (each one a separate IPOPT solve).
 EXPLAIN_STARTS = 2
+#: Largest NLP (unknowns) the explainer searches (the two-joint benchmark's 1.0 m/s crossings: 2053).  Beyond,
+#: the searches cost more than the rounds they can save: on the 3-RPR's 546-sample bounce (6912 unknowns,
+#: 2026-12-03) `check` took 150 s with them (IPOPT 18 s, the rest building the NLPs and the three-joint
+#: forward-kinematics guesses) against 42 s without.
+EXPLAIN_MAX_VARIABLES = 4000
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +103,8 @@ class RefutingExplainer:
         IPOPT CPU cap per search, s (scaled for large NLPs).
     dense : int
         IK continuation points per interval of the check.
+    max_variables : int
+        Largest NLP (unknowns) searched; larger ones are answered ``not-searched``.
 
     Attributes
     ----------
@@ -106,12 +113,13 @@ class RefutingExplainer:
     """
 
     def __init__(self, *, starts: int = EXPLAIN_STARTS, max_cpu_time: float = EXPLAIN_CPU_TIME,
-                 dense: int = DENSE_POINTS):
+                 dense: int = DENSE_POINTS, max_variables: int = EXPLAIN_MAX_VARIABLES):
         if isinstance(starts, bool) or int(starts) != starts or starts < 1:
             raise InputError(f"starts must be a positive integer, got {starts!r}")
         if not max_cpu_time > 0:
             raise InputError(f"max_cpu_time must be positive, s; got {max_cpu_time!r}")
         self.starts, self.max_cpu_time, self.dense = int(starts), float(max_cpu_time), int(dense)
+        self.max_variables = int(max_variables)
         self.log: list[ExplainAttempt] = []
 
     def __call__(self, request: ExplainRequest) -> Explanation:
@@ -128,12 +136,15 @@ class RefutingExplainer:
         if a.drift is not None or s.qdd_bound is not None or request.q.shape[0] < 2:
             return Explanation.NOT_COVERED, None, []
         kin = kinematic_model(request.model.robot)
+        size = nlp_variables(kin, request.q.shape[0])
+        if size > self.max_variables:
+            return Explanation.NOT_SEARCHED, None, []
         kind = CounterexampleKind.BOUNCE if request.final_mode == request.initial_mode else CounterexampleKind.CROSSING
         xi_lo, xi_hi = (np.asarray(v, dtype=np.float64) for v in request.xi_box)
         # the window's own bounds: its settings' assumptions with its calibration box, the robot's workspace box
         rb = RecordingBounds.for_model(kin, request.q, m0=int(request.initial_mode),
                                        assumptions=a.with_(xi_box=(xi_lo, xi_hi)))
-        cpu = scaled_cpu_time(self.max_cpu_time, nlp_variables(kin, rb.n_samples), EXPLAIN_CAP_VARIABLES)
+        cpu = scaled_cpu_time(self.max_cpu_time, size, EXPLAIN_CAP_VARIABLES)
         searches: list[BounceSearch] = []
         for seed in _seeds(request, self.starts):
             if seed is not None:
