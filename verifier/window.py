@@ -559,7 +559,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
             verdict = Verdict.UNKNOWN
             asked = _targets(hyps, m0, goal)
             # the early stop: every hypothesis asked about explained (a wrong claim only costs a verdict)
-            undecidable = all(h.explained for h in asked) and any(h.explained for h in asked)
+            undecidable = all(h.explained for h in asked)
             reason = VerdictReason.UNDECIDABLE if undecidable else VerdictReason.BUDGET
         else:
             verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
