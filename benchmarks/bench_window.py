@@ -27,6 +27,13 @@ S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
     recording (``crosscert simulate --v-sing 1.458 --t-rest 6.221``) and on
     the catalogue's 1.1 m/s crossing and 1.2 m/s bounce.
 
+``--explain`` (since 2026-12-03, issues 17 and 20): S1 and S2 pass
+``planner.refute.RefutingExplainer`` to ``track_window`` (what ``crosscert check``
+does): a recording whose two final modes are explained by verified motions
+stops early, ``unknown`` with reason ``undecidable``; each run also prints
+the explainer's questions, answers and IPOPT wall time, and S2 the
+explainer's share of the undecided run.
+
 ``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
 geometries in S1).
 
@@ -261,7 +268,24 @@ def _lag_latency(im, s, q, lag):
     return t
 
 
-def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
+def _explainer(explain: bool):
+    """A fresh ``RefutingExplainer`` with ``--explain`` (imported only then: older checkouts have none)."""
+    if not explain:
+        return None
+    from crosscert.planner.refute import RefutingExplainer
+
+    return RefutingExplainer()
+
+
+def _asked(ex) -> str:
+    """The explainer's answers of one run: final mode, search, outcome, IPOPT and wall s."""
+    if ex is None:
+        return ""
+    return "  explainer " + (", ".join(f"{a.final_mode:+d} {a.kind.value if a.kind else '-'} {a.outcome.value} "
+                                       f"ipopt {a.solve_s:.2f} s wall {a.wall_s:.2f} s" for a in ex.log) or "not asked")
+
+
+def speed(geometries: int, parts: str = "S1,S2,S3", explain: bool = False) -> None:
     import crosscert.verifier.window as W
 
     print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
@@ -270,20 +294,30 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
         _speed_lag(im, s)
         return
     runs = [_crossing(1.0, xi).q_meas for xi in _true_geometries(geometries)]
+    kw = {}
+    if explain:  # warm-up of the searches too: the NLPs of both kinds built once per process
+        from crosscert.planner.refute import RecordingBounds, search_bounce, search_crossing
+
+        rb = RecordingBounds(q_meas=runs[0], m0=1, assumptions=s.assumptions)
+        search_bounce(kinematics(), rb), search_crossing(kinematics(), rb)
     track_window(im, runs[0], s, initial_mode=1)  # warm-up: kernels loaded, caches filled
-    print(f"[S1] window reasoning, 1.0 m/s crossings, {len(runs)} true geometries (ms per sample)", flush=True)
+    print(f"[S1] window reasoning, 1.0 m/s crossings, {len(runs)} true geometries (ms per sample)"
+          f"{', with the explainer' if explain else ''}", flush=True)
     rows = []
     for i, q in enumerate(runs):
+        ex = _explainer(explain)
+        if explain:  # only then: older checkouts' track_window has no such argument
+            kw["explainer"] = ex
         t0, c0 = time.perf_counter(), time.process_time()
-        w = track_window(im, q, s, initial_mode=1)
+        w = track_window(im, q, s, initial_mode=1, **kw)
         dt, dc = time.perf_counter() - t0, time.process_time() - c0
         kind = ("forward" if w.forward_verdict.value != "unknown" else
                 "undecided" if w.verdict.value == "unknown" else "window")
-        rows.append((kind, dt / len(q), dt, len(q), w, dc / len(q)))
+        rows.append((kind, dt / len(q), dt, len(q), w, dc / len(q), ex))
         print(f"  geometry {i:2d}: {len(q)} samples  {w.verdict.value:15s} {kind:9s} {dt:7.3f} s  "
               f"{1e3 * dt / len(q):7.3f} ms/sample  (CPU {1e3 * dc / len(q):7.3f})  "
               f"passes {[h.passes for h in w.hypotheses]}  alive {[h.geometries_alive for h in w.hypotheses]}  "
-              f"digest {_digest(w)}", flush=True)
+              f"digest {_digest(w)}{_asked(ex)}", flush=True)
     for kind in ("undecided", "window", "forward"):
         sel = [r for r in rows if r[0] == kind]
         if sel:
@@ -291,6 +325,12 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
             print(f"  {kind:9s} ({len(sel):2d} runs): mean {1e3 * per.mean():.3f} ms/sample, min {1e3 * per.min():.3f}, "
                   f"max {1e3 * per.max():.3f}; mean {np.mean([r[2] for r in sel]):.3f} s per run; "
                   f"CPU {1e3 * np.mean([r[5] for r in sel]):.3f} ms/sample", flush=True)
+            if explain:
+                asks = [a for r in sel for a in r[6].log]
+                print(f"  {'':9s} explainer: {len(asks)} questions, IPOPT {sum(a.solve_s for a in asks):.2f} s, "
+                      f"wall {sum(a.wall_s for a in asks):.2f} s in all", flush=True)
+    per = np.array([r[1] for r in rows])
+    print(f"  all       ({len(rows):2d} runs): mean {1e3 * per.mean():.3f} ms/sample", flush=True)
     print(f"  verdicts: {[r[4].verdict.value for r in rows]}")
     print(f"  {_load('')}", flush=True)
     if "goal" in inspect.signature(track_window).parameters:  # since 2026-12-02: what certify asks
@@ -313,10 +353,13 @@ def speed(geometries: int, parts: str = "S1,S2,S3") -> None:
     und = [i for i, r in enumerate(rows) if r[0] == "undecided"] or [0]
     q = runs[und[0]]
     print(f"[S2] where an undecided run spends its time (geometry {und[0]}, {len(q)} samples)", flush=True)
-    with _Clock(W, ("advance", "pose_solutions", "contract_tubes")) as clock:
+    ex = _explainer(explain)
+    with _Clock(W, ("advance", "pose_solutions", "contract_tubes", "one_motion_rows")) as clock:
         t0 = time.perf_counter()
-        track_window(im, q, s, initial_mode=1)
+        track_window(im, q, s, initial_mode=1, **({"explainer": ex} if explain else {}))
         total = time.perf_counter() - t0
+    if ex is not None:
+        clock.total["explainer"] = sum(a.wall_s for a in ex.log)
     rest = total - sum(clock.total.values())
     for name, v in sorted(clock.total.items(), key=lambda kv: -kv[1]):
         print(f"  {name:15s} {v:7.3f} s  {100 * v / total:5.1f} %", flush=True)
@@ -365,6 +408,7 @@ if __name__ == "__main__":
                 int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20)
     elif "--speed" in sys.argv:
         speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20,
-              sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3")
+              sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3",
+              "--explain" in sys.argv)
     else:
         main()

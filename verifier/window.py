@@ -34,6 +34,16 @@ recording may use every reading.  :func:`track_window` does so:
     and the others' sub-boxes narrowed to the geometries the relaxation
     allows (proved bounds by weak duality); a step that changed something
     earns another round of passes with the narrowed sub-boxes.
+6.  **Early stop when no sound method can decide.**  With an
+    :class:`Explainer` (the planner's counterexample searches), a hypothesis
+    that spent its budget of sub-boxes is offered to it before the one-motion
+    step: when it answers :attr:`Explanation.EXPLAINED` (a verified
+    admissible motion ending in that mode explains every reading) the
+    hypothesis runs no more rounds, and once every hypothesis asked about is
+    explained the window stops with ``unknown``
+    (:attr:`VerdictReason.UNDECIDABLE`).  Stopping only ever gives
+    ``unknown``; a wrong explainer can turn a verdict into ``unknown`` and
+    nothing else.
 
 Every pass only removes what cannot hold under the tracker's assumptions and
 the hypothesis, so a refuted hypothesis is false (docs/soundness.md, "Window
@@ -45,6 +55,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 from enum import Enum
+from typing import Protocol
 
 import numpy as np
 
@@ -60,7 +71,8 @@ from .step import Backend, advance, configure, init_state, partition_xi, pose_so
 from .tracker import Tracker, initial_box_from_mode, verdict_of
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
-           "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES"]
+           "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "VerdictReason",
+           "Explanation", "ExplainRequest", "Explainer"]
 
 #: Default pass budget of a round (backward and forward passes alternate).
 WINDOW_MAX_PASSES = 6
@@ -98,6 +110,9 @@ class HypothesisStatus(str, Enum):
 
     REFUTED = "refuted"  #: no admissible motion ends in this mode
     CONSISTENT = "consistent"  #: not refuted within the pass budget
+    #: not refuted, and an admissible motion ending in this mode explains every reading (the
+    #: :class:`Explainer`'s verified witness): no sound method can refute it
+    EXPLAINED = "explained"
 
     def __str__(self) -> str:
         return self.value
@@ -115,6 +130,90 @@ class Refutation(str, Enum):
 
     def __str__(self) -> str:
         return self.value
+
+
+class VerdictReason(str, Enum):
+    """Why a window gave its verdict (:attr:`WindowResult.reason`)."""
+
+    CERTIFIED = "certified"  #: one final mode refuted (by the window passes or the forward pass), not both
+    INCONSISTENT = "inconsistent"  #: every final mode refuted, or the forward pass emptied: an assumption is violated
+    NO_INITIAL_MODE = "no-initial-mode"  #: the initial mode is not certified: no hypothesis was tested
+    BUDGET = "budget-spent"  #: no hypothesis asked about refuted within the rounds run (more work might decide)
+    #: every hypothesis asked about is explained by a verified admissible motion: no sound method can
+    #: decide, the window stopped early with ``unknown``
+    UNDECIDABLE = "undecidable"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+class Explanation(str, Enum):
+    """An :class:`Explainer`'s answer about one final-mode hypothesis."""
+
+    #: a motion satisfying every assumption of the window's settings, ending in this mode, explains every
+    #: reading, and the explainer's independent check accepted it
+    EXPLAINED = "explained"
+    NOT_FOUND = "not-found"  #: no such motion found (which proves nothing)
+    NOT_SEARCHED = "not-searched"  #: the explainer did not search (e.g. the problem is beyond its size limit)
+    #: the settings assume something the explainer's witness is not checked against (it makes no claim)
+    NOT_COVERED = "not-covered"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True, eq=False)
+class ExplainRequest:
+    """What a window asks an :class:`Explainer` about one final-mode hypothesis (SI units).
+
+    Attributes
+    ----------
+    model : verifier.model.IntervalModel
+    q : ndarray, shape (K, n)
+        The readings, rad (or m for a prismatic joint), every ``settings.t_s`` seconds.
+    settings : TrackerSettings
+        The window's assumptions; a witness must satisfy every one of them.
+    xi_box : (lo, hi)
+        The window's calibration box ``(m,)`` (``track_window(xi_box=...)`` or the model's).
+    x0 : (lo, hi) or None
+        The initial pose box ``(n,)`` the window was given (the pose at the
+        first sample lies in it); ``None`` when it was given the initial mode.
+    initial_mode, final_mode : int
+        +1 / -1: the witness starts in ``initial_mode`` and ends in ``final_mode``.
+    xi_lo, xi_hi : ndarray, shape (R, m)
+        The hypothesis' surviving geometry sub-boxes (seeds for a search; they
+        do not restrict the witness, which may use any geometry of ``xi_box``).
+    x_lo, x_hi : ndarray, shape (K, n)
+        Hull of the hypothesis' pose tubes, m (seeds; no restriction either).
+    """
+
+    model: object
+    q: np.ndarray
+    settings: TrackerSettings
+    xi_box: tuple
+    x0: tuple | None
+    initial_mode: int
+    final_mode: int
+    xi_lo: np.ndarray
+    xi_hi: np.ndarray
+    x_lo: np.ndarray
+    x_hi: np.ndarray
+
+
+class Explainer(Protocol):
+    """A strategy asked whether a final-mode hypothesis is explained by an admissible motion.
+
+    It must answer :attr:`Explanation.EXPLAINED` only for a motion it has
+    checked against every assumption of ``request.settings`` (reading error,
+    acceleration, speed bounds, calibration box ``request.xi_box``, initial box
+    ``request.x0``, workspace box) and the modes asked; anything it cannot
+    check gives :attr:`Explanation.NOT_COVERED`.  The window trusts the answer
+    only to stop working on a hypothesis, so a wrong ``EXPLAINED`` can cost a
+    verdict (``unknown`` instead) but never give a wrong one.  Implemented by
+    :class:`planner.refute.RefutingExplainer` (the verifier imports no planner).
+    """
+
+    def __call__(self, request: ExplainRequest) -> Explanation: ...
 
 
 @dataclass(frozen=True)
@@ -180,6 +279,9 @@ class WindowResult:
         Largest side of those tubes over the recording, m and m/s.
     steps : int
     elapsed_s : float
+    reason : VerdictReason
+        Why the verdict is what it is (``UNDECIDABLE``: stopped early, no
+        sound method can decide; ``BUDGET``: undecided within the rounds run).
     """
 
     verdict: Verdict
@@ -194,11 +296,13 @@ class WindowResult:
     max_width_velocity: float
     steps: int
     elapsed_s: float
+    reason: VerdictReason = VerdictReason.CERTIFIED
 
     def summary(self) -> dict:
         """JSON-ready summary (SI units)."""
         return {
             "verdict": self.verdict.value,
+            "reason": self.reason.value,
             "initial_mode": int(self.initial_mode),
             "forward_verdict": self.forward_verdict.value,
             "hypotheses": [
@@ -314,7 +418,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                  max_passes: int = WINDOW_MAX_PASSES, rel_tol: float = WINDOW_REL_TOL,
                  max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
                  parallel: bool = True, goal: Verdict | None = None,
-                 one_motion: int = ONE_MOTION_SAMPLES) -> WindowResult:
+                 one_motion: int = ONE_MOTION_SAMPLES, explainer: Explainer | None = None) -> WindowResult:
     """Verdict of a whole recording by forward-backward window passes (module docstring).
 
     Parameters
@@ -360,6 +464,13 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         proved bounds of the geometries that can; a step that dropped or narrowed (by
         :data:`ONE_MOTION_SHRINK`) earns another round without halving, up to :data:`ONE_MOTION_ROUNDS`.
         0: not tried.
+    explainer : Explainer, optional
+        Asked about each hypothesis (of ``goal``'s, when given) once it has
+        spent its budget of sub-boxes, before its one-motion step; an
+        explained hypothesis runs no more rounds, and when every hypothesis
+        asked about is explained the window stops: ``unknown``, reason
+        :attr:`VerdictReason.UNDECIDABLE`.  ``None``: never asked (the
+        passes, verdict and tubes do not depend on it otherwise).
 
     Returns
     -------
@@ -375,6 +486,8 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         raise InputError("q_meas must be finite")
     if isinstance(max_passes, bool) or int(max_passes) != max_passes or max_passes < 0:
         raise InputError(f"max_passes must be a non-negative integer, got {max_passes!r}")
+    if explainer is not None and not callable(explainer):
+        raise InputError(f"explainer must be callable (an Explainer) or None, got {type(explainer).__name__}")
     if isinstance(max_geometries, bool) or int(max_geometries) != max_geometries or max_geometries < 1:
         raise InputError(f"max_geometries must be a positive integer, got {max_geometries!r}")
     if not (0.0 <= rel_tol < 1.0):
@@ -409,13 +522,14 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     if forward_verdict is Verdict.INCONSISTENT or m0 == 0:
         results = ()
         verdict = forward_verdict
+        reason = VerdictReason.INCONSISTENT if verdict is Verdict.INCONSISTENT else VerdictReason.NO_INITIAL_MODE
         tubes = [(fx[f_alive], fxd[f_alive])]
     elif mf != 0:
         # the forward pass decided: the other final mode is refuted by its certified boxes
         results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
                                     *_hull(fx[f_alive], fxd[f_alive]), xi_rows[0][f_alive], xi_rows[1][f_alive]),
                    HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
-        verdict = forward_verdict
+        verdict, reason = forward_verdict, VerdictReason.CERTIFIED
         tubes = [(fx[f_alive], fxd[f_alive])]
     else:
         finals = _FinalBoxes(model, q[K - 1], s, str(Backend(backend)))
@@ -424,20 +538,32 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                 for m in (m0, -m0)]
         if not any(h.refuted for h in hyps):
             full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
+            ask = None
+            if explainer is not None:
+                x0_given = None if initial_mode is not None else (x0[0][0].copy(), x0[1][0].copy())
+
+                def ask(h):
+                    return explainer(ExplainRequest(model, q, s, XI, x0_given, m0, h.m, h.xlo.copy(), h.xhi.copy(),
+                                                    *(a.copy() for a in _hull(h.tx, h.txd)[:2])))
             _decide(hyps, _Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w,
-                    _targets(hyps, m0, goal), int(one_motion))
+                    _targets(hyps, m0, goal), int(one_motion), ask)
         else:  # refuted by the last reading alone: the other ran no pass
             for h in hyps:
                 h.complete = h.refuted
         results = tuple(h.result() for h in hyps)
         tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
-        alive = [h.final_mode for h in results if h.status is HypothesisStatus.CONSISTENT]
+        alive = [h.final_mode for h in results if h.status is not HypothesisStatus.REFUTED]
         if not alive:
-            verdict = Verdict.INCONSISTENT
+            verdict, reason = Verdict.INCONSISTENT, VerdictReason.INCONSISTENT
         elif len(alive) == 2:
             verdict = Verdict.UNKNOWN
+            asked = _targets(hyps, m0, goal)
+            # the early stop: every hypothesis asked about explained (a wrong claim only costs a verdict)
+            undecidable = all(h.explained for h in asked)
+            reason = VerdictReason.UNDECIDABLE if undecidable else VerdictReason.BUDGET
         else:
             verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
+            reason = VerdictReason.CERTIFIED
     tubes = [t for t in tubes if len(t[0])]
     if tubes:
         x_lo, x_hi, xd_lo, xd_hi = _hull(np.concatenate([t[0] for t in tubes]), np.concatenate([t[1] for t in tubes]))
@@ -448,7 +574,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         wv = float(np.nanmax(xd_hi - xd_lo)) if tubes else 0.0
     return WindowResult(verdict=verdict, initial_mode=m0, forward_verdict=forward_verdict, hypotheses=results,
                         x_lo=x_lo, x_hi=x_hi, xd_lo=xd_lo, xd_hi=xd_hi, max_width_pose=wx, max_width_velocity=wv,
-                        steps=K, elapsed_s=time.perf_counter() - t0)
+                        steps=K, elapsed_s=time.perf_counter() - t0, reason=reason)
 
 
 def _pose_spread(model, x, q, xi_lo, xi_hi):
@@ -507,6 +633,8 @@ class _Hypothesis:
         self.refutation = Refutation.NONE
         self.complete = True  # False once the rounds stopped before this hypothesis used its budget
         self.extra = 0  # rounds run after one-motion steps without halving (ONE_MOTION_ROUNDS)
+        self.asked = False  # offered to the explainer (once, when its budget of sub-boxes is spent)
+        self.explained = False  # the explainer answered EXPLAINED: no more rounds
         self._final_boxes()
 
     @property
@@ -584,7 +712,8 @@ class _Hypothesis:
     def result(self) -> HypothesisResult:
         if self.refuted:
             return HypothesisResult(self.m, HypothesisStatus.REFUTED, self.refutation, self.passes, 0)
-        return HypothesisResult(self.m, HypothesisStatus.CONSISTENT, self.refutation, self.passes, len(self.xlo),
+        status = HypothesisStatus.EXPLAINED if self.explained else HypothesisStatus.CONSISTENT
+        return HypothesisResult(self.m, status, self.refutation, self.passes, len(self.xlo),
                                 self.complete, *_hull(self.tx, self.txd), self.xlo, self.xhi)
 
 
@@ -652,7 +781,7 @@ def _targets(hyps, m0, goal):
     return [h for h in hyps if (h.m == m0) == (goal is Verdict.MODE_CHANGED)]
 
 
-def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=None, one_motion=0):
+def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=None, one_motion=0, ask=None):
     """Rounds on the hypotheses ``targets`` (all of ``hyps`` by default), halving each one's geometries
     after each of its rounds while they stay within ``max_geometries``, until a hypothesis is refuted or
     none can be halved.
@@ -671,6 +800,13 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=N
     hypothesis' rounds on every decided recording, and a refuted hypothesis is false whatever the
     other one's tubes are (measured: benchmarks/README.md [8]).  A hypothesis left out of ``targets``
     runs no round and is marked incomplete too.
+
+    ``ask`` (``ask(h) -> Explanation``, optional) is called once per hypothesis, when its budget of
+    sub-boxes is spent and before its one-motion step (so a recording decided within the budget never
+    calls it).  An explained hypothesis leaves the rounds (complete: no sound pass can refute a
+    hypothesis an admissible motion satisfies); once every hypothesis of ``targets`` is explained the
+    rounds stop.  Trusting a wrong answer only keeps a false hypothesis alive: ``unknown``, never a
+    wrong verdict.
     """
     open_ = list(hyps if targets is None else targets)
     for h in hyps:
@@ -683,6 +819,14 @@ def _decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=N
         before = passes.rows
         _round(h, passes, max_passes, rel_tol)
         rows[i] += passes.rows - before
+        if ask is not None and not h.refuted and not h.asked and 2 * len(h.xlo) > max_geometries:
+            h.asked = True
+            h.explained = Explanation(ask(h)) is Explanation.EXPLAINED
+            if h.explained:
+                del open_[i], rows[i]
+                if all(t.explained for t in (hyps if targets is None else targets)):
+                    return  # no sound method can decide: stop (unknown)
+                continue
         if one_motion and not h.refuted and 2 * len(h.xlo) > max_geometries:
             # the budget is spent: the one-motion step is the last resort; the rows it drops give the halving
             # room again, and the sub-boxes it narrows tighten the next round's tubes

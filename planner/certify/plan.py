@@ -58,12 +58,13 @@ from crosscert.robots.errors import InputError
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.settings import TrackerSettings, Verdict
 from crosscert.verifier.tracker import TrackResult, track
-from crosscert.verifier.window import Reasoning, WindowResult, track_window
+from crosscert.verifier.window import Explainer, Reasoning, WindowResult, track_window
 
 from .. import execution as ex_
 from .. import execution_proof as exp_
 from ..acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
 from ..plan import plan_crossing
+from ..refute import RefutingExplainer
 from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
 
 __all__ = [
@@ -149,13 +150,16 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
 
 def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int,
                         *, execution: ex_.ExecutionClass | None = None, kin=None, a_max=None,
-                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES, parallel: bool = True) -> WindowResult:
+                        max_geometries: int = CERTIFY_WINDOW_GEOMETRIES, parallel: bool = True,
+                        explainer: Explainer | None = None) -> WindowResult:
     """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
 
     ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
     certifies every admissible execution, as for :func:`certify_plan`.  ``parallel``: the geometry
     sub-boxes over the thread slots (the same boxes either way).  The window's one-motion refutation
-    runs over ``bounds.one_motion`` samples (0: not tried).
+    runs over ``bounds.one_motion`` samples (0: not tried).  ``explainer`` (e.g.
+    :class:`planner.refute.RefutingExplainer`): a verified bounce of the plan's readings stops the window
+    early with ``unknown`` (no sound method can certify ``MODE_CHANGED`` then); ``None``: not asked.
     """
     robot = imodel.robot
     b = bounds.for_robot(robot)
@@ -164,7 +168,7 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
     s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
                         max_geometries=max_geometries, parallel=parallel, goal=Verdict.MODE_CHANGED,
-                        one_motion=b.one_motion)
+                        one_motion=b.one_motion, explainer=explainer)
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,8 +224,9 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
     forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
     window = None
     if forward.verdict is Verdict.UNKNOWN and b.reasoning is Reasoning.WINDOW:
+        # a verified bounce stops the window early: that speed cannot be certified by any sound method
         window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=acceleration.values,
-                                     parallel=parallel)
+                                     parallel=parallel, explainer=RefutingExplainer())
     return CertifiedRun(plan, cls, acceleration, forward, window)
 
 

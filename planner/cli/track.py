@@ -17,9 +17,10 @@ from crosscert.verifier.tracker import Tracker
 from crosscert.verifier.settings import Verdict
 from crosscert.verifier.tracker import initial_box_from_mode, verdict_of
 from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
-from crosscert.verifier.window import FixedLagWindow, Reasoning, track_window
+from crosscert.verifier.window import FixedLagWindow, Reasoning, VerdictReason, track_window
 
 from ..progress import Phase, enter
+from ..refute import RefutingExplainer
 from .setup import phase_bar, tracker_setup
 
 __all__ = ["check", "monitor", "Monitor"]
@@ -81,9 +82,14 @@ def _tracked(a, robot, model, run, bar):
                   "samples; the verdict is the forward tracker's", file=sys.stderr)
         else:
             enter(bar, Phase.WINDOW, unit="")
+            # stops the window early on a recording no sound method can decide (both final modes explained)
+            explainer = RefutingExplainer()
             win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
-                               x0=run.x0_used, backend=a.backend)
+                               x0=run.x0_used, backend=a.backend, explainer=explainer)
             out["window"] = win.summary()
+            out["window"]["explainer"] = [
+                {"final_mode": e.final_mode, "search": None if e.kind is None else e.kind.value,
+                 "outcome": e.outcome.value, "ipopt_s": e.solve_s, "wall_s": e.wall_s} for e in explainer.log]
             out["verdict"] = win.verdict.value
             if win.verdict in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
                 out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
@@ -118,6 +124,9 @@ def check(a) -> int:
             w = out["window"]
             hyps = ", ".join("final mode {:+d} {}".format(h["final_mode"], h["status"]) for h in w["hypotheses"])
             print(f"forward tracker: {out['forward_verdict']}; window passes: {w['verdict']} ({hyps})")
+            if w["reason"] == VerdictReason.UNDECIDABLE.value:
+                print("window reason: undecidable: each final mode is explained by a verified admissible motion, "
+                      "so no sound method can decide this recording (stopped early)")
         for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
             print(f"{key}: {out[key]}")
         print(f"max width pose (m_x): {1e3 * out['max_width_pose_m']:.3f} mm")

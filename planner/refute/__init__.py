@@ -13,6 +13,9 @@ every candidate independently.
   :func:`search_crossing`);
 * :mod:`.verify` — the trusted check of a candidate (:func:`verify_bounce`,
   :func:`verify_crossing`), which builds no optimisation problem;
+* :mod:`.explain` — the window's explainer (:class:`RefutingExplainer`): a
+  verified search per final-mode hypothesis, to stop a window no sound method
+  can decide;
 * :mod:`.search` — the sweeps over a family of recordings: crossings by speed
   (:func:`refutation_bound`), bounces by turn-back distance (:func:`crossing_floor`).
 
@@ -24,6 +27,7 @@ counterexample exists.  SI units throughout (m, rad, s).
 Explicit re-exports (no star imports).
 """
 
+from .explain import ExplainAttempt, RefutingExplainer
 from .nlp import fk_branch_guess, fk_crossing_guess, search_bounce, search_counterexample, search_crossing
 from .problem import (
     ACCEL_MARGIN,
@@ -51,9 +55,11 @@ __all__ = [
     "Counterexample",
     "CounterexampleKind",
     "CrossingFloor",
+    "ExplainAttempt",
     "RecordingBounds",
     "RecordingRefutation",
     "RefutationBound",
+    "RefutingExplainer",
     "SearchOutcome",
     "SpeedRefutation",
     "Verification",
