@@ -227,6 +227,7 @@ class _Solver:
         self.basis[(M, N)] = h.getBasis()
         self.feasible = not h.getInfo().objective_function_value > 0
         self.scale, self.r = scale, r
+        self.u = np.asarray(h.getSolution().col_value, dtype=np.float64)[:N]  # a point of the system when feasible
         if not h.getInfo().objective_function_value > 0:
             return None
         y = -np.asarray(h.getSolution().row_dual, dtype=np.float64)  # duals of <= rows are <= 0
@@ -243,9 +244,16 @@ class _Solver:
         h.changeColBounds(N, 0.0, 0.0)  # t = 0: the system itself
         every = np.arange(N + 1, dtype=np.int32)
         C = len(columns)
+        # a side of z_j that a point of the system found so far lies on cannot narrow (the program's minimum
+        # is that bound): its program is skipped, as if it proved only the box (phase one's vertex has
+        # one side of every geometry parameter: half the programs of the certify plans' rows)
+        u = self.u
+        at = {1.0: u[columns] <= -1.0, -1.0: u[columns] >= 1.0}  # min z_j is lo_j / max z_j is hi_j
         Y, cost = np.zeros((2 * C, M)), np.zeros((2 * C, N))
         for i, j in enumerate(columns):
             for k, sign in ((2 * i, 1.0), (2 * i + 1, -1.0)):
+                if at[sign][i]:
+                    continue
                 c = np.zeros(N + 1)
                 c[j] = sign * self.r[j]  # min ±z_j: z_j = c_j + r_j u_j
                 h.changeColsCost(N + 1, every, c)
@@ -253,7 +261,13 @@ class _Solver:
                 cost[k, j] = sign
                 if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
                     Y[k] = -np.asarray(h.getSolution().row_dual, dtype=np.float64) / self.scale
-        low = certified_minimum(system, Y, cost)  # Y = 0 proves only the box
+                    v = np.asarray(h.getSolution().col_value, dtype=np.float64)[columns]
+                    at[1.0] |= v <= -1.0
+                    at[-1.0] |= v >= 1.0
+        low = np.full(2 * C, -np.inf)
+        run = np.any(cost != 0.0, axis=1)
+        if run.any():
+            low[run] = certified_minimum(system, Y[run], cost[run])  # Y = 0 proves only the box
         lo = np.maximum(system.lo[columns], low[0::2])
         hi = np.minimum(system.hi[columns], -low[1::2])
         return lo, hi
