@@ -26,6 +26,7 @@ geometry parameters; SI units.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -190,8 +191,11 @@ class _Solver:
         vals = s.vals[order] * r[cols]
         rhs = s.b - np.bincount(s.rows, weights=s.vals * c[s.cols], minlength=M)
         counts = np.bincount(rows, minlength=M)
-        scale = np.zeros(M)
-        np.maximum.at(scale, rows, np.abs(vals))
+        if np.all(counts > 0):  # rows sorted: each row's largest entry in one pass (max is exact)
+            scale = np.maximum.reduceat(np.abs(vals), np.concatenate(([0], np.cumsum(counts)[:-1])))
+        else:
+            scale = np.zeros(M)
+            np.maximum.at(scale, rows, np.abs(vals))
         scale = np.where(scale > 0, scale, 1.0)
         # row i: its entries scaled by 1/scale_i, then the column t with -1
         start = np.concatenate(([0], np.cumsum(counts + 1)))
@@ -437,6 +441,13 @@ def motion_rows(t_s: float, a, S: int, n: int, velocity: bool):
     return blocks
 
 
+@functools.lru_cache(maxsize=8)
+def _motion_rows_of(t_s: float, a: tuple, S: int, n: int, velocity: bool):
+    """:func:`motion_rows` once per window's settings and sample count (the same blocks for every row; not
+    modified by their users)."""
+    return motion_rows(t_s, np.array(a, dtype=np.float64), S, n, velocity)
+
+
 def drift_rows(settings, q, S: int, n: int):
     """Inequalities of the drift model of the reading error (A9, when the settings have one) on the joint
     unknowns ``q_k`` and the slow part ``s_k`` of the error: ``e_k = q̃_k − q_k = s_k + f_k`` with
@@ -523,7 +534,7 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
         c = np.asarray(c)
         blocks.append((r, m + S * n + c + np.where(c >= S * n, nv, 0), v, b))
     # motion: x at m + k n + i, v at m + 2 S n + k n + i
-    for r, c, v, b in motion_rows(settings.t_s, settings.a_max, S, n, velocity):
+    for r, c, v, b in _motion_rows_of(float(settings.t_s), tuple(np.ravel(settings.a_max).tolist()), S, n, velocity):
         c = np.asarray(c)
         c = np.where(c < S * n, m + c, m + S * n + c)  # v columns: S n + ... -> m + 2 S n + ...
         blocks.append((r, c, v, b))
