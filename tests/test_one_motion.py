@@ -358,3 +358,29 @@ def test_the_contractor_certifies_the_certify_plan_at_0930():
     with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES)
     run = certify_speed(kin, interval_model(), task, with_step, ONE_MOTION_PLAN["contracted"])
     assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
+
+
+def test_the_contractor_skips_only_the_sides_a_point_attains():
+    """``z_0 + z_1 >= 1.5`` over ``[0, 1]²``: ``min z_j`` is 0.5 (proved from below to within ``1e-12``),
+    ``max z_j`` the box's 1, which phase one's vertex or a later program's point attains: those programs are
+    not run (fewer than the four), the same bounds come out.  Fails when the skip takes the other side."""
+    system = OM.LinearSystem(np.array([0, 0]), np.array([0, 1]), np.array([-1.0, -1.0]), np.array([-1.5]),
+                             np.zeros(2), np.ones(2))
+    solver = OM._Solver()
+    runs = []
+    real = solver.highs
+
+    class Counting:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        def run(self):
+            runs.append(1)
+            return real.run()
+
+    assert solver.phase_one(system) is None and solver.feasible
+    solver.highs = Counting()
+    lo, hi = solver.bounds(system, [0, 1])
+    assert np.all(hi == 1.0)
+    assert np.all(lo <= 0.5) and np.all(lo > 0.5 - 1e-12), lo
+    assert len(runs) < 4, len(runs)

@@ -435,3 +435,31 @@ def test_the_compiled_contraction_changes_no_reported_box(monkeypatch):
             assert (u is None) == (v is None), name
             if u is not None:
                 assert np.array_equal(u, v, equal_nan=True), name
+
+
+def test_a_sub_box_the_one_motion_step_left_as_it_was_is_not_asked_again(monkeypatch):
+    """``crosscert certify``'s plan at 0.8548 m/s (undecided, the step runs seven times): a sub-box that a step
+    returned unchanged (not dropped, not narrowed) is not passed to the step again while it stays the same,
+    and the verdict is the same as when every row is asked.  Fails without the rows kept in
+    ``_Hypothesis.one_motion``."""
+    import crosscert.verifier.window as W
+    from crosscert.planner.certify.plan import certify_speed
+    from crosscert.planner.task import benchmark_task
+    from crosscert.robots import KinematicModel
+
+    real, kept, again = W.one_motion_rows, set(), []
+
+    def watching(model, s, q, XI, X, XD, samples):
+        out, lo, hi = real(model, s, q, XI, X, XD, samples)
+        for r in range(len(XI[0])):
+            key = XI[0][r].tobytes() + XI[1][r].tobytes()
+            again.append(key in kept)
+            if not out[r] and np.array_equal(lo[r], XI[0][r]) and np.array_equal(hi[r], XI[1][r]):
+                kept.add(key)
+        return out, lo, hi
+
+    monkeypatch.setattr(W, "one_motion_rows", watching)
+    run = certify_speed(KinematicModel(DEXTAR), interval_model(), benchmark_task(get_entry("dextar")),
+                        PlanningBounds(one_motion=40), 0.8548)
+    assert run.window.verdict is Verdict.UNKNOWN
+    assert len(kept) > 0 and len(again) >= 20 and not any(again), (len(kept), len(again), sum(again))

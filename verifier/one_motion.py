@@ -26,6 +26,7 @@ geometry parameters; SI units.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -190,8 +191,11 @@ class _Solver:
         vals = s.vals[order] * r[cols]
         rhs = s.b - np.bincount(s.rows, weights=s.vals * c[s.cols], minlength=M)
         counts = np.bincount(rows, minlength=M)
-        scale = np.zeros(M)
-        np.maximum.at(scale, rows, np.abs(vals))
+        if np.all(counts > 0):  # rows sorted: each row's largest entry in one pass (max is exact)
+            scale = np.maximum.reduceat(np.abs(vals), np.concatenate(([0], np.cumsum(counts)[:-1])))
+        else:
+            scale = np.zeros(M)
+            np.maximum.at(scale, rows, np.abs(vals))
         scale = np.where(scale > 0, scale, 1.0)
         # row i: its entries scaled by 1/scale_i, then the column t with -1
         start = np.concatenate(([0], np.cumsum(counts + 1)))
@@ -227,6 +231,7 @@ class _Solver:
         self.basis[(M, N)] = h.getBasis()
         self.feasible = not h.getInfo().objective_function_value > 0
         self.scale, self.r = scale, r
+        self.u = np.asarray(h.getSolution().col_value, dtype=np.float64)[:N]  # a point of the system when feasible
         if not h.getInfo().objective_function_value > 0:
             return None
         y = -np.asarray(h.getSolution().row_dual, dtype=np.float64)  # duals of <= rows are <= 0
@@ -243,9 +248,16 @@ class _Solver:
         h.changeColBounds(N, 0.0, 0.0)  # t = 0: the system itself
         every = np.arange(N + 1, dtype=np.int32)
         C = len(columns)
+        # a side of z_j that a point of the system found so far lies on cannot narrow (the program's minimum
+        # is that bound): its program is skipped, as if it proved only the box (phase one's vertex has
+        # one side of every geometry parameter: half the programs of the certify plans' rows)
+        u = self.u
+        at = {1.0: u[columns] <= -1.0, -1.0: u[columns] >= 1.0}  # min z_j is lo_j / max z_j is hi_j
         Y, cost = np.zeros((2 * C, M)), np.zeros((2 * C, N))
         for i, j in enumerate(columns):
             for k, sign in ((2 * i, 1.0), (2 * i + 1, -1.0)):
+                if at[sign][i]:
+                    continue
                 c = np.zeros(N + 1)
                 c[j] = sign * self.r[j]  # min ±z_j: z_j = c_j + r_j u_j
                 h.changeColsCost(N + 1, every, c)
@@ -253,7 +265,13 @@ class _Solver:
                 cost[k, j] = sign
                 if h.getModelStatus() == highspy.HighsModelStatus.kOptimal:
                     Y[k] = -np.asarray(h.getSolution().row_dual, dtype=np.float64) / self.scale
-        low = certified_minimum(system, Y, cost)  # Y = 0 proves only the box
+                    v = np.asarray(h.getSolution().col_value, dtype=np.float64)[columns]
+                    at[1.0] |= v <= -1.0
+                    at[-1.0] |= v >= 1.0
+        low = np.full(2 * C, -np.inf)
+        run = np.any(cost != 0.0, axis=1)
+        if run.any():
+            low[run] = certified_minimum(system, Y[run], cost[run])  # Y = 0 proves only the box
         lo = np.maximum(system.lo[columns], low[0::2])
         hi = np.minimum(system.hi[columns], -low[1::2])
         return lo, hi
@@ -423,6 +441,13 @@ def motion_rows(t_s: float, a, S: int, n: int, velocity: bool):
     return blocks
 
 
+@functools.lru_cache(maxsize=8)
+def _motion_rows_of(t_s: float, a: tuple, S: int, n: int, velocity: bool):
+    """:func:`motion_rows` once per window's settings and sample count (the same blocks for every row; not
+    modified by their users)."""
+    return motion_rows(t_s, np.array(a, dtype=np.float64), S, n, velocity)
+
+
 def drift_rows(settings, q, S: int, n: int):
     """Inequalities of the drift model of the reading error (A9, when the settings have one) on the joint
     unknowns ``q_k`` and the slow part ``s_k`` of the error: ``e_k = q̃_k − q_k = s_k + f_k`` with
@@ -509,7 +534,7 @@ def row_system(model, settings, q, XI, X, XD, samples, velocity: bool = True, cl
         c = np.asarray(c)
         blocks.append((r, m + S * n + c + np.where(c >= S * n, nv, 0), v, b))
     # motion: x at m + k n + i, v at m + 2 S n + k n + i
-    for r, c, v, b in motion_rows(settings.t_s, settings.a_max, S, n, velocity):
+    for r, c, v, b in _motion_rows_of(float(settings.t_s), tuple(np.ravel(settings.a_max).tolist()), S, n, velocity):
         c = np.asarray(c)
         c = np.where(c < S * n, m + c, m + S * n + c)  # v columns: S n + ... -> m + 2 S n + ...
         blocks.append((r, c, v, b))

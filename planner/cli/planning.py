@@ -119,6 +119,9 @@ def certify(a) -> int:
     if cert.execution is not None:
         print(describe_execution(cert.execution, joint_unit))
     print("a_max used: " + ("none (no certificate)" if cert.a_max_used is None else cert.a_max_used.describe()))
+    om = cert.bounds.one_motion
+    print(f"reasoning: {cert.bounds.reasoning.value}; one-motion step in the windows: "
+          + (f"{om} samples" if om else "off"))
     _print_at_robot_a_max(cert, a.no_refute)
     extra = cert.at_robot_a_max
     more = f" + {extra.elapsed_s:.1f} s at the robot's a_max" if extra.outcome is ComparisonOutcome.COMPUTED else ""
