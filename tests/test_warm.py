@@ -130,3 +130,31 @@ def test_the_driver_compiled_by_the_child_gives_the_same_answer(tmp_path, simula
     for d in (got, expected):
         d.pop("elapsed_s")
     assert got == expected
+
+
+def test_by_default_a_child_only_when_a_core_is_free(monkeypatch):
+    """Unset: a child when the load average leaves a core free, none on a busy machine (it would only add
+    the CPU time of the callees it compiles again); ``1`` starts one whatever the load."""
+    started = []
+    monkeypatch.setattr(warm.subprocess, "Popen", lambda *a, **k: started.append(a) or _Done())
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    monkeypatch.setattr(warm.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.delenv(warm.DISABLE, raising=False)
+    monkeypatch.setattr(warm.os, "getloadavg", lambda: (1.5, 1.0, 1.0))
+    assert not warm.start("sound")
+    monkeypatch.setenv(warm.DISABLE, "1")
+    assert warm.start("sound") and warm.wait(SOUND) == 0
+    monkeypatch.delenv(warm.DISABLE)
+    monkeypatch.setattr(warm.os, "getloadavg", lambda: (0.3, 1.0, 1.0))
+    assert warm.start("sound") and warm.wait(SOUND) == 0
+    assert len(started) == 2
+
+
+class _Done:
+    """A child that has finished, successfully."""
+
+    def poll(self):
+        return 0
+
+    def wait(self, timeout=None):
+        return 0
