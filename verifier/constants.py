@@ -20,11 +20,18 @@ import numpy as np
 
 from . import interval as I
 
-__all__ = ["AXIS_DTYPE", "BASELINE_DTYPE", "StepConstants", "pack_constants", "SOUND", "JOINT_FD", "PAPER"]
+__all__ = ["AXIS_DTYPE", "BASELINE_DTYPE", "StepConstants", "pack_constants", "SOUND", "JOINT_FD", "PAPER",
+           "velocity_model_code"]
 
 #: Codes of the velocity models in :attr:`StepConstants.velocity_model`.
 SOUND, JOINT_FD, PAPER = range(3)
 _VMODEL_CODE = {"sound": SOUND, "joint-fd": JOINT_FD, "paper": PAPER}
+
+
+def velocity_model_code(name) -> int:
+    """The code of the velocity model ``name`` (a :class:`verifier.settings.VelocityModel` or its value)."""
+    return _VMODEL_CODE[getattr(name, "value", name)]
+
 
 #: Per-axis constants (one record per pose / joint coordinate).
 AXIS_DTYPE = np.dtype([
@@ -113,7 +120,7 @@ def pack_constants(s, n: int) -> StepConstants:
     baseline = np.zeros(len(s.baselines), BASELINE_DTYPE)
     baseline["j"] = s.baselines
     baseline["h_lo"], baseline["h_hi"] = h[:, 0], h[:, 1]
-    vmodel = _VMODEL_CODE[s.velocity_model.value]
+    vmodel = velocity_model_code(s.velocity_model)
     return StepConstants(
         t_s=float(ts), rel_tol=float(s.rel_tol), split_tol=float(s.split_tol),
         split_max_width=float(s.split_max_width), velocity_model=int(vmodel), max_iter=int(s.max_iter),

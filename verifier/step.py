@@ -555,6 +555,12 @@ class CompiledStep:
 
             model, c = config.model, config.const
             run, threads = self._threads(config, st)
+            if run is kernels.run_slot:
+                from .compiled import warm
+
+                # a child process may be compiling it (planner.cli starts one): its cache entry, not a second
+                # compilation here; without one (or if it failed) the first call below compiles as usual
+                warm.wait(c.velocity_model)
             B, n = st.batch, model.n
             a.update(
                 run=run,

@@ -17,7 +17,7 @@ from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
 from ..task import Method, PlanningBounds
-from .setup import phase_bar, task_setup
+from .setup import compile_ahead, phase_bar, task_setup
 
 __all__ = ["plan", "certify"]
 
@@ -35,6 +35,7 @@ def plan(a) -> int:
 
 def certify(a) -> int:
     """``crosscert certify``: v_min, its certificate, the refutation bound; a table, a JSON report and a figure."""
+    compile_ahead()  # while this process plans (IPOPT) and compiles the tapes and the pose enumeration
     entry, kin, task = task_setup(a)
     robot = entry.robot
     a_max = None if a.a_max is None else (a.a_max[0] if len(a.a_max) == 1 else a.a_max)

@@ -18,7 +18,7 @@ from ..simulate import random_geometry
 from ..task import CrossingTask, benchmark_task
 
 __all__ = ["floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
-           "phase_bar", "COMPILING"]
+           "phase_bar", "COMPILING", "compile_ahead"]
 
 
 def floats_option(text: str, count: int | None, what: str) -> list[float]:
@@ -45,6 +45,14 @@ def tracker_setup(a):
                                          velocity_model=a.velocity_model)
 
     return robot, IntervalModel(robot), settings, x0
+
+
+def compile_ahead(velocity_model: str = "sound") -> None:
+    """Before a command's setup: the tracker's driver compiled in a child process meanwhile, when it is
+    not cached yet (the first run after an install; :mod:`verifier.compiled.warm`)."""
+    from crosscert.verifier.compiled import warm
+
+    warm.start(velocity_model)
 
 
 def benchmark_setup(name: str):

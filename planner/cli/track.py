@@ -21,7 +21,7 @@ from crosscert.verifier.window import FixedLagWindow, Reasoning, VerdictReason, 
 
 from ..progress import Phase, enter
 from ..refute import RefutingExplainer
-from .setup import phase_bar, tracker_setup
+from .setup import compile_ahead, phase_bar, tracker_setup
 
 __all__ = ["check", "monitor", "Monitor"]
 
@@ -106,6 +106,8 @@ def check(a) -> int:
     :data:`WINDOW_MAX_SAMPLES` samples for the window passes (run when the
     forward tracker leaves the verdict open).
     """
+    if a.backend == Backend.COMPILED.value:
+        compile_ahead(a.velocity_model)
     robot, model, make_settings, x0 = tracker_setup(a)
     t0 = time.perf_counter()
     run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False)
@@ -360,6 +362,8 @@ def monitor(a) -> int:
     Returns the exit code; on an error (bad line, Ctrl-C) the summary so far is
     printed, marked interrupted, before the error propagates to :func:`main`.
     """
+    if a.backend == Backend.COMPILED.value and not a.spread_hypotheses:
+        compile_ahead(a.velocity_model)
     robot, model, make_settings, x0 = tracker_setup(a)
     settings = make_settings(robot.t_s if a.t_s is None else a.t_s)
     settings.validated(robot.n)  # bad bounds fail before any input is read

@@ -1,0 +1,160 @@
+"""The tracker's driver compiled in a child process (``verifier.compiled.warm``).
+
+The child only fills numba's disk cache: the signature it compiles must be the tracker's (else the parent
+compiles again), the parent must load the child's entry instead of compiling its own, the results must be
+those of an in-process compilation, and a child that fails or hangs must change nothing but the time.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+
+import numba
+import numpy as np
+import pytest
+
+from crosscert.robots import available_robots, get_robot
+from crosscert.verifier.compiled import step as kernels
+from crosscert.verifier.compiled import warm
+from crosscert.verifier.constants import JOINT_FD, PAPER, SOUND
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.settings import TrackerSettings
+from crosscert.verifier.step import CompiledStep, configure, init_state
+
+
+def _tracker_signature(name: str, velocity_model: str) -> tuple:
+    """numba's types of the arguments the tracker passes to ``run_slot`` (the online path of
+    :meth:`CompiledStep.advance`) for robot ``name``."""
+    robot = get_robot(name)
+    model = IntervalModel(robot)
+    config = configure(model, TrackerSettings.for_robot(robot, velocity_model=velocity_model), parallel=False)
+    box = tuple(np.asarray(v, dtype=np.float64) for v in robot.x_bounds)
+    st = init_state(config, box)
+    a = CompiledStep()._args(config, st)
+    assert a["run"] is kernels.run_slot
+    head = (config.model.program, config.const, a["vel"], a["rows"], a["scen"], a["scratch"])
+    q = np.zeros((1, 1, robot.n))
+    args = head + a["slots"][0] + (int(st.k), q, False, a["no_record"], False, a["no_prior"])
+    return tuple(numba.typeof(v) for v in args)
+
+
+@pytest.mark.parametrize("velocity_model", ["sound", "joint-fd", "paper"])
+@pytest.mark.parametrize("name", available_robots())
+def test_the_child_compiles_the_signature_the_tracker_calls(name, velocity_model):
+    """Every robot, every velocity model: the driver's types do not depend on the robot, and the child's
+    example arguments have them (a changed state array would leave the child compiling a useless one)."""
+    code = {"sound": SOUND, "joint-fd": JOINT_FD, "paper": PAPER}[velocity_model]
+    assert warm.signature(code) == _tracker_signature(name, velocity_model)
+
+
+def test_the_signatures_differ_by_velocity_model():
+    assert len({warm.signature(c) for c in (SOUND, JOINT_FD, PAPER)}) == 3
+
+
+def test_a_failing_child_changes_nothing_but_the_time(monkeypatch, simulated_recording, capsys):
+    """The child's command exits 1: ``check`` answers as without it (the driver is compiled or loaded
+    here as usual), and the child's exit code was read before the first call of the driver."""
+    from crosscert.planner.cli import main
+
+    argv = ["check", str(simulated_recording), "--initial-mode", "1", "--json", "--no-progress"]
+    monkeypatch.setenv(warm.DISABLE, "0")
+    assert main(argv) == 0
+    expected = json.loads(capsys.readouterr().out)
+    codes = []
+    wait = warm.wait
+    monkeypatch.setattr(warm, "wait", lambda *a, **k: codes.append(wait(*a, **k)))
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import sys; sys.exit(1)"])
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)  # as after an install
+    monkeypatch.setenv(warm.DISABLE, "1")
+    assert main(argv) == 0
+    got = json.loads(capsys.readouterr().out)
+    assert codes[0] == 1
+    for key in ("elapsed_s",):
+        expected.pop(key), got.pop(key)
+    assert got == expected
+
+
+def test_a_hanging_child_is_stopped(monkeypatch):
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import time; time.sleep(600)"])
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    monkeypatch.setenv(warm.DISABLE, "1")
+    assert warm.start("sound") and warm.pending() == [SOUND]
+    assert warm.wait(SOUND, timeout=0.5) is None  # not finished: stopped, the caller compiles
+    assert warm.pending() == [] and warm.wait(SOUND) is None
+
+
+def test_no_child_when_disabled_or_cached(monkeypatch):
+    started = []
+    monkeypatch.setattr(warm.subprocess, "Popen", lambda *a, **k: started.append(a))
+    monkeypatch.setenv(warm.DISABLE, "0")
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    assert not warm.start("sound")
+    monkeypatch.setenv(warm.DISABLE, "1")
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: True)
+    assert not warm.start("sound") and not warm.start("no such model")
+    assert started == []
+
+
+_COLD = textwrap.dedent("""
+    import json, sys
+    from crosscert.planner.cli import main
+    from crosscert.verifier.compiled import step, warm
+    codes = []
+    wait = warm.wait
+    warm.wait = lambda *a, **k: codes.append(wait(*a, **k))
+    rc = main(["check", sys.argv[1], "--initial-mode", "1", "--json", "--no-progress"])
+    st = step.run_slot.stats
+    print(json.dumps({"rc": rc, "codes": codes, "hits": sum(st.cache_hits.values()),
+                      "misses": sum(st.cache_misses.values())}))
+""")
+
+
+def test_the_driver_compiled_by_the_child_gives_the_same_answer(tmp_path, simulated_recording, capsys):
+    """After an install (an empty numba cache): the child compiles the driver, this process loads it from
+    the cache instead of compiling it, and ``check`` prints what an in-process compilation prints."""
+    from crosscert.planner.cli import main
+
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), **{warm.DISABLE: "1"})
+    proc = subprocess.run([sys.executable, "-c", _COLD, str(simulated_recording)], capture_output=True, text=True,
+                          env=env, timeout=900, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    lines = proc.stdout.strip().splitlines()
+    got, stats = json.loads(lines[0]), json.loads(lines[-1])
+    assert stats == {"rc": 0, "codes": [0], "hits": 1, "misses": 0}
+    assert main(["check", str(simulated_recording), "--initial-mode", "1", "--json", "--no-progress"]) == 0
+    expected = json.loads(capsys.readouterr().out)
+    for d in (got, expected):
+        d.pop("elapsed_s")
+    assert got == expected
+
+
+def test_by_default_a_child_only_when_a_core_is_free(monkeypatch):
+    """Unset: a child when the load average leaves a core free, none on a busy machine (it would only add
+    the CPU time of the callees it compiles again); ``1`` starts one whatever the load."""
+    started = []
+    monkeypatch.setattr(warm.subprocess, "Popen", lambda *a, **k: started.append(a) or _Done())
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    monkeypatch.setattr(warm.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.delenv(warm.DISABLE, raising=False)
+    monkeypatch.setattr(warm.os, "getloadavg", lambda: (1.5, 1.0, 1.0))
+    assert not warm.start("sound")
+    monkeypatch.setenv(warm.DISABLE, "1")
+    assert warm.start("sound") and warm.wait(SOUND) == 0
+    monkeypatch.delenv(warm.DISABLE)
+    monkeypatch.setattr(warm.os, "getloadavg", lambda: (0.3, 1.0, 1.0))
+    assert warm.start("sound") and warm.wait(SOUND) == 0
+    assert len(started) == 2
+
+
+class _Done:
+    """A child that has finished, successfully."""
+
+    def poll(self):
+        return 0
+
+    def wait(self, timeout=None):
+        return 0

@@ -1,0 +1,209 @@
+"""The step's driver compiled in a child process while this one compiles the rest.
+
+After an install nothing is in numba's on-disk cache: a command's first run
+compiles the robot's tape callback (:mod:`verifier.compiled.straight`), the
+pose enumeration (:func:`verifier.compiled.contractors.pose_solutions`) and the
+tracker's driver (:func:`verifier.compiled.step.run_slot`, the largest), one
+after the other on one core.  :func:`start` runs ``python -m`` this module in a
+child process that compiles the driver for the velocity model in use and writes
+it to numba's disk cache, while this process goes on; :func:`wait`, before the
+driver's first call, waits for the child, and the call then loads the driver
+from the cache.
+
+The child is never needed for correctness: whatever it does (fails, is
+killed, compiles another signature, writes nothing), the driver's first call
+compiles in this process as without it.  What the cache holds is what this
+process would have compiled: numba keys an entry on the function's bytecode,
+the signature, the CPU and numba's version, and writes each file through a
+new name and a rename, so a reader never sees half a file.  An entry loaded
+from the cache is the machine code of the same source, and the kernels'
+sources are stamped (:mod:`verifier.compiled`), so the results are those of an
+in-process compilation bit for bit (tests/test_warm.py).
+"""
+
+from __future__ import annotations
+
+import atexit
+import os
+import subprocess
+import sys
+import threading
+
+import numpy as np
+
+from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
+
+__all__ = ["CHILD", "DISABLE", "WAIT_S", "example_arguments", "signature", "cached", "core_free", "start", "wait",
+           "pending", "main"]
+
+#: The child's command before its arguments (tests replace it by one that fails).
+CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
+
+#: Environment variable: ``0`` starts no child (the driver compiles in the process that calls it), ``1`` one
+#: whenever the driver is not cached; unset (or anything else), one when a core is free (:func:`core_free`).
+DISABLE = "CROSSCERT_COMPILE_CHILD"
+
+#: Longest wait for a child, s; then it is stopped and the driver compiles here (a cold compilation takes
+#: 15-25 s of CPU on the machines of benchmarks/README.md).
+WAIT_S = 600.0
+
+_LOCK = threading.Lock()
+#: velocity model code -> the child compiling the driver for it
+_CHILDREN: dict[int, subprocess.Popen] = {}
+
+
+def example_arguments(velocity_model: int = SOUND) -> tuple:
+    """Arguments of :func:`verifier.compiled.step.run_slot` of the types the tracker passes
+    (:class:`verifier.step.CompiledStep`) for velocity model ``velocity_model``: tiny arrays, never run.
+
+    The types do not depend on the robot (tests/test_warm.py compares them with the tracker's on every
+    robot of the registry and every velocity model)."""
+    from . import step as kernels
+    from .contractors import scratch_arrays
+    from .tape import Program
+
+    f, i = np.float64, np.int64
+
+    def z(*shape, dtype=f):
+        return np.zeros(shape, dtype)
+
+    prog = Program(z(1, 3, dtype=i), z(1), z(1, dtype=i), z(1, 3, dtype=i), 1, z(2, 1, dtype=i))
+    const = StepConstants(0.0, 0.0, 0.0, 0.0, int(velocity_model), 0, 0, 1, False, False, np.zeros(1, AXIS_DTYPE),
+                          np.zeros(1, BASELINE_DTYPE), z(1, 2, 1), 1)
+    rows = kernels.Rows(z(1, 2, 1), z(1, 2, 1), z(1, 2, 1), z(1, 2, 1), z(1, 1, 2, 1), z(1, 1, 2, 1), z(1, 1, 1),
+                        z(1, dtype=i))
+    scen = kernels.Scenarios(z(1, dtype=i), z(1, dtype=i), z(1, dtype=i), z(1, dtype=i), z(1), z(1), z(1, 2, 1),
+                             z(1, 2, 1), z(1, 1))
+    rec = kernels.Record(z(1, 0, 2, 1), z(1, 0, 2, 1), z(1, 0, dtype=i), z(1, 0, 1))
+    prior = kernels.Prior(z(1, 0, 2, 1), z(1, 0, 2, 1))
+    return (prog, const, kernels.velocity_strategy(int(velocity_model)), rows, scen,
+            scratch_arrays(1, 1, 1, 1, 1, 0, 1), 0, 1, 0, z(1, 1, 1), False, rec, False, prior)
+
+
+def signature(velocity_model: int = SOUND) -> tuple:
+    """numba's argument types of :func:`example_arguments`: the driver's signature."""
+    import numba
+
+    return tuple(numba.typeof(v) for v in example_arguments(velocity_model))
+
+
+def cached(velocity_model: int = SOUND) -> bool:
+    """Whether the driver of ``velocity_model`` is compiled in this process or in numba's disk cache
+    (read without loading it; False when numba's cache cannot be read)."""
+    from .step import run_slot
+
+    sig = signature(velocity_model)
+    if sig in run_slot.overloads:
+        return True
+    try:  # numba's private cache API (0.68): the index of the function's file, keyed as numba keys it
+        cache = run_slot._cache
+        return cache._cache_file._load_index().get(cache._index_key(sig, run_slot.targetctx.codegen())) is not None
+    except Exception:
+        return False
+
+
+def start(velocity_model="sound") -> bool:
+    """Start a child compiling the driver of ``velocity_model`` (a name, a
+    :class:`verifier.settings.VelocityModel` or its code) into numba's disk cache, unless it is cached, a
+    child already does, or ``$CROSSCERT_COMPILE_CHILD`` is ``0``.
+
+    Returns whether a child runs for it now.  Never raises: without a child the driver compiles here."""
+    try:
+        code = velocity_model if isinstance(velocity_model, (int, np.integer)) else velocity_model_code(velocity_model)
+    except KeyError:
+        return False
+    code = int(code)
+    if code not in (SOUND, JOINT_FD, PAPER):
+        return False
+    choice = os.environ.get(DISABLE, "").strip()
+    if choice == "0" or (choice != "1" and not core_free()):
+        return False
+    with _LOCK:
+        child = _CHILDREN.get(code)
+        if child is not None and child.poll() is None:
+            return True
+        try:
+            if cached(code):
+                return False
+            _CHILDREN[code] = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL,
+                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        except Exception:  # no child: the driver compiles in this process
+            return False
+    return True
+
+
+def core_free() -> bool:
+    """Whether a second core may compile beside this process: at least two CPUs for this process and a
+    one-minute load average below one less than their number.  On a busy machine a child adds its CPU time
+    (the callees it shares with the pose enumeration, compiled in both processes) and gains no wall time
+    (benchmarks/README.md)."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    try:
+        load = os.getloadavg()[0]
+    except (AttributeError, OSError):
+        load = 0.0
+    return cpus >= 2 and load < cpus - 1
+
+
+def pending() -> list[int]:
+    """The velocity models whose child is still running."""
+    with _LOCK:
+        return [code for code, child in _CHILDREN.items() if child.poll() is None]
+
+
+def wait(velocity_model: int, timeout: float | None = None) -> int | None:
+    """Before the driver's first call for ``velocity_model``: wait for its child, if one was started
+    (at most ``timeout`` s, default :data:`WAIT_S`; then it is stopped).
+
+    Returns the child's exit code (0: the driver is in the cache), or None when there was no child.
+    Whatever it returns, the caller calls the driver as usual: numba loads it from the cache or compiles it."""
+    with _LOCK:
+        child = _CHILDREN.pop(int(velocity_model), None)
+    if child is None:
+        return None
+    try:
+        return child.wait(WAIT_S if timeout is None else timeout)
+    except subprocess.TimeoutExpired:
+        _stop(child)
+        return None
+
+
+def _stop(child) -> None:
+    child.kill()
+    try:
+        child.wait(5.0)
+    except subprocess.TimeoutExpired:  # pragma: no cover - a killed process is reaped at once
+        pass
+
+
+@atexit.register
+def _stop_all() -> None:
+    """A child still compiling when the process ends (the command failed, or never ran the driver)
+    is stopped: numba writes its files through a rename, so at worst a temporary file stays."""
+    with _LOCK:
+        children = list(_CHILDREN.values())
+        _CHILDREN.clear()
+    for child in children:
+        if child.poll() is None:
+            _stop(child)
+
+
+def main(argv=None) -> int:
+    """The child: compile the driver for each velocity model code of ``argv`` and write it to numba's
+    disk cache; exit code 0 when every one is compiled (or was cached)."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    try:
+        from .step import run_slot
+
+        for code in args:
+            run_slot.compile(signature(int(code)))
+    except KeyboardInterrupt:  # the user's Ctrl-C reaches the whole process group: quietly
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
