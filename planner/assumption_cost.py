@@ -108,7 +108,7 @@ def compares(robot, cert: CrossingCertificate) -> bool:
 
 def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6, v_high=None, tol=0.01,
                            refute=True, seed=0, executor=None, progress=None, kin=None,
-                           imodel=None) -> CrossingCertificate:
+                           imodel=None, refute_tol=None) -> CrossingCertificate:
     """``cert`` with :attr:`~planner.certify.crossing.CrossingCertificate.at_robot_a_max` filled in.
 
     Parameters
@@ -119,6 +119,10 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
         The certificate of ``task`` under its own bounds (``cert.bounds``).
     v_low, v_high, tol, refute, seed, executor, progress, kin, imodel
         As for :func:`planner.certify.crossing.certify_crossing` (the call that made ``cert``).
+    refute_tol : float, optional
+        Resolution of this bound, m/s; default ``tol``: no Monte Carlo run here hides the extra
+        searches a finer bound needs (about 4 s on the default robot's benchmark task, measured
+        2026-12-04), and the bound starts from ``cert``'s, already refined.
 
     Returns
     -------
@@ -148,7 +152,7 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
                              refute=refute, refute_speeds=scan, executor=executor, seed=seed,
                              progress=suffixed(progress, " at the robot's a_max"),
                              kin=kin, imodel=imodel, bounce=False, v_guess=speed_guess(cert.v_min, used, ref),
-                             refute_warm=warm)
+                             refute_warm=warm, refute_tol=tol if refute_tol is None else refute_tol)
     bound = other.refutation_bound
     if known is not None and (bound is None or bound < known):
         # a verified counterexample under the default's bounds satisfies the robot's wider ones

@@ -25,6 +25,7 @@ from crosscert.robots import arguments as V
 from crosscert.robots.assumptions import check_bound
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.registry import RobotEntry
+from crosscert.verifier.one_motion import ONE_MOTION_SAMPLES
 from crosscert.verifier.trajectory import Trajectory
 from crosscert.verifier.window import Reasoning
 
@@ -161,10 +162,13 @@ class PlanningBounds:
         tracker, then window passes over the whole run when it is undecided)
         or ``forward`` (the tracker alone).
     one_motion : int
-        Samples of the one-motion refutation in those windows
-        (``verifier.window.track_window(one_motion=...)``; 0, the default: not tried).
-        40 lowers the benchmark task's v_min from 0.961 to 0.929 m/s at about 2.3
-        times certify's time (docs/tracker.md, "One motion, one geometry").
+        Samples of the one-motion step in those windows
+        (``verifier.window.track_window(one_motion=...)``; default
+        :data:`verifier.one_motion.ONE_MOTION_SAMPLES`, 40, as in ``track_window``;
+        0: not tried).  It lowers the benchmark task's v_min from 0.961 to 0.929
+        m/s at about twice certify's time (docs/tracker.md, "One motion, one
+        geometry"); an optimisation loop that values time over the last 3 %
+        of speed passes 0.
     """
 
     eps_q: float | None = None
@@ -181,7 +185,7 @@ class PlanningBounds:
     qdd_max: float | None = None
     execution: ExecutionKind = ExecutionKind.CARTESIAN
     reasoning: Reasoning = Reasoning.WINDOW
-    one_motion: int = 0
+    one_motion: int = ONE_MOTION_SAMPLES
     #: Name of the robot whose defaults :meth:`for_robot` filled in (``None``: not yet bound).
     robot_name: str | None = field(default=None, init=False, compare=False)
     #: The robot itself and these bounds before its defaults were filled in: binding to another robot

@@ -256,17 +256,18 @@ def test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_fl
     assert floor.window.verdict is Verdict.UNKNOWN, floor.window.summary()
 
 
-def test_certify_runs_the_step_only_when_the_bounds_ask():
-    """Off in certify's windows unless ``PlanningBounds.one_motion`` asks (its cost, docs/tracker.md); the plan
-    at 0.9557 m/s stays undecided without it."""
+def test_certify_runs_the_step_by_default_and_not_when_the_bounds_say_0():
+    """On in certify's windows by default (``PlanningBounds.one_motion`` = ``ONE_MOTION_SAMPLES``, as in
+    ``track_window``; issue 20's ratio); ``one_motion=0`` turns it off, and the plan at 0.9557 m/s then stays
+    undecided (with the step it is certified: the test above)."""
     from crosscert.planner.certify.plan import certify_speed
     from crosscert.planner.task import PlanningBounds, benchmark_task
     from crosscert.robots import KinematicModel, get_entry
     from crosscert.verifier.settings import Verdict
 
-    assert PlanningBounds().one_motion == 0
+    assert PlanningBounds().one_motion == OM.ONE_MOTION_SAMPLES == 40
     kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
-    run = certify_speed(kin, interval_model(), task, PlanningBounds(), ONE_MOTION_PLAN["certified"])
+    run = certify_speed(kin, interval_model(), task, PlanningBounds(one_motion=0), ONE_MOTION_PLAN["certified"])
     assert run.window.verdict is Verdict.UNKNOWN, run.window.summary()
 
 

@@ -325,3 +325,39 @@ def test_the_speed_search_tells_the_refuter_each_answer(monkeypatch):
                           b=None, threads=False)
     crossing_mod._search(job, _Refuter(), None)
     assert told == [("certified", 1.9), ("failed", 0.9), ("certified", 1.2)]
+
+
+def _certify_without_v_min(monkeypatch, **kw):
+    """certify_crossing on the benchmark task with every speed failing (stand-in answers) and counterexamples
+    up to 0.849 m/s: only the refutation search runs, here."""
+    from crosscert.planner.certify.crossing import certify_crossing
+    from crosscert.planner.task import benchmark_task
+    from crosscert.robots import KinematicModel, get_entry
+
+    _answers(monkeypatch, lambda v: False)
+    _refuting(monkeypatch, lambda v: v <= 0.849)
+    return certify_crossing(DEXTAR, benchmark_task(get_entry("dextar")), kin=KinematicModel(DEXTAR), imodel=object(),
+                            monte_carlo_runs=0, bounce=False, refute_in_background=False, **kw)
+
+
+def test_the_refutation_bound_is_bisected_to_a_tenth_of_tol_by_default(monkeypatch):
+    """The ratio v_min / bound is only as good as the coarser of the two: the bound is bisected to
+    tol / REFUTE_TOL_DIVISOR (0.001 m/s) unless refute_tol says otherwise (at 0.01 m/s it stops 5 mm/s
+    short of the last refuted speed here)."""
+    assert crossing_mod.REFUTE_TOL_DIVISOR == 10
+    fine = _certify_without_v_min(monkeypatch).refutation_bound
+    assert 0.849 - 0.001 <= fine <= 0.849
+    coarse = _certify_without_v_min(monkeypatch, refute_tol=0.01).refutation_bound
+    assert coarse == 0.84375 and 0.849 - coarse > 0.001
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.001, float("nan"), float("inf"), True])
+def test_a_bad_refutation_resolution_is_refused_before_any_model_is_built(monkeypatch, bad):
+    from crosscert.planner.certify.crossing import certify_crossing
+
+    def no_model(*a, **k):
+        raise AssertionError("a model was built before refute_tol was checked")
+
+    monkeypatch.setattr(crossing_mod, "KinematicModel", no_model)
+    with pytest.raises(InputError, match="refute_tol"):
+        certify_crossing(DEXTAR, None, refute_tol=bad)

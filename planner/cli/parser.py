@@ -11,6 +11,7 @@ from crosscert.robots.registry import DEFAULT_ROBOT, ROBOTS, available_robots
 from crosscert.verifier.step import Backend
 from crosscert.verifier.settings import VelocityModel
 from crosscert.verifier.trajfile import parse_number
+from crosscert.verifier.one_motion import ONE_MOTION_SAMPLES
 from crosscert.verifier.window import Reasoning
 
 from ..execution import ExecutionKind
@@ -204,13 +205,14 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
                          "in the calibration box; 'joint' keep the joints within eps_q + tracking error of the plan")
     ce.add_argument("--a-peak", type=number, default=PLAN_A_PEAK, help="peak acceleration of the planned ramps, m/s^2")
     ce.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
-    ce.add_argument("--one-motion", type=count, default=0, metavar="SAMPLES",
-                    help="also refute and narrow, in the window passes, every geometry sub-box left when the budget is "
-                         "spent by one geometry and one motion over this many samples (40: v_min 0.929 instead of "
-                         "0.961 m/s on the default task, at about 2.3 times the time; 0: off)")
+    ce.add_argument("--one-motion", type=count, default=ONE_MOTION_SAMPLES, metavar="SAMPLES",
+                    help="samples of the one-motion step: in the window passes, every geometry sub-box left when the "
+                         f"budget is spent is refuted or narrowed by one geometry and one motion over this many samples "
+                         f"(default {ONE_MOTION_SAMPLES}: v_min 0.929 m/s on the default task; 0: off, v_min 0.961 m/s "
+                         "in about half the time)")
     ce.add_argument("--v-low", type=number, default=V_LOW, help="slowest speed tried, m/s")
     ce.add_argument("--v-high", type=number, help="fastest speed tried, m/s (default: the fastest the segment allows)")
-    ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min and of the refutation bound, m/s")
+    ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min, m/s (the refutation bound is bisected to a tenth of it)")
     ce.add_argument("--monte-carlo", type=count, default=50, help="simulated executions at v_min (0 skips)")
     ce.add_argument("--no-refute", action="store_true", help="skip the counterexample search")
     ce.add_argument("--seed", type=count, default=0, help="seed of the Monte Carlo executions and search starts")
