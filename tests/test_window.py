@@ -388,6 +388,32 @@ def test_halving_follows_the_pose_spread_and_covers_the_parent():
             assert np.array_equal(left[1][others], hi[r][others]) and np.array_equal(right[0][others], lo[r][others])
 
 
+def test_the_pose_spread_of_rows_evaluated_together_is_that_of_each_alone():
+    """``_Hypothesis.split`` evaluates both ends of every row in one call (per-row readings): each row's
+    spread must be bit for bit what a call of its own gives, or the halving (and so the verdicts) would
+    depend on how rows are batched."""
+    from problems import simulate
+    from crosscert.verifier.step import partition_xi
+    from crosscert.verifier.window import _pose_spread
+
+    im = interval_model()
+    XI = im.xi_box()
+    lo, hi = (v[0] for v in partition_xi((XI[0][None], XI[1][None]), DEXTAR.xi_splits))
+    run = simulate(1.0, False, 0)
+    ends = []
+    for k in (0, len(run.q_meas) - 1):
+        x = np.repeat(np.stack([run.x_true[k] - 1e-4, run.x_true[k] + 2e-4])[None], len(lo), axis=0)
+        ends.append((x, run.q_meas[k]))
+    R = len(lo)
+    together = _pose_spread(im, np.concatenate([ends[0][0], ends[1][0]]),
+                            np.concatenate([np.tile(ends[0][1], (R, 1)), np.tile(ends[1][1], (R, 1))]),
+                            np.concatenate([lo, lo]), np.concatenate([hi, hi]))
+    for e, (x, q) in enumerate(ends):
+        assert np.array_equal(together[e * R:(e + 1) * R], _pose_spread(im, x, q, lo, hi))
+        for r in range(R):
+            assert np.array_equal(together[e * R + r], _pose_spread(im, x[r:r + 1], q, lo[r:r + 1], hi[r:r + 1])[0])
+
+
 def test_acceleration_bound_between_samples_certifies_the_plan_at_0961(monkeypatch):
     """``crosscert certify``'s plan at 0.961 m/s (derived a_max 80 / 66 m/s^2): undecided by the passes
     alone (the bounce hypothesis survives with 9-10 sub-boxes), certified once every pass's tubes are

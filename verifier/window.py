@@ -580,15 +580,17 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
 def _pose_spread(model, x, q, xi_lo, xi_hi):
     """How wide each parameter's width alone makes the pose, per geometry sub-box: ``(R, m)``, m.
 
-    For row ``r`` and parameter ``i``: ``|C| w(f(x_r, q, xi_i))`` summed over the pose coordinates, ``f`` the
-    loop closure evaluated at the midpoint of the pose box ``x`` ``(R, 2, n)`` and of the sub-box except
-    parameter ``i``, which keeps its width, and ``C`` the inverse of ``J_x`` there (the first-order pose
-    error of that parameter's uncertainty).  A heuristic for where to split: it decides no box.
+    For row ``r`` and parameter ``i``: ``|C| w(f(x_r, q_r, xi_i))`` summed over the pose coordinates, ``f``
+    the loop closure evaluated at the midpoint of the pose box ``x`` ``(R, 2, n)`` and of the sub-box except
+    parameter ``i``, which keeps its width, with the reading ``q`` (``(n,)``, or ``(R, n)``: one per row), and
+    ``C`` the inverse of ``J_x`` there (the first-order pose error of that parameter's uncertainty).  A
+    heuristic for where to split: it decides no box.  Every operation is elementwise over the rows, so a
+    row's result does not depend on the rows evaluated with it.
     """
     R, m = xi_lo.shape
     n = model.n
     xm = np.repeat(I.midpoint(x[:, 0], x[:, 1]), m, axis=0)
-    qm = np.broadcast_to(np.asarray(q, dtype=np.float64), (R * m, n))
+    qm = np.repeat(np.broadcast_to(np.asarray(q, dtype=np.float64), (R, n)), m, axis=0)
     mid = I.midpoint(xi_lo, xi_hi)
     lo, hi = np.repeat(mid, m, axis=0), np.repeat(mid, m, axis=0)
     one = np.tile(np.eye(m, dtype=bool), (R, 1))
@@ -713,9 +715,14 @@ class _Hypothesis:
         """Halve every surviving geometry sub-box along the parameter that spreads the pose most at the two
         ends of the recording (first reading ``q_first``); children start from their parent's tubes."""
         model = self.finals.model
+        R, n = len(self.xlo), model.n
+        # both ends in one evaluation of the tapes (their numpy cost is per call, not per row)
+        q_ends = np.concatenate([np.broadcast_to(np.asarray(q_first, dtype=np.float64), (R, n)),
+                                 np.broadcast_to(np.asarray(self.finals.q_last, dtype=np.float64), (R, n))])
         with I.quiet_fp():
-            spread = (_pose_spread(model, self.tx[:, 0], q_first, self.xlo, self.xhi)
-                      + _pose_spread(model, self.tx[:, -1], self.finals.q_last, self.xlo, self.xhi))
+            both = _pose_spread(model, np.concatenate([self.tx[:, 0], self.tx[:, -1]]), q_ends,
+                                np.concatenate([self.xlo, self.xlo]), np.concatenate([self.xhi, self.xhi]))
+        spread = both[:R] + both[R:]
         self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w, spread)
         self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
         self._final_boxes()
