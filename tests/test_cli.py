@@ -465,3 +465,37 @@ def test_certify_refuses_a_bad_one_motion_count_before_any_work(tmp_path, capsys
     err = capsys.readouterr().err.strip()
     assert "--one-motion" in err and "Traceback" not in err
     assert not (tmp_path / "c").exists()
+
+
+def test_certify_passes_refute_tol_to_both_certifications(tmp_path, monkeypatch):
+    """``--refute-tol`` reaches the certification and the one at the robot's a_max; absent, both keep their
+    defaults (None: a tenth of --tol for the first, --tol for the second)."""
+    planning = sys.modules["crosscert.planner.cli.planning"]
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def first(*a, **k):
+        seen.append(("first", k["refute_tol"]))
+        raise Stop
+
+    monkeypatch.setattr(planning, "certify_crossing", first)
+    for extra, want in (([], None), (["--refute-tol", "0.002"], 0.002)):
+        seen.clear()
+        with pytest.raises(Stop):
+            main([*CERTIFY_NARROW, *extra, "--out", str(tmp_path / "c")])
+        assert seen == [("first", want)]
+    calls = []
+
+    def second(*a, **k):
+        calls.append(k["refute_tol"])
+        raise Stop
+
+    monkeypatch.setattr(planning, "certify_crossing", lambda *a, **k: object())
+    monkeypatch.setattr(planning, "_figure", lambda *a, **k: None)
+    monkeypatch.setattr(planning, "compares", lambda *a, **k: False)
+    monkeypatch.setattr(planning, "certify_at_robot_a_max", second)
+    with pytest.raises(Stop):
+        main([*CERTIFY_NARROW, "--refute-tol", "0.003", "--out", str(tmp_path / "d")])
+    assert calls == [0.003]

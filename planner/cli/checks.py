@@ -247,6 +247,7 @@ def check_command(a, entry) -> None:
         _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
         _in("--v-high", a.v_high, a.v_low, MAX_SPEED, unit=" m/s")
         _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")
+        _in("--refute-tol", a.refute_tol, MIN_TOL / 10, 1.0, lo_open=False, unit=" m/s")
         _in("--monte-carlo", a.monte_carlo, 0, MAX_MONTE_CARLO, lo_open=False)
         # the slowest plan bounds every batch: samples of a crossing at v_low
         T = ramp_length(a.v_low, a.a_peak)[0]
@@ -350,6 +351,7 @@ def _study(a) -> None:
     if isinstance(bounds.get("a_peak"), (int, float)) and not isinstance(bounds.get("a_peak"), bool):
         _in("[bounds] a_peak", bounds["a_peak"], 0.0, 1e6, unit=" m/s^2")
     _in("[certify] tol", cert.get("tol"), MIN_TOL, 1.0, lo_open=False, unit=" m/s")
+    _in("[certify] refute_tol", cert.get("refute_tol"), MIN_TOL / 10, 1.0, lo_open=False, unit=" m/s")
     v_low = cert.get("v_low", V_LOW)
     _in("[certify] v_low", v_low, 0.0, MAX_SPEED, unit=" m/s")
     _in("[certify] v_high", cert.get("v_high"), v_low, MAX_SPEED, unit=" m/s")

@@ -212,7 +212,10 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
                          "in about half the time)")
     ce.add_argument("--v-low", type=number, default=V_LOW, help="slowest speed tried, m/s")
     ce.add_argument("--v-high", type=number, help="fastest speed tried, m/s (default: the fastest the segment allows)")
-    ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min, m/s (the refutation bound is bisected to a tenth of it)")
+    ce.add_argument("--tol", type=number, default=0.01, help="resolution of v_min, m/s")
+    ce.add_argument("--refute-tol", type=number, metavar="TOL",
+                    help="resolution of the refutation bound, m/s (default: a tenth of --tol; each halving is one "
+                         "more counterexample search, run beside the Monte Carlo run)")
     ce.add_argument("--monte-carlo", type=count, default=50, help="simulated executions at v_min (0 skips)")
     ce.add_argument("--no-refute", action="store_true", help="skip the counterexample search")
     ce.add_argument("--seed", type=count, default=0, help="seed of the Monte Carlo executions and search starts")

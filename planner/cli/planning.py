@@ -52,7 +52,7 @@ def certify(a) -> int:
     drawing = None
     try:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
-                                monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
+                                refute_tol=a.refute_tol, monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
                                 progress=bar, kin=kin, executor=pool)
         figure = _figure(cert, bounds, out, joint_unit)
         if figure is not None and pool is not None and compares(robot, cert):
@@ -63,7 +63,7 @@ def certify(a) -> int:
             drawing = pool.submit(fn, Path(args[0]).absolute(), *args[1:], **kwargs)
         # what the assumption buys: the same search under the robot's physical a_max
         cert = certify_at_robot_a_max(robot, task, cert, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
-                                      refute=not a.no_refute, seed=a.seed, progress=bar, kin=kin, executor=pool)
+                                      refute_tol=a.refute_tol, refute=not a.no_refute, seed=a.seed, progress=bar, kin=kin, executor=pool)
         files = [] if figure is None else [figure[0]]
         if drawing is not None:
             try:

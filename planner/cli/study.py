@@ -36,7 +36,7 @@ __all__ = ["study", "read_grid", "plot_study", "CERTIFY_KEYS", "BOUNDS_KEYS", "M
 #: Sections and keys a grid file may have at its top level.
 TOP_KEYS = ("robot", "grid", "bounds", "certify")
 #: ``[certify]`` keys (keyword arguments of ``certify_crossing``) a study may set.
-CERTIFY_KEYS = ("tol", "v_low", "v_high", "monte_carlo_runs", "refute", "seed", "bounce")
+CERTIFY_KEYS = ("tol", "refute_tol", "v_low", "v_high", "monte_carlo_runs", "refute", "seed", "bounce")
 #: ``[bounds]`` keys (``PlanningBounds`` fields; ``dynamics`` comes from the robot for ``method = "dynamic"``).
 BOUNDS_KEYS = ("eps_q", "tracking_error", "a_max", "a_margin", "a_peak", "t_s", "t_rest", "method", "qd_max",
                "qdd_max", "execution", "reasoning", "one_motion")
@@ -117,7 +117,7 @@ def read_grid(path) -> dict:
             raise InputError(f"[certify] {k} must be true or false, got {v!r}")
         if k in ("monte_carlo_runs", "seed") and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
             raise InputError(f"[certify] {k} must be a non-negative whole number, got {v!r}")
-        if k in ("tol", "v_low", "v_high") and (isinstance(v, bool) or not isinstance(v, (int, float))
+        if k in ("tol", "refute_tol", "v_low", "v_high") and (isinstance(v, bool) or not isinstance(v, (int, float))
                                                 or not math.isfinite(v)):
             raise InputError(f"[certify] {k} must be a finite number (m/s), got {v!r}")
     return {"robot": robot, "grid": grid, "bounds": dict(bounds), "certify": dict(certify)}
