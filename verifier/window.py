@@ -722,7 +722,7 @@ class _Hypothesis:
         with I.quiet_fp():
             both = _pose_spread(model, np.concatenate([self.tx[:, 0], self.tx[:, -1]]), q_ends,
                                 np.concatenate([self.xlo, self.xlo]), np.concatenate([self.xhi, self.xhi]))
-        spread = both[:R] + both[R:]
+            spread = both[:R] + both[R:]
         self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w, spread)
         self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
         self._final_boxes()

@@ -221,7 +221,7 @@ class RefuteOptions:
     executor: Executor | None = None
     bounce: bool = True
     warm: object = None  # a verified counterexample starting the scan's searches (planner.refute.Counterexample)
-    tol: float = 0.001  # resolution of the refutation bound, m/s
+    tol: float | None = None  # resolution of the refutation bound, m/s (certify_crossing's refute_tol, filled in)
 
 
 @dataclass(frozen=True, eq=False)

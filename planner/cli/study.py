@@ -118,7 +118,7 @@ def read_grid(path) -> dict:
         if k in ("monte_carlo_runs", "seed") and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
             raise InputError(f"[certify] {k} must be a non-negative whole number, got {v!r}")
         if k in ("tol", "refute_tol", "v_low", "v_high") and (isinstance(v, bool) or not isinstance(v, (int, float))
-                                                or not math.isfinite(v)):
+                                                              or not math.isfinite(v)):
             raise InputError(f"[certify] {k} must be a finite number (m/s), got {v!r}")
     return {"robot": robot, "grid": grid, "bounds": dict(bounds), "certify": dict(certify)}
 
