@@ -11,6 +11,7 @@ verdicts must be zero (they would be bugs).
 from __future__ import annotations
 
 import logging
+import threading
 from concurrent.futures import Executor
 from dataclasses import dataclass
 
@@ -99,13 +100,16 @@ class MonteCarloResult:
 _SAME_BRANCH = 0.2
 #: Executions per task when an executor is given: ~1-2 s of tracking per task on one core.
 BATCH_RUNS = 200
+#: Executions per share when a background worker takes part (``beside``): the shares are taken one at a
+#: time from both ends, so neither process waits for the other longer than one share (an execution the
+#: window passes decide costs 0.1-4 s on the benchmark task).
+BESIDE_CHUNK = 1
 
 
 def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
                              a_max=None, progress=None, execution: ex_.ExecutionClass | None = None,
                              executor: Executor | None = None, batch_runs: int = BATCH_RUNS,
-                             parallel: bool = True, beside: Executor | None = None,
-                             beside_runs: int = 0) -> MonteCarloResult:
+                             parallel: bool = True, beside: Executor | None = None) -> MonteCarloResult:
     """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
 
     Each execution ``r``: geometry uniform in ``[xi]`` (every 5th at a random
@@ -125,9 +129,12 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
         a Dask client's ``get_executor()``): for 10^5 executions and more.
         Each worker builds the robot's models once.
     beside : concurrent.futures.Executor, optional
-        Without ``executor``: run the first ``beside_runs`` executions there (serial kernels), the
-        others here at the same time (a certification's background worker, idle for part of the run).
-        If it fails, those executions run here.
+        Without ``executor``: share the executions with it (a certification's background worker, idle for
+        part of the run): it takes :data:`BESIDE_CHUNK` executions at a time from the first ones (serial
+        kernels), one call in flight, while this process takes them from the last ones, until the two
+        meet (:func:`_shared`).  If it fails, the executions it had not done run here.
+    progress : callable or planner.progress.Progress, optional
+        Counts samples of the forward pass; with ``beside``, executions (one call each).
 
     Returns
     -------
@@ -140,22 +147,18 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     a_max = derived_a_max(plan, b, robot) if a_max is None else a_max
     cls = execution_class(kin, plan, b) if execution is None else execution
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
-    if executor is None:
-        split = min(runs - 1, max(0, int(beside_runs))) if beside is not None else 0
-        there = None
-        if split > 0:
-            there = beside.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, 0, split, parallel=False)
-        here = monte_carlo_runs(robot, plan, b, s, cls, seed, split, runs, models=(kin, imodel), progress=progress,
+    if executor is None and beside is None:
+        return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress,
                                 parallel=parallel)
-        if there is None:
-            return here
-        try:
-            first = there.result()
-        except Exception as exc:  # the worker failed: those executions run here (the same draws)
-            log.warning("background Monte Carlo executions failed (%r); running them in this process", exc)
-            first = monte_carlo_runs(robot, plan, b, s, cls, seed, 0, split, models=(kin, imodel),
-                                     parallel=parallel)
-        return merge_results([first, here])
+    if executor is None:
+        def there(start, stop):
+            return beside.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, stop, parallel=False)
+
+        def here(start, stop):
+            return monte_carlo_runs(robot, plan, b, s, cls, seed, start, stop, models=(kin, imodel),
+                                    parallel=parallel)
+
+        return merge_results(_shared(there, here, runs, BESIDE_CHUNK, progress))
     futures = [executor.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, min(runs, start + batch_runs))
                for start in range(0, runs, batch_runs)]
     return merge_results([f.result() for f in futures])
@@ -231,6 +234,63 @@ def _true_joints(kin, plan: PlannedTrajectory, xi) -> np.ndarray:
     if ok.all() and np.max(np.abs(q - plan.q)) <= _SAME_BRANCH:
         return q
     return kin.ik_path(plan.x, xi, plan.q[0])
+
+
+def _shared(there, here, runs: int, chunk: int, progress=None) -> list:
+    """The results of executions ``0 .. runs - 1`` in chunks of ``chunk``, in execution order, shared between
+    ``there(start, stop)`` (a future: another process) and ``here(start, stop)`` (a result, this thread).
+
+    A feeder thread keeps one chunk in flight there, taken from the front, while this thread takes chunks
+    from the back; each side takes the next chunk only when its last one is done, so the two finish within
+    one chunk of each other whatever the executions cost.  The chunks there failed on, and those it would
+    have taken after, run here.  ``progress`` is called once per execution done, from this thread.
+    """
+    bounds = [(start, min(runs, start + chunk)) for start in range(0, runs, chunk)]
+    results = [None] * len(bounds)
+    lock = threading.Lock()
+    front, back, done_there = 0, len(bounds), []
+
+    def feed():
+        nonlocal front
+        while True:
+            with lock:
+                if front >= back:
+                    return
+                i = front
+                front += 1
+            try:
+                results[i] = there(*bounds[i]).result()
+            except Exception as exc:  # the worker failed: its chunk and the rest run here (the same draws)
+                log.warning("background Monte Carlo executions failed (%r); running them in this process", exc)
+                return
+            with lock:
+                done_there.append(i)
+
+    def tick(chunks):
+        if progress is not None:
+            for i in chunks:
+                for _ in range(*bounds[i]):
+                    progress(1)
+
+    feeder = threading.Thread(target=feed, name="crosscert-monte-carlo-feeder", daemon=True)
+    feeder.start()
+    while True:
+        with lock:
+            if back <= front:
+                break
+            back -= 1
+            i = back
+            seen, done_there[:] = list(done_there), []
+        tick(seen)
+        results[i] = here(*bounds[i])
+        tick([i])
+    feeder.join()
+    tick(done_there)
+    for i, r in enumerate(results):
+        if r is None:
+            results[i] = here(*bounds[i])
+            tick([i])
+    return results
 
 
 def merge_results(parts: list[MonteCarloResult]) -> MonteCarloResult:

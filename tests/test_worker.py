@@ -155,11 +155,74 @@ def test_monte_carlo_beside_a_worker_counts_the_same_executions():
     serial = monte_carlo_confirmation(kin, im, plan, b, runs=6, seed=3, execution=cls, parallel=False)
     with cf.ThreadPoolExecutor(max_workers=1) as pool:
         split = monte_carlo_confirmation(kin, im, plan, b, runs=6, seed=3, execution=cls, parallel=False,
-                                         beside=pool, beside_runs=2)
+                                         beside=pool)
     failed = monte_carlo_confirmation(kin, im, plan, b, runs=6, seed=3, execution=cls, parallel=False,
-                                      beside=_FailingExecutor(), beside_runs=2)
+                                      beside=_FailingExecutor())
     assert serial.runs == serial.in_class == 6
     assert split.summary() == serial.summary() and failed.summary() == serial.summary()
+
+
+class _SlowThere:
+    """``there`` of :func:`planner.montecarlo._shared`: each chunk after ``delay`` s on a thread of its own,
+    recording what it ran; fails from chunk ``fail_from`` on."""
+
+    def __init__(self, delay: float, fail_from: int | None = None):
+        self.delay, self.fail_from, self.ran = delay, fail_from, []
+        self.pool = cf.ThreadPoolExecutor(max_workers=1)
+
+    def __call__(self, start, stop):
+        def run():
+            import time
+
+            time.sleep(self.delay)
+            if self.fail_from is not None and start >= self.fail_from:
+                raise WorkerStopped("the background worker stopped")
+            self.ran.append((start, stop))
+            return ("there", start, stop)
+
+        return self.pool.submit(run)
+
+
+@pytest.mark.parametrize("delay, chunk", [(0.0, 1), (0.02, 1), (0.02, 3), (0.5, 2)])
+def test_shared_executions_run_once_each_in_order_from_both_ends(delay, chunk):
+    """Every chunk runs exactly once, results come back in execution order whoever ran them, the worker
+    takes from the front and this thread from the back, and progress counts every execution once."""
+    from crosscert.planner.montecarlo import _shared
+
+    there, here_ran, ticks = _SlowThere(delay), [], []
+
+    def here(start, stop):
+        here_ran.append((start, stop))
+        return ("here", start, stop)
+
+    out = _shared(there, here, 10, chunk, progress=lambda done=1: ticks.append(done))
+    bounds = [(s, min(10, s + chunk)) for s in range(0, 10, chunk)]
+    assert [(a, b) for _, a, b in out] == bounds
+    assert sorted(there.ran + here_ran) == bounds and not set(there.ran) & set(here_ran)
+    assert there.ran == bounds[:len(there.ran)]  # the front
+    assert here_ran == bounds[::-1][:len(here_ran)]  # the back
+    assert len(ticks) == 10
+    if delay >= 0.5:  # a slow worker still takes its first chunk, this thread the rest
+        assert there.ran == bounds[:1]
+
+
+def test_shared_executions_the_worker_failed_on_run_here():
+    """A worker that fails from some chunk on: that chunk and those after it run here, once each, in order."""
+    from crosscert.planner.montecarlo import _shared
+
+    there, here_ran = _SlowThere(0.05, fail_from=2), []
+
+    def here(start, stop):
+        import time
+
+        time.sleep(0.03)
+        here_ran.append((start, stop))
+        return ("here", start, stop)
+
+    out = _shared(there, here, 8, 1)
+    assert [(a, b) for _, a, b in out] == [(i, i + 1) for i in range(8)]
+    assert there.ran and all(start < 2 for start, _ in there.ran)  # it failed at chunk 2, if it got there
+    assert sorted(there.ran + here_ran) == [(i, i + 1) for i in range(8)]
 
 
 def test_the_worker_draws_the_certificate_figure_as_this_process_does(tmp_path):

@@ -48,11 +48,6 @@ log = logging.getLogger(__name__)
 
 #: Version of the layout of :meth:`CrossingCertificate.summary` (``certificate.json``).
 CERTIFICATE_SCHEMA = "crosscert-certificate/3"
-#: Share of the Monte Carlo executions run on the background worker beside this process (the same
-#: draws and counts: each execution has its own generator).  0.4 since the one-motion step is on by
-#: default (2026-12-04: the executions at the lower v_min cost more, the worker's searches the same;
-#: the Monte Carlo phase 9.7 -> 8.1-8.5 s, the command 0.94 times the wall time of 0.2; 0.5 no better).
-MC_BESIDE_SHARE = 0.4
 #: Slowest crossing speed a certification tries by default, m/s.
 V_LOW = 0.6
 #: The refutation bound is bisected to ``tol / REFUTE_TOL_DIVISOR`` by default (:func:`certify_crossing`'s
@@ -466,17 +461,19 @@ def _bounce_gap(job: _Job, bounces, starts) -> tuple:
 def _confirm(job: _Job, run, runs: int, seed, progress, pool=None):
     """The Monte Carlo confirmation at ``v_min`` (None without a certificate or with 0 runs).
 
-    With the background worker ``pool``, a share of the executions (:data:`MC_BESIDE_SHARE`) runs there:
-    it has only the bounce floor left (and whatever counterexample searches it could not start ahead of
-    time), a few seconds of work (0.2 of 50 executions balanced the two processes on the benchmark
-    task once the refutation search ran ahead, 0.4 with the one-motion step on; benchmarks/README.md).
+    With the background worker ``pool``, the executions are shared with it one at a time from both ends
+    (:func:`planner.montecarlo.monte_carlo_confirmation`, ``beside``): whatever the counterexample and
+    bounce searches queued there leave of its time goes to the executions, and neither process waits for
+    the other at the end longer than one execution.
     """
     if run is None or not runs:
         return None
-    enter(progress, Phase.MONTE_CARLO, len(run.plan.q), unit="sample")
+    if pool is None:
+        enter(progress, Phase.MONTE_CARLO, len(run.plan.q), unit="sample")
+    else:
+        enter(progress, Phase.MONTE_CARLO, runs, unit="execution")
     return monte_carlo_confirmation(job.kin, job.imodel, run.plan, job.b, runs=runs, seed=seed, progress=progress,
-                                    execution=run.execution, parallel=job.threads, beside=pool,
-                                    beside_runs=round(MC_BESIDE_SHARE * runs))
+                                    execution=run.execution, parallel=job.threads, beside=pool)
 
 
 def _certificate(job: _Job, search, run, mc, ref_bound, ref, gap, clock, t0) -> CrossingCertificate:
