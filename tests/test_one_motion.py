@@ -48,26 +48,29 @@ def _violations(system, z):
     return [i for i, row in enumerate(rows) if sum(v * z[c] for c, v in row) > b[i]]
 
 
-def test_a_true_certificate_is_proved():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_true_certificate_is_proved(compiled):
     """``z <= 0.4`` and ``z >= 0.6``: the hand-made multipliers and those of the solver both prove it."""
     system, y = _system("infeasible")
-    assert OM.prove_infeasible(system, y)
+    assert OM.prove_infeasible(system, y, compiled=compiled)
     found = OM._phase_one(system)
-    assert found is not None and OM.prove_infeasible(system, found)
+    assert found is not None and OM.prove_infeasible(system, found, compiled=compiled)
 
 
-def test_a_feasible_system_is_never_proved():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_feasible_system_is_never_proved(compiled):
     """A feasible system: no multipliers prove it (none exist), whatever is given, and the solver finds none."""
     system, _ = _system("infeasible")
     feasible = OM.LinearSystem(system.rows, system.cols, system.vals, np.array([0.6, -0.4]), system.lo, system.hi)
     rng = np.random.default_rng(0)
     for y in [np.ones(2), np.array([1.0, 0.0]), np.array([np.inf, 1.0]), np.array([-1.0, 2.0])] + \
             [rng.uniform(0, 10, 2) for _ in range(50)]:
-        assert not OM.prove_infeasible(feasible, y)
+        assert not OM.prove_infeasible(feasible, y, compiled=compiled)
     assert OM._phase_one(feasible) is None
 
 
-def test_a_certificate_that_holds_only_in_floats_is_refused():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_certificate_that_holds_only_in_floats_is_refused(compiled):
     """``FARKAS["float_only"]``: feasible, yet ``yᵀ(A z - b)`` is positive in round to nearest; the outward-rounded
     check must refuse it (fails when the check's products and sums are rounded to nearest)."""
     A, b, lo, hi, y = FARKAS["float_only"]
@@ -77,7 +80,7 @@ def test_a_certificate_that_holds_only_in_floats_is_refused():
     exact = sum(Fraction(y[i]) * (Fraction(A[i, 0]) * Fraction(lo[0]) - Fraction(b[i])) for i in range(2))
     assert exact <= 0  # z = lo satisfies every row exactly
     system, _ = _system("float_only")
-    assert not OM.prove_infeasible(system, y)
+    assert not OM.prove_infeasible(system, y, compiled=compiled)
 
 
 def _corner_boxes(rng, x, q, xi_lo, xi_hi, eps):
@@ -95,7 +98,8 @@ def scenarios():
     return near_scenarios(4, 11, v_cross=(0.9, 1.1), v_bounce=(0.9, 1.1))
 
 
-def test_loop_closure_rows_hold_true_solutions_at_box_corners(scenarios):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_loop_closure_rows_hold_true_solutions_at_box_corners(scenarios, compiled):
     """For true ``(x_k, q_k, ξ)`` (``ξ`` a corner of ``[ξ]``, ``x_k``, ``q_k`` at corners of their boxes):
     ``blo <= Jc z <= bhi`` in exact arithmetic.  Fails without the second-order remainder."""
     im = interval_model()
@@ -104,7 +108,7 @@ def test_loop_closure_rows_hold_true_solutions_at_box_corners(scenarios):
     for sc in scenarios:
         ks = np.arange(0, len(sc.t), 7)
         X, Q, XI = _corner_boxes(rng, sc.x[ks], sc.q_true[ks], lo_xi, hi_xi, DEXTAR.eps_q)
-        Jc, blo, bhi = OM.loop_closure_rows(im, X, Q, XI)
+        Jc, blo, bhi = OM.loop_closure_rows(im, X, Q, XI, compiled=compiled)
         for s, k in enumerate(ks):
             z = [Fraction(float(v)) for v in np.concatenate([sc.x[k], sc.q_true[k], sc.xi])]
             for i in range(im.n):
@@ -112,7 +116,8 @@ def test_loop_closure_rows_hold_true_solutions_at_box_corners(scenarios):
                 assert Fraction(float(blo[s, i])) <= val <= Fraction(float(bhi[s, i])), (sc.name, k, i)
 
 
-def test_loop_closure_rows_hold_with_one_wide_parameter(scenarios):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_loop_closure_rows_hold_with_one_wide_parameter(scenarios, compiled):
     """The true pose and joints as points and one geometry parameter wide (the truth at either end of it, the
     others at their true values): the remainder is then that parameter's diagonal term alone, and the truth
     at a corner attains it.  Fails when either side of the diagonal term is dropped (``max(−H_jj, 0) r_j²``
@@ -131,7 +136,7 @@ def test_loop_closure_rows_hold_with_one_wide_parameter(scenarios):
                     xhi[j] = sc.xi[j] + w
                 else:
                     xlo[j] = sc.xi[j] - w
-                Jc, blo, bhi = OM.loop_closure_rows(im, X, Q, (xlo, xhi))
+                Jc, blo, bhi = OM.loop_closure_rows(im, X, Q, (xlo, xhi), compiled=compiled)
                 for s_, k in enumerate(ks):
                     z = [Fraction(float(v)) for v in np.concatenate([sc.x[k], sc.q_true[k], sc.xi])]
                     for i in range(im.n):
@@ -208,8 +213,8 @@ def _tubes(rng, x, xd, width=3e-4, vwidth=0.05):
     return X, XD
 
 
-@pytest.mark.parametrize("velocity", [False, True])
-def test_a_row_holding_an_adversarial_truth_is_never_refuted(scenarios, settings, velocity):
+@pytest.mark.parametrize("velocity, compiled", [(False, False), (True, False), (False, True)])
+def test_a_row_holding_an_adversarial_truth_is_never_refuted(scenarios, settings, velocity, compiled):
     """Tubes holding an adversarial true motion (bang-bang at 0.999 a_max, readings at the edges of ±eps_q),
     the whole ``[ξ]`` (the true geometry at a corner) or a sub-box with the truth at its corner: never refuted,
     over 40 samples around the widest box and over the whole run."""
@@ -221,7 +226,8 @@ def test_a_row_holding_an_adversarial_truth_is_never_refuted(scenarios, settings
         corner = (np.minimum(sc.xi, 0.5 * (lo + hi)), np.maximum(sc.xi, 0.5 * (lo + hi)))
         for XI in ((lo, hi), corner):
             for size in (40, len(sc.t)):
-                assert not OM.refute_row(im, settings, sc.q_meas, XI, X, XD, size=size, velocity=velocity), sc.name
+                assert not OM.refute_row(im, settings, sc.q_meas, XI, X, XD, size=size, velocity=velocity,
+                                         compiled=compiled), sc.name
 
 
 def test_tight_tubes_around_a_motion_at_the_bound_are_not_refuted(settings):
@@ -300,7 +306,8 @@ def test_the_interval_sum_is_outward():
         assert Fraction(float(lo[r])) <= exact <= Fraction(float(hi[r]))
 
 
-def test_a_certified_minimum_is_below_the_true_minimum():
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_certified_minimum_is_below_the_true_minimum(compiled):
     """Weak duality with outward rounding: ``FARKAS["float_only"]`` (``z = 5.2`` feasible, a certificate that
     holds only in round to nearest) gives no bound above ``0`` for the cost 0 nor above ``5.2`` for ``z``
     itself; on ``z_0 + z_1 >= 0.7`` over ``[0, 1]²`` the solver's multipliers prove ``min z_0 + z_1`` from below
@@ -308,20 +315,21 @@ def test_a_certified_minimum_is_below_the_true_minimum():
     A, b, lo, hi, y = FARKAS["float_only"]
     system, _ = _system("float_only")
     for cost, exact in (([0.0], Fraction(0)), ([1.0], Fraction(float(lo[0])))):
-        low = float(OM.certified_minimum(system, y, np.array(cost)))
+        low = float(OM.certified_minimum(system, y, np.array(cost), compiled=compiled))
         assert Fraction(low) <= exact, (cost, low)
     tie = OM.LinearSystem(np.array([0, 0]), np.array([0, 1]), np.array([-1.0, -1.0]), np.array([-0.7]),
                           np.zeros(2), np.ones(2))
-    solver = OM._Solver()
+    solver = OM._Solver(compiled)
     assert solver.phase_one(tie) is None and solver.feasible
     lo2, hi2 = solver.bounds(tie, [0, 1])  # each in [0, 1]: z_0 >= 0.7 - 1 < 0, no narrowing
     assert np.all(lo2 <= 0.0) and np.all(hi2 >= 1.0)
     y2 = np.array([1.0])
-    low = float(OM.certified_minimum(tie, y2, np.array([1.0, 1.0])))
+    low = float(OM.certified_minimum(tie, y2, np.array([1.0, 1.0]), compiled=compiled))
     assert Fraction(low) <= Fraction(0.7) and low > 0.7 - 1e-12
 
 
-def test_the_contractor_keeps_the_true_geometry(scenarios, settings):
+@pytest.mark.parametrize("compiled", [False, True])
+def test_the_contractor_keeps_the_true_geometry(scenarios, settings, compiled):
     """Tubes holding an adversarial true motion, the true geometry at a corner of ``[ξ]`` and the sub-box with
     the truth at its corner: the contracted sub-box keeps the true geometry (over 40 samples and the whole
     run), and the contractor narrows something (not vacuous).  Fails when a proved bound is moved inward by
@@ -336,7 +344,7 @@ def test_the_contractor_keeps_the_true_geometry(scenarios, settings):
         for XI in ((lo, hi), corner):
             for size in (40, len(sc.t)):
                 out, clo, chi = OM.one_motion_rows(im, settings, sc.q_meas, (XI[0][None], XI[1][None]), X[None],
-                                                   XD[None], size)
+                                                   XD[None], size, compiled=compiled)
                 assert not out[0], sc.name
                 assert np.all((clo[0] <= sc.xi) & (sc.xi <= chi[0])), (sc.name, size, clo[0] - sc.xi, chi[0] - sc.xi)
                 assert np.all((XI[0] <= clo[0]) & (chi[0] <= XI[1]))

@@ -89,13 +89,14 @@ def _tree_sum(lo, hi, axis=-1):
     return lo[..., 0], hi[..., 0]
 
 
-def _dual_bound(system: LinearSystem, y, cost=None):
+def _dual_bound(system: LinearSystem, y, cost=None, compiled: bool = False):
     """``(left, yb)`` for multipliers ``y`` ``(M,)`` or ``(B, M)``: ``left`` a lower bound of ``min over the
     box of (cost + yᵀA) z`` and ``yb`` an upper bound of ``yᵀb``, enclosed with outward rounding (``()`` or
     ``(B,)``).  Every ``z`` of the box with ``A z <= b`` has ``cost·z >= left − yb`` (weak duality:
     ``yᵀ(A z − b) <= 0`` for ``y >= 0``).  ``y`` is any float array: negative or non-finite entries are
     replaced by 0 (any ``y >= 0`` is admissible), so the solver that produced it is not trusted.
-    ``cost`` ``(N,)`` or ``(B, N)`` floats (exact as given), 0 by default."""
+    ``cost`` ``(N,)`` or ``(B, N)`` floats (exact as given), 0 by default.  ``compiled``: the same floats
+    from :func:`verifier.compiled.one_motion.dual_bound` (a few microseconds instead of about a millisecond)."""
     s = system
     M, N = s.shape
     y = np.asarray(y, dtype=np.float64)
@@ -103,6 +104,9 @@ def _dual_bound(system: LinearSystem, y, cost=None):
     y = np.atleast_2d(y)
     y = np.where(np.isfinite(y) & (y > 0), y, 0.0)
     B = y.shape[0]
+    if compiled:
+        left, yb = _dual_bound_compiled(s, y, cost)
+        return (left[0], yb[0]) if one else (left, yb)
     with I.quiet_fp():
         # cost + yᵀA column by column: products enclosed, then summed per column with the cost (padded with 0)
         # only the entries of rows some y uses: the others' products are exactly 0
@@ -136,28 +140,49 @@ def _dual_bound(system: LinearSystem, y, cost=None):
     return (left[0], yb[0]) if one else (left, yb)
 
 
-def prove_infeasible(system: LinearSystem, y) -> bool:
+def _dual_bound_compiled(system: LinearSystem, y, cost):
+    """:func:`_dual_bound`'s ``(left, yb)`` ``(B,)`` for sanitised multipliers ``y`` ``(B, M)``, by the compiled
+    kernel (its scratch allocated here: a few arrays of the system's size)."""
+    from .compiled.one_motion import dual_bound  # numba loaded on first use only
+
+    s = system
+    M, N = s.shape
+    B, E = y.shape[0], len(s.rows)
+    cost = np.zeros((B, N)) if cost is None else np.broadcast_to(np.asarray(cost, dtype=np.float64), (B, N))
+    size = 2 * max(E + 1, N, M, 1)
+    i64 = np.int64
+    left, yb = np.empty(B), np.empty(B)
+    dual_bound(np.ascontiguousarray(s.rows, i64), np.ascontiguousarray(s.cols, i64),
+               np.ascontiguousarray(s.vals, np.float64), np.ascontiguousarray(s.b, np.float64),
+               np.ascontiguousarray(s.lo, np.float64), np.ascontiguousarray(s.hi, np.float64),
+               np.ascontiguousarray(y), np.ascontiguousarray(cost), np.empty(M, i64), np.empty(N, i64),
+               np.empty(N + 1, i64), np.empty(E, i64), np.empty(size), np.empty(size), np.empty(N), left, yb)
+    return left, yb
+
+
+def prove_infeasible(system: LinearSystem, y, *, compiled: bool = False) -> bool:
     """True when the multipliers ``y`` ``(M,)`` prove that no ``z`` in the box satisfies ``A z <= b``.
 
     For ``y >= 0`` every solution would satisfy ``yᵀ(A z − b) <= 0``; the lower bound of
     ``min over the box of (yᵀA) z − yᵀb``, with ``yᵀA`` and ``yᵀb`` enclosed by outward-rounded interval
     arithmetic and the minimum of each term ``[c_j] z_j`` taken over ``z_j``'s bounds, being positive
     proves there is none (a Farkas certificate; :func:`_dual_bound`).  ``y`` is any float vector: negative
-    or non-finite entries are replaced by 0, so the solver that produced it is not trusted.
+    or non-finite entries are replaced by 0, so the solver that produced it is not trusted.  ``compiled``: the
+    bounds by the compiled kernel (the same floats).
     """
     y = np.asarray(y, dtype=np.float64)
     if y.shape != (system.shape[0],) or not np.any(np.isfinite(y) & (y > 0)):
         return False
-    left, yb = _dual_bound(system, y)
+    left, yb = _dual_bound(system, y, compiled=compiled)
     return bool(np.isfinite(left) and np.isfinite(yb) and left > yb)
 
 
-def certified_minimum(system: LinearSystem, y, cost):
+def certified_minimum(system: LinearSystem, y, cost, *, compiled: bool = False):
     """Lower bounds of ``cost·z`` over ``{z in the box : A z <= b}`` proved from the multipliers ``y`` (any
     floats, ``(M,)`` or one row per cost ``(B, M)``; :func:`_dual_bound`), ``-inf`` where they prove nothing
     finite.  Weak duality with outward rounding (the safe bounds of Neumaier and Shcherbina): for ``y >= 0``
     and every feasible ``z``, ``cost·z >= cost·z + yᵀ(A z − b) >= min over the box of (cost + yᵀA) z − yᵀb``."""
-    left, yb = _dual_bound(system, y, cost)
+    left, yb = _dual_bound(system, y, cost, compiled)
     with I.quiet_fp():
         low = I.sub(left, left, yb, yb)[0]
     return np.where(np.isfinite(left) & np.isfinite(yb) & ~np.isnan(low), low, -np.inf)
@@ -166,9 +191,11 @@ def certified_minimum(system: LinearSystem, y, cost):
 class _Solver:
     """One HiGHS instance for the phase-one programs of a batch of rows, each warm-started from the basis of
     the last program of the same shape (the rows of a window have the same structure, their coefficients and
-    bounds differ a little).  A float search only: :func:`prove_infeasible` decides."""
+    bounds differ a little).  A float search only: :func:`prove_infeasible` decides.  ``compiled``: the proofs of
+    :meth:`bounds` by the compiled kernel (the same floats)."""
 
-    def __init__(self):
+    def __init__(self, compiled: bool = False):
+        self.compiled = compiled
         # the bare solver (no banner, no callbacks) where highspy exposes it, else its public subclass;
         # both silenced by output_flag below
         self.highs = getattr(highspy, "_Highs", highspy.Highs)()
@@ -271,7 +298,7 @@ class _Solver:
         low = np.full(2 * C, -np.inf)
         run = np.any(cost != 0.0, axis=1)
         if run.any():
-            low[run] = certified_minimum(system, Y[run], cost[run])  # Y = 0 proves only the box
+            low[run] = certified_minimum(system, Y[run], cost[run], compiled=self.compiled)  # Y = 0: only the box
         lo = np.maximum(system.lo[columns], low[0::2])
         hi = np.minimum(system.hi[columns], -low[1::2])
         return lo, hi
@@ -307,7 +334,7 @@ def _sum_up(v):
     return v[..., 0]
 
 
-def loop_closure_rows(model, X, Q, XI):
+def loop_closure_rows(model, X, Q, XI, *, compiled: bool = False):
     """Linear inequalities implied by ``f(x_k, q_k, ξ) = 0`` for every ``(x_k, q_k, ξ)`` of the boxes.
 
     Parameters
@@ -318,6 +345,9 @@ def loop_closure_rows(model, X, Q, XI):
     XI : (lo, hi), arrays ``(m,)`` or ``(S, m)``
         The geometry box (shared by the samples, or one per sample: the rows of several window rows are
         computed in one call).
+    compiled : bool
+        The rows from the tapes' enclosures by :func:`verifier.compiled.one_motion.taylor_rows` (the same
+        floats).
 
     Returns
     -------
@@ -352,6 +382,16 @@ def loop_closure_rows(model, X, Q, XI):
         Jp = model.tape_jac.evaluate([(cx, cx), (cq, cq), (cxi, cxi)])[0]
         Hlo, Hhi = model.tape_hess.evaluate([(X[0], X[1]), (Q[0], Q[1]), XIb])[0]
         Hlo, Hhi = Hlo.reshape(S, n, N, N), Hhi.reshape(S, n, N, N)
+    return (_taylor_rows_compiled if compiled else _taylor_rows)(c, r, F, Jp, Hlo, Hhi)
+
+
+def _taylor_rows(c, r, F, Jp, Hlo, Hhi):
+    """:func:`loop_closure_rows`'s ``(Jc, blo, bhi)`` from the box midpoints ``c`` and radii ``r`` ``(S, N)``
+    and the enclosures of ``f(c)`` ``(S, n)``, of the gradient at ``c`` ``(S, n, N)`` and of the Hessians
+    over the box ``(S, n, N, N)`` (each a ``(lo, hi)`` pair but ``c``, ``r``; the notes there give the maths)."""
+    S, N = c.shape
+    n = F[0].shape[1]
+    with I.quiet_fp():
         Jc = I.midpoint(*Jp)
         Jc = np.where(np.isfinite(Jc), Jc, 0.0)
         # ([g] - Jc) d, |d_j| <= r_j: within +-e1
@@ -374,6 +414,20 @@ def loop_closure_rows(model, X, Q, XI):
     bad = np.isnan(blo) | np.isnan(bhi) | np.isnan(Hlo).any(axis=(2, 3)) | np.isnan(Hhi).any(axis=(2, 3))
     blo = np.where(bad, -np.inf, blo)
     bhi = np.where(bad, np.inf, bhi)
+    return Jc, blo, bhi
+
+
+def _taylor_rows_compiled(c, r, F, J, Hlo, Hhi):
+    """:func:`loop_closure_rows`'s ``(Jc, blo, bhi)`` from the enclosures, by the compiled kernel."""
+    from .compiled.one_motion import taylor_rows  # numba loaded on first use only
+
+    S, N = c.shape
+    n = F[0].shape[1]
+    w = 1 << max(N - 1, 0).bit_length()
+    Jc, blo, bhi = np.empty((S, n, N)), np.empty((S, n)), np.empty((S, n))
+    f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
+    taylor_rows(f64(c), f64(r), f64(F[0]), f64(F[1]), f64(J[0]), f64(J[1]), f64(Hlo), f64(Hhi), Jc, blo, bhi,
+                np.empty(max(N * N, 1)), np.empty(w), np.empty(w))
     return Jc, blo, bhi
 
 
@@ -551,7 +605,7 @@ def _samples(X, size):
 
 
 def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False,
-                    contract: bool = True):
+                    contract: bool = True, *, compiled: bool = False):
     """Refute and contract rows, one geometry and one motion at a time.
 
     Row ``r`` is the geometry box ``(XI[0][r], XI[1][r])`` (``(R, m)``) with the tubes ``X[r]``, ``XD[r]``
@@ -561,7 +615,9 @@ def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLE
     to proved bounds of each parameter over the same relaxation (:meth:`_Solver.bounds`): every geometry
     that explains the row with one motion stays in it.  The loop closure of every row is linearised in one
     batch.  ``velocity``: velocity unknowns in ``XD`` and their rows (:func:`motion_rows`); off by default:
-    on the runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.
+    on the runs of docs/tracker.md they refuted no more rows, at 1.5 times the cost.  ``compiled``: the
+    certificates' interval arithmetic by :mod:`verifier.compiled.one_motion` (the window's compiled backend; the same
+    floats).
 
     Returns
     -------
@@ -582,8 +638,9 @@ def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLE
     rows = np.repeat(np.arange(R), S)
     Xb = (X[rows, idx, 0], X[rows, idx, 1])
     with I.quiet_fp():
-        closure = loop_closure_rows(model, Xb, reading_box(q[idx], settings.eps_q), (XI[0][rows], XI[1][rows]))
-    solver = _Solver()
+        closure = loop_closure_rows(model, Xb, reading_box(q[idx], settings.eps_q), (XI[0][rows], XI[1][rows]),
+                                    compiled=compiled)
+    solver = _Solver(compiled)
     for r in range(R):
         part = tuple(v[r * S:(r + 1) * S] for v in closure)
         system = row_system(model, settings, q, (xlo[r], xhi[r]), X[r], XD[r], ks[r], velocity, part)
@@ -591,7 +648,7 @@ def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLE
             continue
         y = solver.phase_one(system)
         if y is not None:
-            out[r] = prove_infeasible(system, y)
+            out[r] = prove_infeasible(system, y, compiled=compiled)
         elif contract and solver.feasible:
             lo, hi = solver.bounds(system, np.arange(m))  # ξ: the first m unknowns
             xlo[r], xhi[r] = np.maximum(xlo[r], lo), np.minimum(xhi[r], hi)
@@ -599,13 +656,15 @@ def one_motion_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLE
     return out, xlo, xhi
 
 
-def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False):
+def refute_rows(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False, *,
+                compiled: bool = False):
     """Which rows no single geometry and single motion explain: ``(R,)`` bool, True where proved
     (:func:`one_motion_rows` without contraction)."""
-    return one_motion_rows(model, settings, q, XI, X, XD, size, velocity, contract=False)[0]
+    return one_motion_rows(model, settings, q, XI, X, XD, size, velocity, contract=False, compiled=compiled)[0]
 
 
-def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False) -> bool:
+def refute_row(model, settings, q, XI, X, XD, size: int = ONE_MOTION_SAMPLES, velocity: bool = False, *,
+               compiled: bool = False) -> bool:
     """:func:`refute_rows` for one row: geometry box ``XI`` ``(m,)`` pair, tubes ``X``, ``XD`` ``(K, 2, n)``."""
     XIr = (np.asarray(XI[0], np.float64)[None], np.asarray(XI[1], np.float64)[None])
-    return bool(refute_rows(model, settings, q, XIr, X[None], XD[None], size, velocity)[0])
+    return bool(refute_rows(model, settings, q, XIr, X[None], XD[None], size, velocity, compiled=compiled)[0])

@@ -696,7 +696,7 @@ class _Hypothesis:
         if ask.any():
             out[ask], lo[ask], hi[ask] = one_motion_rows(self.finals.model, self.finals.s, q,
                                                          (self.xlo[ask], self.xhi[ask]), self.tx[ask], self.txd[ask],
-                                                         samples)
+                                                         samples, compiled=self.finals.backend == Backend.COMPILED)
         same = ask & ~out & np.all(lo == self.xlo, axis=1) & np.all(hi == self.xhi, axis=1)
         self.kept.update(k for k, s in zip(keys, same) if s)
         w0 = self.xhi - self.xlo

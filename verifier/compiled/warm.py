@@ -3,10 +3,11 @@
 After an install nothing is in numba's on-disk cache: a command's first run
 compiles the robot's tape callback (:mod:`verifier.compiled.straight`), the
 pose enumeration (:func:`verifier.compiled.contractors.pose_solutions`) and the
-tracker's driver (:func:`verifier.compiled.step.run_slot`, the largest), one
-after the other on one core.  :func:`start` runs ``python -m`` this module in a
-child process that compiles the driver for the velocity model in use and writes
-it to numba's disk cache, while this process goes on; :func:`wait`, before the
+tracker's driver (:func:`verifier.compiled.step.run_slot`, the largest) and the
+window's one-motion kernels, one after the other on one core.  :func:`start` runs
+``python -m`` this module in a child process that compiles the driver for the
+velocity model in use, then the one-motion kernels, and writes them to numba's
+disk cache, while this process goes on; :func:`wait`, before the
 driver's first call, waits for the child, and the call then loads the driver
 from the cache.
 
@@ -193,13 +194,17 @@ def _stop_all() -> None:
 
 def main(argv=None) -> int:
     """The child: compile the driver for each velocity model code of ``argv`` and write it to numba's
-    disk cache; exit code 0 when every one is compiled (or was cached)."""
+    disk cache, then the window's one-motion kernels (:func:`verifier.compiled.one_motion.compile_kernels`:
+    their first call in the parent comes later, and loads them when the child was first); exit code 0 when
+    every one is compiled (or was cached)."""
     args = sys.argv[1:] if argv is None else list(argv)
     try:
+        from .one_motion import compile_kernels
         from .step import run_slot
 
         for code in args:
             run_slot.compile(signature(int(code)))
+        compile_kernels()
     except KeyboardInterrupt:  # the user's Ctrl-C reaches the whole process group: quietly
         return 130
     return 0

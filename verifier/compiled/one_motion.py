@@ -1,0 +1,223 @@
+"""The interval arithmetic of the one-motion step (:mod:`verifier.one_motion`), compiled.
+
+* :func:`dual_bound`: the weak-duality bounds that prove a row refuted or a geometry bound
+  (``verifier.one_motion._dual_bound``);
+* :func:`taylor_rows`: the loop closure's linear rows from its enclosures over the boxes
+  (the part of ``verifier.one_motion.loop_closure_rows`` after the tapes).
+
+Each computes what the numpy function computes, operation for operation, with the scalar interval
+operations of :mod:`verifier.compiled.ops` (numpy's floats bit for bit, docs/rounding.md): the same
+products, the same pairwise sums over the same zero-padded blocks, in the same order
+(tests/test_one_motion.py compares the two bit for bit, and checks containment against exact rational
+arithmetic).  numpy's versions cost about a millisecond a call in array overheads on the window's
+systems (hundreds of rows, a few thousand entries); these a few microseconds.  Imported on first use
+only, so that the numpy backend never loads numba.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .ops import add, cached_jit, dn0, jit, maxn, midpoint, mul, sub, up, up0
+
+
+@jit
+def _pow2_at_least(s):
+    """The smallest power of two ``>= s`` (1 for ``s <= 1``): the padded length of a pairwise sum."""
+    p = 1
+    while p < s:
+        p *= 2
+    return p
+
+
+@jit
+def _pairwise(lo, hi, w):
+    """The outward-rounded pairwise sum of the intervals ``lo[:w]``, ``hi[:w]`` (``w`` a power of two),
+    in place: level by level, element ``t`` of a level is the sum of elements ``2t`` and ``2t + 1`` of the
+    last one (as ``verifier.one_motion._tree_sum``)."""
+    while w > 1:
+        w //= 2
+        for t in range(w):
+            lo[t], hi[t] = add(lo[2 * t], hi[2 * t], lo[2 * t + 1], hi[2 * t + 1])
+    return lo[0], hi[0]
+
+
+@cached_jit
+def dual_bound(rows, cols, vals, b, lo, hi, Y, cost, used, counts, start, order, buf_lo, buf_hi, tlo, left, yb):
+    """``left[k]``, a lower bound of ``min over the box of (cost[k] + Y[k]ᵀA) z``, and ``yb[k]``, an upper
+    bound of ``Y[k]ᵀb``, for every multiplier row ``k`` (``verifier.one_motion._dual_bound``).
+
+    ``A`` is given by coordinates ``rows``, ``cols``, ``vals`` ``(E,)`` (int64, int64, float64), ``b``
+    ``(M,)``, the box ``lo``, ``hi`` ``(N,)``; ``Y`` ``(B, M)`` holds multipliers already made non-negative
+    and finite (the caller's ``y >= 0`` check), ``cost`` ``(B, N)``.  As in numpy's version, an entry (and
+    a row of ``b``) takes part when its row has a positive multiplier in *some* row of ``Y``: its products
+    are then exactly 0 in the other rows, and still padded into their sums.  Scratch: ``used`` ``(M,)``,
+    ``counts`` ``(N,)``, ``start`` ``(N + 1,)``, ``order`` ``(E,)`` (int64), ``buf_lo``, ``buf_hi`` (at
+    least the power of two above ``max(E + 1, N, M)``), ``tlo`` ``(N,)``; results ``left``, ``yb`` ``(B,)``.
+    Allocates nothing.
+    """
+    B = Y.shape[0]
+    M = Y.shape[1]
+    N = lo.shape[0]
+    E = rows.shape[0]
+    for i in range(M):
+        u = 0
+        for k in range(B):
+            if Y[k, i] > 0.0:
+                u = 1
+        used[i] = u
+    # the entries of the rows in use, column by column, each column's in their order in A (numpy's stable sort)
+    for j in range(N):
+        counts[j] = 0
+    for e in range(E):
+        if used[rows[e]] != 0:
+            counts[cols[e]] += 1
+    start[0] = 0
+    for j in range(N):
+        start[j + 1] = start[j] + counts[j]
+        counts[j] = start[j]  # from here on: where the column's next entry goes
+    for e in range(E):
+        if used[rows[e]] != 0:
+            j = cols[e]
+            order[counts[j]] = e
+            counts[j] += 1
+    for k in range(B):
+        # cost_j + sum_i y_i A_ij, each column one padded pairwise sum whose first term is the cost
+        for j in range(N):
+            c = start[j + 1] - start[j]
+            w = _pow2_at_least(c + 1)
+            buf_lo[0] = cost[k, j]
+            buf_hi[0] = cost[k, j]
+            for t in range(c):
+                e = order[start[j] + t]
+                y = Y[k, rows[e]]
+                buf_lo[t + 1], buf_hi[t + 1] = mul(y, y, vals[e], vals[e])
+            for t in range(c + 1, w):
+                buf_lo[t] = 0.0
+                buf_hi[t] = 0.0
+            cl, ch = _pairwise(buf_lo, buf_hi, w)
+            # min over z_j in [lo_j, hi_j] of c_j z_j, c_j in [cl, ch]: the lower bound of the product
+            tlo[j] = mul(cl, ch, lo[j], hi[j])[0]
+        w = _pow2_at_least(N)
+        for j in range(N):
+            buf_lo[j] = tlo[j]
+            buf_hi[j] = tlo[j]
+        for j in range(N, w):
+            buf_lo[j] = 0.0
+            buf_hi[j] = 0.0
+        left[k] = _pairwise(buf_lo, buf_hi, w)[0]
+        # y b over the rows in use, in their order
+        L = 0
+        for i in range(M):
+            if used[i] != 0:
+                buf_lo[L], buf_hi[L] = mul(Y[k, i], Y[k, i], b[i], b[i])
+                L += 1
+        w = _pow2_at_least(L)
+        for t in range(L, w):
+            buf_lo[t] = 0.0
+            buf_hi[t] = 0.0
+        yb[k] = _pairwise(buf_lo, buf_hi, w)[1]
+
+
+@jit
+def _mul_up(a, b):
+    """Upper bound of the product of non-negative floats, exactly 0 when a factor is 0 (``_mul_up``)."""
+    if a == 0.0 or b == 0.0:
+        return 0.0
+    return up(a * b)
+
+
+@jit
+def _sum_up(v, L):
+    """Upper bound of the sum of the non-negative ``v[:L]``, in place (``verifier.one_motion._sum_up``):
+    pairwise, a level of odd length padded with one exact 0, every addition rounded up (an exact 0
+    stays 0)."""
+    while L > 1:
+        h = L // 2
+        for t in range(h):
+            v[t] = up0(v[2 * t] + v[2 * t + 1])
+        if L % 2:
+            v[h] = up0(v[L - 1] + 0.0)
+            h += 1
+        L = h
+    return v[0]
+
+
+@cached_jit
+def taylor_rows(c, r, Flo, Fhi, Jlo, Jhi, Hlo, Hhi, Jc, blo, bhi, v, plo, phi):
+    """The rows ``blo <= Jc z <= bhi`` of the loop closure over ``S`` boxes (``verifier.one_motion.
+    loop_closure_rows``, whose notes give the maths), from the box midpoints ``c`` and radii ``r``
+    ``(S, N)``, the enclosures of ``f(c)`` ``(S, n)``, of the gradient over the midpoint ``J`` ``(S, n, N)``
+    and of the Hessians over the box ``H`` ``(S, n, N, N)``.  Writes ``Jc`` ``(S, n, N)``, ``blo``, ``bhi``
+    ``(S, n)`` (infinite where an enclosure holds a NaN).  Scratch: ``v`` (at least ``N * N``), ``plo``,
+    ``phi`` (at least the power of two above ``N``).  Allocates nothing."""
+    S = c.shape[0]
+    N = c.shape[1]
+    n = Flo.shape[1]
+    w = 1
+    while w < N:
+        w *= 2
+    for s in range(S):
+        for i in range(n):
+            for j in range(N):
+                m = midpoint(Jlo[s, i, j], Jhi[s, i, j])
+                Jc[s, i, j] = m if math.isfinite(m) else 0.0
+            # ([g] - Jc) d, |d_j| <= r_j: within +-e1
+            for j in range(N):
+                el, eh = sub(Jlo[s, i, j], Jhi[s, i, j], Jc[s, i, j], Jc[s, i, j])
+                v[j] = _mul_up(maxn(abs(el), abs(eh)), r[s, j])
+            e1 = _sum_up(v, N)
+            # 1/2 d' H d: d_j d_l in [-r_j r_l, r_j r_l], and in [0, r_j^2] on the diagonal
+            nan = False
+            for j in range(N):
+                for l in range(N):
+                    hl = Hlo[s, i, j, l]
+                    hh = Hhi[s, i, j, l]
+                    nan |= hl != hl or hh != hh
+                    g = maxn(hh, 0.0) if j == l else maxn(abs(hl), abs(hh))
+                    v[j * N + l] = _mul_up(g, _mul_up(r[s, j], r[s, l]))
+            u = _sum_up(v, N * N)
+            for j in range(N):
+                for l in range(N):
+                    hl = Hlo[s, i, j, l]
+                    hh = Hhi[s, i, j, l]
+                    g = maxn(-hl, 0.0) if j == l else maxn(abs(hl), abs(hh))
+                    v[j * N + l] = _mul_up(g, _mul_up(r[s, j], r[s, l]))
+            d = _sum_up(v, N * N)
+            rhi = up0(0.5 * u)
+            rlo = -up0(0.5 * d)
+            # Jc c, enclosed: the products, then a pairwise sum padded with exact zeros
+            for j in range(N):
+                plo[j], phi[j] = mul(Jc[s, i, j], Jc[s, i, j], c[s, j], c[s, j])
+            for j in range(N, w):
+                plo[j] = 0.0
+                phi[j] = 0.0
+            ql, qh = _pairwise(plo, phi, w)
+            bl, bh = sub(ql, qh, Flo[s, i], Fhi[s, i])
+            lo = dn0(bl - rhi)
+            hi = up0(bh - rlo)
+            lo = dn0(lo - e1)
+            hi = up0(hi + e1)
+            if nan or lo != lo or hi != hi:
+                lo = -math.inf
+                hi = math.inf
+            blo[s, i] = lo
+            bhi[s, i] = hi
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's disk cache) both kernels for the argument types
+    :mod:`verifier.one_motion` passes (C-contiguous float64 and int64 arrays), by calling them on tiny
+    arrays: the compilation child of a first run (:mod:`verifier.compiled.warm`) does it beside the
+    parent's work."""
+    import numpy as np
+
+    f, i = np.float64, np.int64
+
+    def z(*shape, dtype=f):
+        return np.zeros(shape, dtype)
+
+    dual_bound(z(1, dtype=i), z(1, dtype=i), z(1), z(1), z(1), z(1), z(1, 1), z(1, 1), z(1, dtype=i), z(1, dtype=i),
+               z(2, dtype=i), z(1, dtype=i), z(4), z(4), z(1), z(1), z(1))
+    taylor_rows(z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1, 1), z(1, 1, 1), z(1, 1, 1, 1), z(1, 1, 1, 1), z(1, 1, 1),
+                z(1, 1), z(1, 1), z(1), z(1), z(1))
