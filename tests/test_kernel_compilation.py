@@ -23,7 +23,7 @@ from numba.core.registry import CPUDispatcher
 
 import crosscert.verifier.compiled as compiled_pkg
 
-MODULES = ("ops", "tape", "linalg", "contractors", "step", "vectorized", "motion")
+MODULES = ("ops", "tape", "linalg", "contractors", "step", "vectorized", "motion", "one_motion")
 
 
 def _literal(node) -> bool:

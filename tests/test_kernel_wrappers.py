@@ -27,11 +27,12 @@ from problems import CATALOGUE, default_settings, interval_model, run_of, simula
 from crosscert.verifier import interval as I
 from crosscert.verifier.compiled.ops import NO_WRAPPERS, Kernel
 
-MODULES = ("ops", "tape", "linalg", "contractors", "step", "motion", "vectorized")
+MODULES = ("ops", "tape", "linalg", "contractors", "step", "motion", "vectorized", "one_motion")
 
 #: The dispatchers called from Python, with numba's wrappers and cached on disk with all they call.
 ENTRY_POINTS = {
     "contractors.pose_solutions", "motion.pair_kernel", "step.run_slot", "step.run_hypotheses_parallel",
+    "one_motion.dual_bound", "one_motion.taylor_rows",
     "vectorized._unary_loop", "vectorized._binary_loop", "vectorized._scalar_loop", "vectorized._scale_loop",
     "vectorized._pown_loop",
 }

@@ -2,11 +2,15 @@
 
 * :func:`dual_bound` (the Farkas and weak-duality bounds) gives numpy's ``_dual_bound`` bit for bit on seeded
   random sparse systems, multipliers with zeros, negatives, NaN and infinities included, several rows of
-  multipliers and costs at once; and both enclose the exact rational values (a rounding dropped in either
-  shows there, not only as a disagreement);
+  multipliers and costs at once; and both enclose the exact rational values, on random systems and on sums
+  that cancel to an exact float zero (where no later outward step covers a product's rounding): each of its
+  roundings dropped fails a containment test, not only the agreement (removal checks, 2026-12-04);
 * :func:`taylor_rows` (the loop closure's rows from the tapes' enclosures) gives numpy's ``_taylor_rows`` bit
   for bit on random enclosures (NaN and infinite ones included) and on the window's boxes of every robot
-  of the registry, and its bounds are outward of the exact value of the same formula;
+  of the registry, and its bounds are outward of the exact value of the same formula.  Dropping its first-
+  or second-order term fails containment; dropping one of its roundings (a product ``r_j r_l``, a sum, the
+  last subtraction) fails only the agreement: every such step is followed by another outward one that
+  covers half an ulp (removal checks, 2026-12-04);
 * the window's one-motion step gives the same rows, refutations and sub-boxes with either backend.
 
 The containment of the truth itself (true solutions at box corners, adversarial motions never refuted) is
@@ -113,6 +117,54 @@ def test_dual_bound_encloses_the_exact_value(compiled):
         ex_left, ex_yb = _exact_dual(system, y, cost)
         assert Fraction(float(left)) <= ex_left, t
         assert Fraction(float(yb)) >= ex_yb, t
+
+
+def _product_error(y, v) -> Fraction:
+    """``y v − fl(y v)``, exactly."""
+    return Fraction(float(y)) * Fraction(float(v)) - Fraction(float(y) * float(v))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_column_sum_cancelling_to_zero_keeps_its_products_rounding(compiled):
+    """One entry ``y v`` and the cost ``−fl(y v)``: the column sum is exactly 0 in floats (an exact zero is
+    not widened), so only the product's own outward rounding keeps the exact ``y v − fl(y v)`` inside; the
+    box ``z = ±1`` makes ``left`` that value (or its opposite).  Fails when the products of the column sums
+    are rounded to nearest (the other checks do not see it: the next addition's outward step covers it)."""
+    rng = np.random.default_rng(17)
+    seen = set()
+    for _ in range(60):
+        y, v = rng.uniform(0.5, 2.0), rng.uniform(-3.0, 3.0)
+        err = _product_error(y, v)
+        if err == 0:
+            continue
+        side = 1.0 if err < 0 else -1.0  # left = cl (z = 1) or -ch (z = -1): the bound the error is beyond
+        system = OM.LinearSystem(np.array([0]), np.array([0]), np.array([v]), np.array([0.0]), np.array([side]),
+                                 np.array([side]))
+        left, _ = OM._dual_bound(system, np.array([y]), np.array([-(y * v)]), compiled=compiled)
+        assert Fraction(float(left)) <= side * err, (y, v)
+        seen.add(side)
+    assert seen == {1.0, -1.0}
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_sum_of_yb_cancelling_to_zero_keeps_its_products_rounding(compiled):
+    """Two rows with ``fl(y b_1) = −fl(y b_2)`` while ``y (b_1 + b_2) > 0`` exactly: ``yᵀb`` is 0 in floats, and
+    only the products' outward rounding keeps the bound above the exact value.  Fails when the products of
+    ``yᵀb`` are rounded to nearest."""
+    rng = np.random.default_rng(19)
+    found = 0
+    while found < 20:
+        y, b1 = rng.uniform(0.5, 2.0), rng.uniform(0.5, 2.0)
+        b2 = -np.nextafter(b1, 0.0)
+        if y * b1 != -(y * b2):
+            continue
+        exact = Fraction(float(y)) * (Fraction(float(b1)) + Fraction(float(b2)))
+        assert exact > 0
+        system = OM.LinearSystem(np.array([0, 1]), np.array([0, 0]), np.array([1.0, -1.0]), np.array([b1, b2]),
+                                 np.zeros(1), np.ones(1))
+        _, yb = OM._dual_bound(system, np.array([y, y]), compiled=compiled)
+        assert Fraction(float(yb)) >= exact, (y, b1)
+        found += 1
 
 
 def _random_enclosures(rng, S, n, N, special=False):
@@ -224,3 +276,23 @@ def test_the_one_motion_step_is_the_same_with_either_backend(scenarios):
             want = OM.one_motion_rows(im, settings, sc.q_meas, XI, np.stack([X, X]), np.stack([XD, XD]))
             got = OM.one_motion_rows(im, settings, sc.q_meas, XI, np.stack([X, X]), np.stack([XD, XD]), compiled=True)
             assert all(_bits_equal(a, b) for a, b in zip(got, want)), sc.name
+
+
+def test_the_compilation_child_builds_the_signatures_the_step_uses(scenarios):
+    """:func:`verifier.compiled.one_motion.compile_kernels` (run by the first run's compilation child) compiles
+    each kernel for exactly the argument types of the step's calls: after it, a call adds no signature."""
+    from crosscert.robots import DEXTAR
+    from crosscert.verifier.compiled.one_motion import compile_kernels, dual_bound, taylor_rows
+    from crosscert.verifier.settings import TrackerSettings
+
+    compile_kernels()
+    before = (list(dual_bound.signatures), list(taylor_rows.signatures))
+    im = interval_model()
+    sc = scenarios[0]
+    X = np.stack([sc.x - 1e-3, sc.x + 1e-3], axis=1)
+    XD = np.stack([sc.xd - 0.1, sc.xd + 0.1], axis=1)
+    lo, hi = im.xi_box()
+    OM.one_motion_rows(im, TrackerSettings.for_robot(DEXTAR), sc.q_meas, (lo[None], hi[None]), X[None], XD[None],
+                       compiled=True)
+    assert (list(dual_bound.signatures), list(taylor_rows.signatures)) == before
+    assert len(before[0]) == len(before[1]) == 1

@@ -424,7 +424,7 @@ def test_acceleration_bound_between_samples_certifies_the_plan_at_0961(monkeypat
     from crosscert.planner.certify.plan import certify_speed
 
     monkeypatch.setattr(W, "one_motion_rows",
-                        lambda model, s, q, XI, *a: (np.zeros(len(XI[0]), dtype=bool), XI[0].copy(), XI[1].copy()))
+                        lambda model, s, q, XI, *a, **kw: (np.zeros(len(XI[0]), dtype=bool), XI[0].copy(), XI[1].copy()))
     from crosscert.planner.task import benchmark_task
     from crosscert.robots import KinematicModel
 
@@ -475,8 +475,8 @@ def test_a_sub_box_the_one_motion_step_left_as_it_was_is_not_asked_again(monkeyp
 
     real, kept, again = W.one_motion_rows, set(), []
 
-    def watching(model, s, q, XI, X, XD, samples):
-        out, lo, hi = real(model, s, q, XI, X, XD, samples)
+    def watching(model, s, q, XI, X, XD, samples, **kw):
+        out, lo, hi = real(model, s, q, XI, X, XD, samples, **kw)
         for r in range(len(XI[0])):
             key = XI[0][r].tobytes() + XI[1][r].tobytes()
             again.append(key in kept)

@@ -140,6 +140,13 @@ def _dual_bound(system: LinearSystem, y, cost=None, compiled: bool = False):
     return (left[0], yb[0]) if one else (left, yb)
 
 
+def _kernel_array(a, dtype=np.float64):
+    """``a`` as a C-contiguous, writable array of ``dtype``: the one layout the compiled kernels are built for
+    (a read-only view, such as a broadcast, would compile them once more)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
+
+
 def _dual_bound_compiled(system: LinearSystem, y, cost):
     """:func:`_dual_bound`'s ``(left, yb)`` ``(B,)`` for sanitised multipliers ``y`` ``(B, M)``, by the compiled
     kernel (its scratch allocated here: a few arrays of the system's size)."""
@@ -150,13 +157,11 @@ def _dual_bound_compiled(system: LinearSystem, y, cost):
     B, E = y.shape[0], len(s.rows)
     cost = np.zeros((B, N)) if cost is None else np.broadcast_to(np.asarray(cost, dtype=np.float64), (B, N))
     size = 2 * max(E + 1, N, M, 1)
-    i64 = np.int64
+    i64, k = np.int64, _kernel_array
     left, yb = np.empty(B), np.empty(B)
-    dual_bound(np.ascontiguousarray(s.rows, i64), np.ascontiguousarray(s.cols, i64),
-               np.ascontiguousarray(s.vals, np.float64), np.ascontiguousarray(s.b, np.float64),
-               np.ascontiguousarray(s.lo, np.float64), np.ascontiguousarray(s.hi, np.float64),
-               np.ascontiguousarray(y), np.ascontiguousarray(cost), np.empty(M, i64), np.empty(N, i64),
-               np.empty(N + 1, i64), np.empty(E, i64), np.empty(size), np.empty(size), np.empty(N), left, yb)
+    dual_bound(k(s.rows, i64), k(s.cols, i64), k(s.vals), k(s.b), k(s.lo), k(s.hi), k(y), k(cost), np.empty(M, i64),
+               np.empty(N, i64), np.empty(N + 1, i64), np.empty(E, i64), np.empty(size), np.empty(size), np.empty(N),
+               left, yb)
     return left, yb
 
 
@@ -425,8 +430,8 @@ def _taylor_rows_compiled(c, r, F, J, Hlo, Hhi):
     n = F[0].shape[1]
     w = 1 << max(N - 1, 0).bit_length()
     Jc, blo, bhi = np.empty((S, n, N)), np.empty((S, n)), np.empty((S, n))
-    f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
-    taylor_rows(f64(c), f64(r), f64(F[0]), f64(F[1]), f64(J[0]), f64(J[1]), f64(Hlo), f64(Hhi), Jc, blo, bhi,
+    k = _kernel_array
+    taylor_rows(k(c), k(r), k(F[0]), k(F[1]), k(J[0]), k(J[1]), k(Hlo), k(Hhi), Jc, blo, bhi,
                 np.empty(max(N * N, 1)), np.empty(w), np.empty(w))
     return Jc, blo, bhi
 
