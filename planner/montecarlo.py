@@ -274,16 +274,20 @@ def _shared(there, here, runs: int, chunk: int, progress=None) -> list:
 
     feeder = threading.Thread(target=feed, name="crosscert-monte-carlo-feeder", daemon=True)
     feeder.start()
-    while True:
+    try:
+        while True:
+            with lock:
+                if back <= front:
+                    break
+                back -= 1
+                i = back
+                seen, done_there[:] = list(done_there), []
+            tick(seen)
+            results[i] = here(*bounds[i])
+            tick([i])
+    finally:  # on an error here too: the feeder takes no further chunk
         with lock:
-            if back <= front:
-                break
-            back -= 1
-            i = back
-            seen, done_there[:] = list(done_there), []
-        tick(seen)
-        results[i] = here(*bounds[i])
-        tick([i])
+            back = min(back, front)
     feeder.join()
     tick(done_there)
     for i, r in enumerate(results):

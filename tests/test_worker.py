@@ -225,6 +225,23 @@ def test_shared_executions_the_worker_failed_on_run_here():
     assert sorted(there.ran + here_ran) == [(i, i + 1) for i in range(8)]
 
 
+def test_an_error_here_stops_the_worker_taking_shares():
+    """An execution failing in this process: the error comes out, and the worker takes no share after it."""
+    from crosscert.planner.montecarlo import _shared
+
+    there = _SlowThere(0.05)
+
+    def here(start, stop):
+        raise ValueError("boom")
+
+    import time
+
+    with pytest.raises(ValueError, match="boom"):
+        _shared(there, here, 20, 1)
+    time.sleep(0.4)  # a feeder still taking shares would have run several by now
+    assert len(there.ran) <= 1
+
+
 def test_the_worker_draws_the_certificate_figure_as_this_process_does(tmp_path):
     """`crosscert certify` hands the figure to the worker while the second certification runs: its
     arguments reach the worker, and the file is the one this process draws, byte for byte."""
