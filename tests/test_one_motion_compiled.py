@@ -73,10 +73,10 @@ def test_dual_bound_is_numpys_bit_for_bit(seed):
         for B in (1, 3):
             y = _multipliers(rng, B, M)
             for cost in (None, rng.normal(size=N), rng.normal(size=(B, N))):
-                want = OM._dual_bound(system, y if B > 1 else y[0], cost if B > 1 or cost is None or cost.ndim == 1
-                                      else cost[0])
-                got = OM._dual_bound(system, y if B > 1 else y[0], cost if B > 1 or cost is None or cost.ndim == 1
-                                     else cost[0], compiled=True)
+                if B == 1:  # one multiplier vector: (M,) and a cost (N,)
+                    y, cost = y[0] if y.ndim == 2 else y, cost[0] if cost is not None and cost.ndim == 2 else cost
+                want = OM._dual_bound(system, y, cost)
+                got = OM._dual_bound(system, y, cost, compiled=True)
                 assert _bits_equal(got[0], want[0]) and _bits_equal(got[1], want[1]), (seed, M, N, B)
 
 

@@ -154,9 +154,7 @@ def taylor_rows(c, r, Flo, Fhi, Jlo, Jhi, Hlo, Hhi, Jc, blo, bhi, v, plo, phi):
     S = c.shape[0]
     N = c.shape[1]
     n = Flo.shape[1]
-    w = 1
-    while w < N:
-        w *= 2
+    w = _pow2_at_least(N)
     for s in range(S):
         for i in range(n):
             for j in range(N):
