@@ -71,3 +71,83 @@ def test_split_prune_matches_the_reference(max_pieces, tol):
         decided += got_mode != 0
         undecided += got_mode == 0
     assert decided > 0 and undecided > 0
+
+
+def test_settled_pieces_change_no_result_below_the_piece_budget(monkeypatch):
+    """A piece left whole because splitting it can change neither result (``contractors._settled``) gives
+    the boxes and modes of splitting it, float for float, while no scenario reaches its piece budget: the
+    rule spares work only.  It does spare some on these boxes (pieces of both modes around the locus)."""
+    model = interval_model()
+    settled = []
+    real = ref._settled
+
+    def spy(*args):
+        out = real(*args)
+        settled.append(int(out.sum()))
+        return out
+
+    cases = list(_cases())
+    X, Q, XI = (np.concatenate(b) for b in zip(*cases))
+    box = lambda a: (a[:, 0], a[:, 1])  # noqa: E731
+    monkeypatch.setattr(ref, "_settled", spy)
+    (lo, hi), mode = ref.split_prune(model, box(X), box(Q), box(XI), max_pieces=10_000, tol=2e-4)
+    monkeypatch.setattr(ref, "_settled", lambda lo, hi, *rest: np.zeros(len(lo), bool))
+    (lo0, hi0), mode0 = ref.split_prune(model, box(X), box(Q), box(XI), max_pieces=10_000, tol=2e-4)
+    np.testing.assert_array_equal(lo, lo0)
+    np.testing.assert_array_equal(hi, hi0)
+    np.testing.assert_array_equal(mode, mode0)
+    assert sum(settled) > 0
+
+
+def test_settled_needs_final_pieces_of_no_common_mode_holding_the_piece():
+    """``_settled`` case by case: the final pieces' modes must leave no common one (a 0, or both signs),
+    the piece must lie inside their hull (bounds compared as floats, ends included), scenarios apart, and
+    a NaN bound settles nothing."""
+    lo = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.2], [0.5, 0.2], [0.0, 0.0], [0.2, 0.2]])
+    hi = np.array([[0.4, 1.0], [2.0, 1.0], [1.5, 0.8], [2.5, 0.8], [1.0, 1.0], [0.3, 0.3]])
+    owner = np.array([0, 0, 0, 0, 1, 1])
+    final = np.array([True, True, False, False, True, False])
+
+    def settled(mode, lo=lo, hi=hi):
+        return ref._settled(lo, hi, np.array(mode), owner, final, 2).tolist()
+
+    # both signs among scenario 0's finals: the piece inside their hull [0, 2] x [0, 1] is settled,
+    # the one reaching 2.5 is not; scenario 1's only final is certified, so its piece is not settled
+    assert settled([1, -1, 0, 0, 1, 0]) == [False, False, True, False, False, False]
+    assert settled([0, 1, 0, 0, 0, 0]) == [False, False, True, False, False, True]  # a final of mode 0
+    assert settled([1, 1, 0, 0, 1, 0]) == [False] * 6  # a common mode (+1) may still be certified
+    edge = hi.copy()
+    edge[2] = [2.0, 1.0]  # on the hull's upper ends: inside
+    assert settled([1, -1, 0, 0, 1, 0], hi=edge)[2]
+    edge[2, 0] = np.nextafter(2.0, 3.0)
+    assert not settled([1, -1, 0, 0, 1, 0], hi=edge)[2]
+    nan = lo.copy()
+    nan[0, 1] = np.nan
+    assert settled([1, -1, 0, 0, 1, 0], lo=nan)[:4] == [False] * 4
+    assert not any(ref._settled(lo, hi, np.zeros(6, np.int64), owner, np.zeros(6, bool), 2))  # no final piece
+
+
+@pytest.mark.parametrize("modes", [[1, -1, 0, 0], [0, 1, 0, 0], [1, 1, 0, 0], [-1, -1, 0, 0], [1, 0, 0, 0]])
+@pytest.mark.parametrize("change", ["none", "edge", "past_edge", "nan_final", "nan_piece"])
+def test_compiled_settle_agrees_with_the_reference(modes, change):
+    """The compiled ``_settle`` clears the split flags of exactly the pieces the reference's ``_settled``
+    finds (one scenario: two final pieces, two split), and says whether any piece still splits."""
+    lo = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.2], [0.5, 0.2]])
+    hi = np.array([[0.4, 1.0], [2.0, 1.0], [1.5, 0.8], [2.5, 0.8]])
+    if change == "edge":
+        hi[2] = [2.0, 1.0]
+    elif change == "past_edge":
+        hi[2] = [np.nextafter(2.0, 3.0), 1.0]
+    elif change == "nan_final":
+        lo[1, 1] = np.nan
+    elif change == "nan_piece":
+        hi[2, 0] = np.nan
+    final = np.array([True, True, False, False])
+    mode = np.array(modes, np.int64)
+    want = ref._settled(lo, hi, mode, np.zeros(4, np.int64), final, 1)
+    P = np.stack([lo, hi], axis=1)
+    wi = np.concatenate([mode, (~final).astype(np.int64)])
+    tb = np.zeros((K.TB_DQ + 1, 2, 2))
+    still = K._settle(P, 4, wi, 0, 4, tb, 2)
+    np.testing.assert_array_equal(wi[4:] == 0, final | want)
+    assert still == bool(np.any(~final & ~want))

@@ -200,6 +200,27 @@ def pose_solutions(model, Q, XI, X_search, tol: float = 1e-7, small: float = 5e-
     return out
 
 
+def _settled(lo, hi, mode, owner, final, B):
+    """The pieces ``(lo, hi)`` ``(N, n)`` of :func:`split_prune`, not ``final``, whose splitting can change
+    neither of its results: their scenario's ``final`` pieces (left unsplit in this generation: unchanged from now on)
+    include one of mode 0 or both modes, so the common mode is 0 whatever the others' descendants are, and
+    the hull of those final pieces contains the piece (a comparison of floats: no rounding).  A NaN
+    bound or a scenario without final pieces settles nothing."""
+    n = lo.shape[1]
+    f_owner = owner[final]
+    mn = np.full(B, 2, np.int64)
+    mx = np.full(B, -2, np.int64)
+    np.minimum.at(mn, f_owner, mode[final])
+    np.maximum.at(mx, f_owner, mode[final])
+    f_lo = np.full((B, n), np.inf)
+    f_hi = np.full((B, n), -np.inf)
+    np.minimum.at(f_lo, f_owner, lo[final])
+    np.maximum.at(f_hi, f_owner, hi[final])
+    no_common = (mn <= 0) & (mx >= 0)
+    inside = np.all((lo >= f_lo[owner]) & (hi <= f_hi[owner]), -1)
+    return no_common[owner] & inside & ~final
+
+
 def split_prune(model, X, Q, XI, max_pieces: int = 64, tol: float = 2e-4, sweeps: int = 2):
     """Batched branch and prune of pose boxes whose mode is undecided.
 
@@ -207,6 +228,16 @@ def split_prune(model, X, Q, XI, max_pieces: int = 64, tol: float = 2e-4, sweeps
     is bisected along its widest side; both halves are contracted (HC4 then
     Newton, ``sweeps`` times) and dropped only when proved empty.  A scenario
     stops splitting once it holds ``max_pieces`` pieces.
+
+    A piece is not split either once splitting it can change neither result
+    (:func:`_settled`): the pieces left unsplit in this generation (they never
+    change again) already have no common mode, and their hull contains the
+    piece.  Its descendants would lie inside it, hence inside that hull, and
+    could only be of the same uncertain mode.  Near the singular locus this
+    spares most of the halves (the pieces along the locus, between the
+    certified pieces of both modes).  The results differ from splitting them
+    only when ``max_pieces`` stops a scenario, which then counts the piece
+    once instead of its descendants.
 
     Parameters
     ----------
@@ -225,6 +256,7 @@ def split_prune(model, X, Q, XI, max_pieces: int = 64, tol: float = 2e-4, sweeps
         mode = mode_of(model, (lo, hi), (Q[0][owner], Q[1][owner]), (XI[0][owner], XI[1][owner]))
         counts = np.bincount(owner, minlength=B)
         split = (mode == 0) & ((hi - lo).max(-1) >= tol) & (counts[owner] < max_pieces)
+        split &= ~_settled(lo, hi, mode, owner, ~split, B)
         if not split.any():
             break
         keep = ~split

@@ -342,13 +342,51 @@ def inverted_box(B, b, k):
 
 
 @jit
+def _settle(P, N, wi, pm, sp, tb, n):
+    """Clear the split flag ``wi[sp + p]`` of the pieces ``P[:N]`` whose splitting can change neither
+    result of :func:`split_prune` (:func:`verifier.contractors._settled`: the unsplit pieces have modes
+    ``wi[pm:]`` of no common value, and their hull holds the piece); returns whether a piece still splits.
+    The hull is built in the scratch box ``tb[TB_SWEEP]``, free until the halves are contracted."""
+    lo_mode = 2
+    hi_mode = -2
+    for i in range(n):
+        tb[TB_SWEEP, 0, i] = np.inf
+        tb[TB_SWEEP, 1, i] = -np.inf
+    for p in range(N):
+        if wi[sp + p] == 0:
+            lo_mode = min(lo_mode, wi[pm + p])
+            hi_mode = max(hi_mode, wi[pm + p])
+            for i in range(n):
+                lo, hi = P[p, 0, i], P[p, 1, i]
+                if lo != lo or hi != hi:  # a NaN hull holds nothing (numpy's minimum propagates it)
+                    return True
+                tb[TB_SWEEP, 0, i] = min(tb[TB_SWEEP, 0, i], lo)
+                tb[TB_SWEEP, 1, i] = max(tb[TB_SWEEP, 1, i], hi)
+    if not (lo_mode <= 0 and hi_mode >= 0):
+        return True
+    any_split = False
+    for p in range(N):
+        if wi[sp + p] == 0:
+            continue
+        inside = True
+        for i in range(n):
+            inside &= P[p, 0, i] >= tb[TB_SWEEP, 0, i] and P[p, 1, i] <= tb[TB_SWEEP, 1, i]
+        if inside:
+            wi[sp + p] = 0
+        else:
+            any_split = True
+    return any_split
+
+
+@jit
 def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, wi0):
     """Branch and prune of one pose box whose mode is undecided (see
     :func:`verifier.contractors.split_prune`): ``X[ix]`` becomes the hull of
     the surviving pieces (empty when none survives); returns their common mode or 0.
 
     Pieces are split generation by generation, in the reference's order: the
-    kept pieces, then every left half, then every right half.  The two
+    kept pieces, then every left half, then every right half; a piece whose
+    splitting can change neither result stays whole (:func:`_settle`).  The two
     generations live in ``sc.pieces[:cap]`` and ``sc.pieces[cap:]``, their
     modes and split flags in ``sc.wi[wi0:]``.  Two computations of the
     reference are skipped because their results are known bit for bit: the
@@ -376,6 +414,8 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
             s = wi[pm + p] == 0 and wmax >= tol and N < max_pieces
             wi[sp + p] = 1 if s else 0
             any_split |= s
+        if any_split:
+            any_split = _settle(P, N, wi, pm, sp, tb, n)
         if not any_split:
             break
         M = 0
