@@ -277,6 +277,22 @@ def _explainer(explain: bool):
     return RefutingExplainer()
 
 
+def _warm_explainer(im, s, q) -> None:
+    """Ask a fresh explainer about both final modes of the recording ``q``: builds the NLPs of both kinds with
+    the explainer's own IPOPT options (its solvers are cached per process by size, kind and options; a
+    search with other options, as ``search_bounce``'s defaults, builds other ones), so that S1 and S2 time
+    the questions, not the one-off builds (about 0.25 s each)."""
+    from crosscert.verifier.window import ExplainRequest
+
+    xi = im.xi_box()
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in im.robot.x_bounds)
+    K = q.shape[0]
+    ex = _explainer(True)
+    for final in (1, -1):
+        ex(ExplainRequest(im, q, s, xi, None, 1, final, xi[0][None], xi[1][None], np.tile(lo, (K, 1)),
+                          np.tile(hi, (K, 1))))
+
+
 def _asked(ex) -> str:
     """The explainer's answers of one run: final mode, search, outcome, IPOPT and wall s."""
     if ex is None:
@@ -295,11 +311,8 @@ def speed(geometries: int, parts: str = "S1,S2,S3", explain: bool = False) -> No
         return
     runs = [_crossing(1.0, xi).q_meas for xi in _true_geometries(geometries)]
     kw = {}
-    if explain:  # warm-up of the searches too: the NLPs of both kinds built once per process
-        from crosscert.planner.refute import RecordingBounds, search_bounce, search_crossing
-
-        rb = RecordingBounds(q_meas=runs[0], m0=1, assumptions=s.assumptions)
-        search_bounce(kinematics(), rb), search_crossing(kinematics(), rb)
+    if explain:  # warm-up of the searches too: the explainer's NLPs of both kinds built once per process
+        _warm_explainer(im, s, runs[0])
     track_window(im, runs[0], s, initial_mode=1)  # warm-up: kernels loaded, caches filled
     print(f"[S1] window reasoning, 1.0 m/s crossings, {len(runs)} true geometries (ms per sample)"
           f"{', with the explainer' if explain else ''}", flush=True)
