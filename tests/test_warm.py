@@ -158,3 +158,40 @@ class _Done:
 
     def wait(self, timeout=None):
         return 0
+
+
+def test_the_wait_ends_once_the_driver_is_cached_and_the_child_is_stopped_at_exit(monkeypatch):
+    """The child goes on (the one-motion kernels) after the driver is in the cache: ``wait`` returns 0 then,
+    without waiting for its exit, and the exit handler stops it."""
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import time; time.sleep(600)"])
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    monkeypatch.setenv(warm.DISABLE, "1")
+    assert warm.start("sound")
+    child = warm._CHILDREN[SOUND]
+    looks = []
+
+    def cached(code=SOUND):
+        looks.append(code)
+        return len(looks) >= 3  # the driver reaches the cache while the child runs
+
+    monkeypatch.setattr(warm, "cached", cached)
+    assert warm.wait(SOUND, timeout=60) == 0
+    assert looks == [SOUND] * 3 and child.poll() is None and warm.pending() == []
+    warm._stop_all()
+    assert child.poll() is not None and warm._FINISHING == []
+
+
+def test_the_one_motion_kernels_wait_for_a_finishing_child(monkeypatch):
+    """A child whose driver is cached is still compiling the one-motion kernels: their first call here waits
+    for it (then loads them) instead of compiling them beside it; a child that does not end in time is
+    stopped."""
+    from crosscert.verifier import one_motion
+
+    quick = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(0.5)"])
+    monkeypatch.setattr(warm, "_FINISHING", [quick])
+    kernels = one_motion._compiled_kernels()
+    assert quick.poll() == 0 and warm._FINISHING == [] and callable(kernels.dual_bound)
+    slow = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    monkeypatch.setattr(warm, "_FINISHING", [slow])
+    warm.finish(timeout=0.2)
+    assert slow.poll() is not None and warm._FINISHING == []

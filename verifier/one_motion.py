@@ -147,10 +147,20 @@ def _kernel_array(a, dtype=np.float64):
     return a if a.flags.writeable else a.copy()
 
 
+def _compiled_kernels():
+    """:mod:`verifier.compiled.one_motion` (numba loaded on first use only), once the first run's compilation
+    child is done with its kernels: this process then loads them from the cache instead of compiling them
+    beside the child (:func:`verifier.compiled.warm.finish`)."""
+    from .compiled import one_motion, warm
+
+    warm.finish()
+    return one_motion
+
+
 def _dual_bound_compiled(system: LinearSystem, y, cost):
     """:func:`_dual_bound`'s ``(left, yb)`` ``(B,)`` for sanitised multipliers ``y`` ``(B, M)``, by the compiled
     kernel (its scratch allocated here: a few arrays of the system's size)."""
-    from .compiled.one_motion import dual_bound  # numba loaded on first use only
+    dual_bound = _compiled_kernels().dual_bound
 
     s = system
     M, N = s.shape
@@ -422,7 +432,7 @@ def _taylor_rows(c, r, F, Jp, Hlo, Hhi):
 
 def _taylor_rows_compiled(c, r, F, J, Hlo, Hhi):
     """:func:`loop_closure_rows`'s ``(Jc, blo, bhi)`` from the enclosures, by the compiled kernel."""
-    from .compiled.one_motion import taylor_rows  # numba loaded on first use only
+    taylor_rows = _compiled_kernels().taylor_rows
 
     S, N = c.shape
     n = F[0].shape[1]

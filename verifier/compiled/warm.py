@@ -8,8 +8,9 @@ window's one-motion kernels, one after the other on one core.  :func:`start` run
 ``python -m`` this module in a child process that compiles the driver for the
 velocity model in use, then the one-motion kernels, and writes them to numba's
 disk cache, while this process goes on; :func:`wait`, before the
-driver's first call, waits for the child, and the call then loads the driver
-from the cache.
+driver's first call, waits until the driver is in the cache (not for the
+one-motion kernels, which the child goes on compiling beside this process),
+and the call then loads the driver from the cache.
 
 The child is never needed for correctness: whatever it does (fails, is
 killed, compiles another signature, writes nothing), the driver's first call
@@ -29,13 +30,14 @@ import os
 import subprocess
 import sys
 import threading
+import time
 
 import numpy as np
 
 from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
 
-__all__ = ["CHILD", "DISABLE", "WAIT_S", "example_arguments", "signature", "cached", "core_free", "start", "wait",
-           "pending", "main"]
+__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "example_arguments", "signature", "cached", "core_free", "start",
+           "wait", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -48,9 +50,14 @@ DISABLE = "CROSSCERT_COMPILE_CHILD"
 #: 15-25 s of CPU on the machines of benchmarks/README.md).
 WAIT_S = 600.0
 
+#: How often :func:`wait` looks for the driver in numba's disk cache, s.
+POLL_S = 0.05
+
 _LOCK = threading.Lock()
 #: velocity model code -> the child compiling the driver for it
 _CHILDREN: dict[int, subprocess.Popen] = {}
+#: Children whose driver is in the cache, still compiling the one-motion kernels (stopped at exit)
+_FINISHING: list[subprocess.Popen] = []
 
 
 def example_arguments(velocity_model: int = SOUND) -> tuple:
@@ -156,20 +163,49 @@ def pending() -> list[int]:
 
 
 def wait(velocity_model: int, timeout: float | None = None) -> int | None:
-    """Before the driver's first call for ``velocity_model``: wait for its child, if one was started
-    (at most ``timeout`` s, default :data:`WAIT_S`; then it is stopped).
+    """Before the driver's first call for ``velocity_model``: wait for its child, if one was started,
+    until it exits or the driver is in numba's disk cache (looked for every :data:`POLL_S` s), at most
+    ``timeout`` s (default :data:`WAIT_S`; then it is stopped).
 
-    Returns the child's exit code (0: the driver is in the cache), or None when there was no child.
-    Whatever it returns, the caller calls the driver as usual: numba loads it from the cache or compiles it."""
+    Returns the child's exit code, 0 as soon as the driver is in the cache (the child then goes on with the
+    one-motion kernels beside this process, which loads them if the child wrote them first; it is stopped
+    at exit), or None when there was no child.  Whatever it returns, the caller calls the driver as usual:
+    numba loads it from the cache or compiles it."""
+    code = int(velocity_model)
     with _LOCK:
-        child = _CHILDREN.pop(int(velocity_model), None)
+        child = _CHILDREN.pop(code, None)
     if child is None:
         return None
-    try:
-        return child.wait(WAIT_S if timeout is None else timeout)
-    except subprocess.TimeoutExpired:
-        _stop(child)
-        return None
+    deadline = time.monotonic() + (WAIT_S if timeout is None else timeout)
+    while True:
+        rc = child.poll()
+        if rc is not None:
+            return rc
+        if cached(code):  # numba writes an entry's data before its index: the entry is whole
+            with _LOCK:
+                _FINISHING.append(child)
+            return 0
+        if time.monotonic() >= deadline:
+            _stop(child)
+            return None
+        time.sleep(POLL_S)
+
+
+def finish(timeout: float | None = None) -> None:
+    """Before a call of the one-motion kernels: wait for the children that put their driver in the cache and
+    still compile those kernels (:func:`wait`), at most ``timeout`` s each (default :data:`WAIT_S`; then they
+    are stopped), so that this process loads the kernels instead of compiling them beside the child.  Nothing
+    to do (one list read) when no child is finishing."""
+    if not _FINISHING:
+        return
+    with _LOCK:
+        children = list(_FINISHING)
+        _FINISHING[:] = []
+    for child in children:
+        try:
+            child.wait(WAIT_S if timeout is None else timeout)
+        except subprocess.TimeoutExpired:
+            _stop(child)
 
 
 def _stop(child) -> None:
@@ -185,8 +221,9 @@ def _stop_all() -> None:
     """A child still compiling when the process ends (the command failed, or never ran the driver)
     is stopped: numba writes its files through a rename, so at worst a temporary file stays."""
     with _LOCK:
-        children = list(_CHILDREN.values())
+        children = list(_CHILDREN.values()) + _FINISHING
         _CHILDREN.clear()
+        _FINISHING[:] = []
     for child in children:
         if child.poll() is None:
             _stop(child)
