@@ -195,3 +195,37 @@ def test_the_one_motion_kernels_wait_for_a_finishing_child(monkeypatch):
     monkeypatch.setattr(warm, "_FINISHING", [slow])
     warm.finish(timeout=0.2)
     assert slow.poll() is not None and warm._FINISHING == []
+
+
+def test_the_pair_contraction_is_loaded_while_the_child_compiles(monkeypatch):
+    """While a child compiles the driver, the parent compiles the window's pair contraction instead of waiting
+    idle, with the argument types of the window's own calls (one compilation serves both)."""
+    import crosscert.verifier.compiled.motion as motion
+    import crosscert.verifier.step as step_module
+    from crosscert.verifier.window import track_window
+
+    from problems import default_settings, interval_model, simulate
+
+    kinds = []
+    real = motion.pair_kernel
+
+    def spy(*args):
+        kinds.append(tuple(numba.typeof(a) for a in args))
+        return real(*args)
+
+    monkeypatch.setattr(motion, "pair_kernel", spy)
+    step_module._load_pair_kernel(2)
+    assert len(kinds) == 1
+    run = simulate(1.0, False, 0)
+    track_window(interval_model(), run.q_meas, default_settings(), initial_mode=1, max_geometries=4)
+    assert len(kinds) > 1 and set(kinds) == {kinds[0]}  # the window's calls: the same types
+    # the order in the step: the contraction first, then the wait for the child
+    order = []
+    monkeypatch.setattr(step_module, "_load_pair_kernel", lambda n: order.append("pair"))
+    monkeypatch.setattr(warm, "pending", lambda: [SOUND])
+    monkeypatch.setattr(warm, "wait", lambda code, timeout=None: order.append("wait"))
+    model = interval_model()
+    robot = model.robot
+    config = configure(model, TrackerSettings.for_robot(robot), parallel=False)
+    CompiledStep()._args(config, init_state(config, tuple(np.asarray(v, float) for v in robot.x_bounds)))
+    assert order == ["pair", "wait"]

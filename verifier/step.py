@@ -50,6 +50,7 @@ from .contractors import pose_solutions as _np_pose_solutions
 from crosscert.robots.errors import InputError
 from .constants import JOINT_FD, PAPER, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
+from .motion_model import contract_tubes
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
            "advance", "pose_solutions", "pose_solution_arrays", "reading_box", "StepImpl", "NumpyStep", "CompiledStep"]
@@ -560,6 +561,8 @@ class CompiledStep:
 
                 # a child process may be compiling it (planner.cli starts one): its cache entry, not a second
                 # compilation here; without one (or if it failed) the first call below compiles as usual
+                if int(c.velocity_model) in warm.pending():
+                    _load_pair_kernel(model.n)  # meanwhile: the window's, which it would compile after the driver
                 warm.wait(c.velocity_model)
             B, n = st.batch, model.n
             a.update(
@@ -619,6 +622,16 @@ class CompiledStep:
         if count < 0:
             return None
         return out[:count].copy(), modes[:count].copy()
+
+
+def _load_pair_kernel(n: int) -> None:
+    """Compile (or load) the window's pair contraction (:func:`verifier.compiled.motion.pair_kernel`) by
+    contracting two samples of one row whose velocity boxes are disjoint: the argument types of every call
+    (C-contiguous tubes of ``n`` pose coordinates)."""
+    x = np.zeros((1, 2, 2, n))
+    xd = np.zeros((1, 2, 2, n))
+    xd[0, 1] = 1.0
+    contract_tubes(x, xd, 1e-3, np.ones(n), offsets=(1,), compiled=True)
 
 
 _BUFFERS = threading.local()
