@@ -342,27 +342,38 @@ def inverted_box(B, b, k):
 
 
 @jit
+def _hull_of_pieces(P, N, wi, pm, sp, unsplit, B, b, n):
+    """``B[b]`` <- the hull of the pieces ``P[:N]`` (those whose split flag ``wi[sp + p]`` is 0 when
+    ``unsplit``); returns the least and greatest of their modes ``wi[pm + p]`` (2, -2 for no piece) and
+    whether every bound read is a number."""
+    lo_mode = 2
+    hi_mode = -2
+    numbers = True
+    for i in range(n):
+        B[b, 0, i] = np.inf
+        B[b, 1, i] = -np.inf
+    for p in range(N):
+        if unsplit and wi[sp + p] != 0:
+            continue
+        lo_mode = min(lo_mode, wi[pm + p])
+        hi_mode = max(hi_mode, wi[pm + p])
+        for i in range(n):
+            lo, hi = P[p, 0, i], P[p, 1, i]
+            numbers &= lo == lo and hi == hi
+            B[b, 0, i] = min(B[b, 0, i], lo)
+            B[b, 1, i] = max(B[b, 1, i], hi)
+    return lo_mode, hi_mode, numbers
+
+
+@jit
 def _settle(P, N, wi, pm, sp, tb, n):
     """Clear the split flag ``wi[sp + p]`` of the pieces ``P[:N]`` whose splitting can change neither
     result of :func:`split_prune` (:func:`verifier.contractors._settled`: the unsplit pieces have modes
     ``wi[pm:]`` of no common value, and their hull holds the piece); returns whether a piece still splits.
-    The hull is built in the scratch box ``tb[TB_SWEEP]``, free until the halves are contracted."""
-    lo_mode = 2
-    hi_mode = -2
-    for i in range(n):
-        tb[TB_SWEEP, 0, i] = np.inf
-        tb[TB_SWEEP, 1, i] = -np.inf
-    for p in range(N):
-        if wi[sp + p] == 0:
-            lo_mode = min(lo_mode, wi[pm + p])
-            hi_mode = max(hi_mode, wi[pm + p])
-            for i in range(n):
-                lo, hi = P[p, 0, i], P[p, 1, i]
-                if lo != lo or hi != hi:  # a NaN hull holds nothing (numpy's minimum propagates it)
-                    return True
-                tb[TB_SWEEP, 0, i] = min(tb[TB_SWEEP, 0, i], lo)
-                tb[TB_SWEEP, 1, i] = max(tb[TB_SWEEP, 1, i], hi)
-    if not (lo_mode <= 0 and hi_mode >= 0):
+    The hull is built in the scratch box ``tb[TB_SWEEP]``, free until the halves are contracted; a NaN
+    bound settles nothing (numpy's minimum propagates it)."""
+    lo_mode, hi_mode, numbers = _hull_of_pieces(P, N, wi, pm, sp, YES, tb, TB_SWEEP, n)
+    if not (numbers and lo_mode <= 0 and hi_mode >= 0):
         return True
     any_split = False
     for p in range(N):
@@ -465,17 +476,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
             copy_box(P, cap + p, P, p, n)
         if N == 0:
             break
-    lo_mode = 2
-    hi_mode = -2
-    for i in range(n):
-        X[ix, 0, i] = np.inf
-        X[ix, 1, i] = -np.inf
-    for p in range(N):
-        for i in range(n):
-            X[ix, 0, i] = min(X[ix, 0, i], P[p, 0, i])
-            X[ix, 1, i] = max(X[ix, 1, i], P[p, 1, i])
-        lo_mode = min(lo_mode, wi[pm + p])
-        hi_mode = max(hi_mode, wi[pm + p])
+    lo_mode, hi_mode, _ = _hull_of_pieces(P, N, wi, pm, I0, NO, X, ix, n)
     if N > 0 and lo_mode == hi_mode:
         return lo_mode
     return 0
