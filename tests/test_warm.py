@@ -161,22 +161,23 @@ class _Done:
 
 
 def test_the_wait_ends_once_the_driver_is_cached_and_the_child_is_stopped_at_exit(monkeypatch):
-    """The child goes on (the one-motion kernels) after the driver is in the cache: ``wait`` returns 0 then,
-    without waiting for its exit, and the exit handler stops it."""
-    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import time; time.sleep(600)"])
+    """The child says the driver is cached, then goes on (the one-motion kernels): ``wait`` returns 0 then,
+    without waiting for its exit, and the exit handler stops it.  A line for another velocity model, or
+    none, does not end the wait."""
     monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
     monkeypatch.setenv(warm.DISABLE, "1")
+    say = f"import sys, time; print({warm.READY!r}, int(sys.argv[1]) + 1, flush=True); time.sleep(%s); " \
+          f"print({warm.READY!r}, sys.argv[1], flush=True); time.sleep(600)"
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 3])
     assert warm.start("sound")
     child = warm._CHILDREN[SOUND]
-    looks = []
-
-    def cached(code=SOUND):
-        looks.append(code)
-        return len(looks) >= 3  # the driver reaches the cache while the child runs
-
-    monkeypatch.setattr(warm, "cached", cached)
+    assert warm.wait(SOUND, timeout=1.0) is None  # only the other model's line within the timeout: stopped
+    assert child.poll() is not None
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 0])
+    assert warm.start("sound")
+    child = warm._CHILDREN[SOUND]
     assert warm.wait(SOUND, timeout=60) == 0
-    assert looks == [SOUND] * 3 and child.poll() is None and warm.pending() == []
+    assert child.poll() is None and warm.pending() == [] and warm._FINISHING == [child]
     warm._stop_all()
     assert child.poll() is not None and warm._FINISHING == []
 

@@ -36,8 +36,8 @@ import numpy as np
 
 from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
 
-__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "example_arguments", "signature", "cached", "core_free", "start",
-           "wait", "finish", "pending", "main"]
+__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "example_arguments", "signature", "cached", "core_free",
+           "start", "wait", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -50,12 +50,17 @@ DISABLE = "CROSSCERT_COMPILE_CHILD"
 #: 15-25 s of CPU on the machines of benchmarks/README.md).
 WAIT_S = 600.0
 
-#: How often :func:`wait` looks for the driver in numba's disk cache, s.
+#: How often :func:`wait` looks whether the child has exited, s.
 POLL_S = 0.05
+#: The line the child prints (with the velocity model code) once the driver is in numba's disk cache:
+#: ``Dispatcher.compile`` returns after numba wrote the entry's data and its index.
+READY = "driver-cached"
 
 _LOCK = threading.Lock()
 #: velocity model code -> the child compiling the driver for it
 _CHILDREN: dict[int, subprocess.Popen] = {}
+#: child -> set once it printed :data:`READY` (read by a thread per child, which drains its output)
+_READY: dict[subprocess.Popen, threading.Event] = {}
 #: Children whose driver is in the cache, still compiling the one-motion kernels (stopped at exit)
 _FINISHING: list[subprocess.Popen] = []
 
@@ -133,11 +138,25 @@ def start(velocity_model="sound") -> bool:
         try:
             if cached(code):
                 return False
-            _CHILDREN[code] = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL,
-                                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            child = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                     stderr=subprocess.DEVNULL)
+            _CHILDREN[code] = child
+            _READY[child] = threading.Event()
+            threading.Thread(target=_watch, args=(child, code), name="crosscert-compile-child", daemon=True).start()
         except Exception:  # no child: the driver compiles in this process
             return False
     return True
+
+
+def _watch(child, code: int) -> None:
+    """Read the child's output to its end; mark it ready when it says the driver of ``code`` is cached."""
+    stream = getattr(child, "stdout", None)
+    if stream is None:
+        return
+    with stream:
+        for line in stream:
+            if line.split() == [READY.encode(), str(code).encode()]:
+                _READY[child].set()
 
 
 def core_free() -> bool:
@@ -164,31 +183,33 @@ def pending() -> list[int]:
 
 def wait(velocity_model: int, timeout: float | None = None) -> int | None:
     """Before the driver's first call for ``velocity_model``: wait for its child, if one was started,
-    until it exits or the driver is in numba's disk cache (looked for every :data:`POLL_S` s), at most
-    ``timeout`` s (default :data:`WAIT_S`; then it is stopped).
+    until it exits or says the driver is in numba's disk cache, at most ``timeout`` s (default
+    :data:`WAIT_S`; then it is stopped).
 
-    Returns the child's exit code, 0 as soon as the driver is in the cache (the child then goes on with the
-    one-motion kernels beside this process, which loads them if the child wrote them first; it is stopped
-    at exit), or None when there was no child.  Whatever it returns, the caller calls the driver as usual:
-    numba loads it from the cache or compiles it."""
+    Returns the child's exit code, 0 as soon as the child says the driver is in the cache (:data:`READY`;
+    it then goes on with the one-motion kernels beside this process, which loads them if the child wrote
+    them first; it is stopped at exit), or None when there was no child.  Whatever it returns, the caller
+    calls the driver as usual: numba loads it from the cache or compiles it."""
     code = int(velocity_model)
     with _LOCK:
         child = _CHILDREN.pop(code, None)
+        ready = _READY.get(child)
     if child is None:
         return None
     deadline = time.monotonic() + (WAIT_S if timeout is None else timeout)
     while True:
-        rc = child.poll()
-        if rc is not None:
-            return rc
-        if cached(code):  # numba writes an entry's data before its index: the entry is whole
+        if ready is not None and ready.wait(POLL_S):
             with _LOCK:
                 _FINISHING.append(child)
             return 0
+        rc = child.poll()
+        if rc is not None:
+            return rc
         if time.monotonic() >= deadline:
             _stop(child)
             return None
-        time.sleep(POLL_S)
+        if ready is None:
+            time.sleep(POLL_S)
 
 
 def finish(timeout: float | None = None) -> None:
@@ -241,6 +262,7 @@ def main(argv=None) -> int:
 
         for code in args:
             run_slot.compile(signature(int(code)))
+            print(READY, int(code), flush=True)  # the parent's wait ends: the one-motion kernels follow
         compile_kernels()
     except KeyboardInterrupt:  # the user's Ctrl-C reaches the whole process group: quietly
         return 130
