@@ -59,7 +59,7 @@ READY = "driver-cached"
 _LOCK = threading.Lock()
 #: velocity model code -> the child compiling the driver for it
 _CHILDREN: dict[int, subprocess.Popen] = {}
-#: child -> set once it printed :data:`READY` (read by a thread per child, which drains its output)
+#: pending child -> set once it printed :data:`READY` (read by a thread per child, which drains its output)
 _READY: dict[subprocess.Popen, threading.Event] = {}
 #: Children whose driver is in the cache, still compiling the one-motion kernels (stopped at exit)
 _FINISHING: list[subprocess.Popen] = []
@@ -141,22 +141,23 @@ def start(velocity_model="sound") -> bool:
             child = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL)
             _CHILDREN[code] = child
-            _READY[child] = threading.Event()
-            threading.Thread(target=_watch, args=(child, code), name="crosscert-compile-child", daemon=True).start()
+            ready = _READY[child] = threading.Event()
+            threading.Thread(target=_watch, args=(child, code, ready), name="crosscert-compile-child",
+                             daemon=True).start()
         except Exception:  # no child: the driver compiles in this process
             return False
     return True
 
 
-def _watch(child, code: int) -> None:
-    """Read the child's output to its end; mark it ready when it says the driver of ``code`` is cached."""
+def _watch(child, code: int, ready: threading.Event) -> None:
+    """Read the child's output to its end; set ``ready`` when it says the driver of ``code`` is cached."""
     stream = getattr(child, "stdout", None)
     if stream is None:
         return
     with stream:
         for line in stream:
             if line.split() == [READY.encode(), str(code).encode()]:
-                _READY[child].set()
+                ready.set()
 
 
 def core_free() -> bool:
@@ -193,7 +194,7 @@ def wait(velocity_model: int, timeout: float | None = None) -> int | None:
     code = int(velocity_model)
     with _LOCK:
         child = _CHILDREN.pop(code, None)
-        ready = _READY.get(child)
+        ready = _READY.pop(child, None)
     if child is None:
         return None
     deadline = time.monotonic() + (WAIT_S if timeout is None else timeout)
