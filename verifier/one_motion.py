@@ -33,7 +33,7 @@ import numpy as np
 import highspy
 
 from . import interval as I
-from .step import reading_box
+from .step import kernel_array, reading_box
 
 __all__ = ["LinearSystem", "prove_infeasible", "loop_closure_rows", "motion_rows", "drift_rows", "row_system",
            "refute_row", "refute_rows", "one_motion_rows", "certified_minimum", "ONE_MOTION_SAMPLES", "CUT_SLOPES"]
@@ -140,13 +140,6 @@ def _dual_bound(system: LinearSystem, y, cost=None, compiled: bool = False):
     return (left[0], yb[0]) if one else (left, yb)
 
 
-def _kernel_array(a, dtype=np.float64):
-    """``a`` as a C-contiguous, writable array of ``dtype``: the one layout the compiled kernels are built for
-    (a read-only view, such as a broadcast, would compile them once more)."""
-    a = np.ascontiguousarray(a, dtype=dtype)
-    return a if a.flags.writeable else a.copy()
-
-
 def _compiled_kernels():
     """:mod:`verifier.compiled.one_motion` (numba loaded on first use only), once the first run's compilation
     child is done with its kernels: this process then loads them from the cache instead of compiling them
@@ -167,7 +160,7 @@ def _dual_bound_compiled(system: LinearSystem, y, cost):
     B, E = y.shape[0], len(s.rows)
     cost = np.zeros((B, N)) if cost is None else np.broadcast_to(np.asarray(cost, dtype=np.float64), (B, N))
     size = 2 * max(E + 1, N, M, 1)
-    i64, k = np.int64, _kernel_array
+    i64, k = np.int64, kernel_array
     left, yb = np.empty(B), np.empty(B)
     dual_bound(k(s.rows, i64), k(s.cols, i64), k(s.vals), k(s.b), k(s.lo), k(s.hi), k(y), k(cost), np.empty(M, i64),
                np.empty(N, i64), np.empty(N + 1, i64), np.empty(E, i64), np.empty(size), np.empty(size), np.empty(N),
@@ -438,7 +431,7 @@ def _taylor_rows_compiled(c, r, F, J, Hlo, Hhi):
     n = F[0].shape[1]
     w = 1 << max(N - 1, 0).bit_length()
     Jc, blo, bhi = np.empty((S, n, N)), np.empty((S, n)), np.empty((S, n))
-    k = _kernel_array
+    k = kernel_array
     taylor_rows(k(c), k(r), k(F[0]), k(F[1]), k(J[0]), k(J[1]), k(Hlo), k(Hhi), Jc, blo, bhi,
                 np.empty(max(N * N, 1)), np.empty(w), np.empty(w))
     return Jc, blo, bhi

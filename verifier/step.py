@@ -53,7 +53,8 @@ from .linalg import linear_enclosure
 from .motion_model import contract_tubes
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
-           "advance", "pose_solutions", "pose_solution_arrays", "reading_box", "StepImpl", "NumpyStep", "CompiledStep"]
+           "advance", "pose_solutions", "pose_solution_arrays", "reading_box", "kernel_array", "StepImpl", "NumpyStep",
+           "CompiledStep"]
 
 
 def reading_box(q, eps):
@@ -699,10 +700,12 @@ def pose_solutions(model, Q, XI, X_search, *, tol: float = 1e-7, small: float = 
     return [((boxes[i, 0].copy(), boxes[i, 1].copy()), int(modes[i])) for i in range(len(modes))]
 
 
-def _kernel_array(a):
-    """A writable C-contiguous float64 copy: one kernel signature whatever the
-    caller's array (a row of a frozen recording is read-only)."""
-    return np.array(a, dtype=np.float64, order="C", copy=True)
+def kernel_array(a, dtype=np.float64):
+    """``a`` as a C-contiguous, writable array of ``dtype`` (copied only when it is not one already): one
+    kernel signature whatever the caller's array (a row of a frozen recording, or a broadcast, is read-only;
+    the kernels only read these arrays)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return a if a.flags.writeable else a.copy()
 
 
 def step(config: StepConfig, state: TrackerState, q) -> None:
@@ -716,7 +719,7 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
     if q.shape != (state.batch, config.model.n) or not np.isfinite(q).all():
         raise InputError(f"sample {state.k}: expected {state.batch}x{config.model.n} finite joint values, "
                          f"got shape {q.shape}")
-    config.impl.advance(config, state, _kernel_array(q[:, None, :]))
+    config.impl.advance(config, state, kernel_array(q[:, None, :]))
 
 
 def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
@@ -738,7 +741,7 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None)
         k = state.k + (int(bad[0]) if len(bad) else 0)
         raise InputError(f"sample {k}: expected {B}x{config.model.n} finite joint values, got shape {q.shape[::2]}")
     if prior is not None:
-        prior = tuple(_kernel_array(a) for a in prior)
+        prior = tuple(kernel_array(a) for a in prior)
         if any(a.shape != (B, Kc, 2, config.model.n) for a in prior):
             raise InputError(f"prior boxes must have shape ({B}, {Kc}, 2, {config.model.n})")
-    config.impl.advance(config, state, _kernel_array(q), record, prior)
+    config.impl.advance(config, state, kernel_array(q), record, prior)
