@@ -18,7 +18,7 @@ import numpy as np
 
 from . import ops
 from .linalg import gauss_seidel, pmat_imat, pmat_ivec, point_inverse, precondition, solve_preconditioned
-from .ops import cached_jit, jit
+from .ops import cached_jit, inline_jit, jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement
@@ -266,7 +266,7 @@ def velocity_gs(prog, X, ix, Q, iq, XI, ixi, XD, ixd, QD, iqd, n, m, sc):
         XD[ixd, 1, i] = w[n + i]
 
 
-@jit
+@inline_jit
 def velocity_displacement(prog, X, ix, Q, iq, XI, ixi, XD, ixd, past_x, past_q, r, DQ, dq0, baseline, idx,
                           n_base, axis, n, m, sc):
     """Contract ``XD[ixd]`` in place with the displacements over ``n_base``
@@ -389,7 +389,7 @@ def _settle(P, N, wi, pm, sp, tb, n):
     return any_split
 
 
-@jit
+@inline_jit
 def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, wi0):
     """Branch and prune of one pose box whose mode is undecided (see
     :func:`verifier.contractors.split_prune`): ``X[ix]`` becomes the hull of

@@ -56,14 +56,10 @@ from .contractors import (
     velocity_gs,
 )
 from .linalg import linear_enclosure, solve_preconditioned
-from .ops import KERNEL_FLAGS, NO_WRAPPERS, jit, kernel
+from .ops import KERNEL_FLAGS, NO_WRAPPERS, inline_jit, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 
-#: Kernels inlined into their callers' IR: no compiled function (and Python entry) of their own.  Each
-#: compiled function costs its own typing and machine code of all it calls, a second or more for the
-#: callees of the row step (benchmarks/README.md, "Compile only the velocity model in use").
-inline_jit = kernel(inline="always", **KERNEL_FLAGS)
 
 
 class Rows(NamedTuple):
@@ -201,10 +197,13 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
 # Gauss-Seidel contractor are not compiled for the default model).  A named
 # tuple rather than a kernel passed as an argument: numba's on-disk cache
 # compares such an argument's type by object identity, so a driver taking a
-# kernel missed the cache in every new process (numba 0.68).  The hooks are
-# inlined into the row step (:data:`inline_jit`): a wrapper of its own in the
-# call chain of a contractor cost about as much compilation again as the
-# contractor.
+# kernel missed the cache in every new process (numba 0.68).  The row step is
+# one kernel for every model, inlined into the driver (:data:`inline_jit`); it
+# calls the model's two hooks through :func:`velocity_info` and
+# :func:`velocity_contract`, overloads chosen by the strategy's type.  Each
+# hook is a compiled function of its own, with its contractor inlined into it
+# (``velocity_displacement``), so no wrapper adds a level to the call chain: a
+# level costs the optimisation and machine code of all it calls once more.
 
 
 class Displacement(NamedTuple):
@@ -235,15 +234,14 @@ def velocity_strategy(code: int):
     return _STRATEGIES[code](np.int64(code))
 
 
-# Each strategy is two hooks, inlined into the row step:
-#   info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd) -> int, before the prediction (from the boxes of
+# Each strategy is two hooks (the strategy ``vel`` comes first, for the overloads' signatures):
+#   info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd) -> int, before the prediction (from the boxes of
 #     sample k - 1, the window and the reading q[b, kk]): the velocity information into the scratch, and
 #     what ``contract`` reads; may write a joint-acceleration bound to qdd[iqdd];
-#   contract(prog, c, rows, r, sc, info): contracts the velocity box of row r in place, every round.
+#   contract(vel, prog, c, rows, r, sc, info): contracts the velocity box of row r in place, every round.
 
 
-@inline_jit
-def _displacement_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+def _displacement_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
     """``SOUND``: the displacement baselines' mean joint rates, from past boxes and readings only, into
     ``sc.tb[TB_DQ + j]`` (rad/s), and the window slots ``sc.wi[j]`` of the baselines that reach back;
     returns their number."""
@@ -270,8 +268,7 @@ def _displacement_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
     return n_base
 
 
-@inline_jit
-def _displacement_contract(prog, c, rows, r, sc, info):
+def _displacement_contract(vel, prog, c, rows, r, sc, info):
     """``SOUND``: contract with the ``info`` baselines of :func:`_displacement_info`."""
     velocity_displacement(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, rows.past_x, rows.past_q, r, sc.tb,
                           TB_DQ, c.baseline, sc.wi, info, c.axis, rows.x.shape[2], rows.xi.shape[2], sc)
@@ -310,14 +307,12 @@ def _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
     return has_qd
 
 
-@inline_jit
-def _paper_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+def _paper_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
     """``PAPER``: :func:`_joint_rates` with the quantisation error only."""
     return _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, NO)
 
 
-@inline_jit
-def _joint_fd_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+def _joint_fd_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
     """``JOINT_FD``: the joint-acceleration bound over the last interval into ``qdd[iqdd]`` (intersected with
     the given ``|qdd|`` bound), then :func:`_joint_rates` with it."""
     if k > 0:
@@ -331,128 +326,140 @@ def _joint_fd_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
     return _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, YES)
 
 
-@inline_jit
-def _joint_rates_contract(prog, c, rows, r, sc, info):
+def _joint_rates_contract(vel, prog, c, rows, r, sc, info):
     """``PAPER``, ``JOINT_FD``: contract with the joint rates ``sc.tb[TB_QD]`` (when ``info``: one is finite)."""
     if info > 0:
         velocity_gs(prog, rows.x, r, rows.q, r, rows.xi, r, rows.xd, r, sc.tb, TB_QD, rows.x.shape[2],
                     rows.xi.shape[2], sc)
 
 
-# ---------------------------------------------------------------------------- one row, one sample
-
-
-def _row_step_with(velocity_info, velocity_contract):
-    """The row step of one velocity model, with its hooks (compiled through :func:`row_step`)."""
-
-    def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-        """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` (``vel``: the strategy, only typed).  Writes
-        its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
-        to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
-        Results are written rather than returned because an assignment of a
-        call's result inside a ``prange`` body went wrong (test_backends); with
-        ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
-        hold the truth at this sample are intersected with the prediction."""
-        X = rows.x
-        XD = rows.xd
-        XI = rows.xi
-        Q = rows.q
-        past_x = rows.past_x
-        past_q = rows.past_q
-        past_r = rows.past_r
-        tb = sc.tb
-        n = X.shape[2]
-        m = XI.shape[2]
-        D = past_x.shape[1]
-        ts = c.t_s
-        for i in range(n):
-            qk = q[b, kk, i]
-            e = c.axis[i].eps_q
-            tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
-            tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
-            qdd[iqdd, 0, i] = -np.inf
-            qdd[iqdd, 1, i] = np.inf
-        # from the boxes of the last sample: before the prediction overwrites them
-        info = velocity_info(prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd)
-        if k > 0:
-            for i in range(n):
-                ax = c.axis[i]
-                pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
-                xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
-                X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
-                vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
-                XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
-        if use_prior:
-            for i in range(n):
-                X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
-                XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
-                                                         prior.xd[b, kk, 1, i])
-        copy_box(tb, TB_QN, Q, r, n)
-        keep_xi = c.keep_xi
-        copy_box(XI, r, tb, TB_XIW, m)
-        dead = False
-        for _ in range(c.max_iter):
-            wx0 = _wsum(X, r, n)
-            wv0 = _wsum(XD, r, n)
-            if not keep_xi:
-                copy_box(XI, r, tb, TB_XIW, m)
-            hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
-            if keep_xi:
-                copy_box(tb, TB_XIW, XI, r, m)
-            newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
-            velocity_contract(prog, c, rows, r, sc, info)
-            if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
-                dead = True
-                break
-            wx1 = _wsum(X, r, n)
-            wv1 = _wsum(XD, r, n)
-            gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
-            gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
-            if not (ops.maxn(gx, gv) > c.rel_tol):
-                break
-        mode = 0
-        if not dead:
-            mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
-            if c.split_boxes > 0 and mode == 0:
-                narrow = True
-                for i in range(n):
-                    narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
-                if narrow:
-                    mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
-                                       c.baseline.shape[0])
-                    dead = empty_box(X, r, n)
-        if dead:
-            rows.row_bad[r] = k
-            mode = 0
-        # this sample joins the window of past boxes and readings
-        slot = k % D
-        for i in range(n):
-            past_x[r, slot, 0, i] = X[r, 0, i]
-            past_x[r, slot, 1, i] = X[r, 1, i]
-            past_q[r, slot, 0, i] = Q[r, 0, i]
-            past_q[r, slot, 1, i] = Q[r, 1, i]
-            past_r[r, slot, i] = q[b, kk, i]
-            qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
-        modes[iqdd] = mode
-
-    return row_step
-
-
-_ROW_STEPS = {Displacement: _row_step_with(_displacement_info, _displacement_contract),
-              JointRates: _row_step_with(_paper_info, _joint_rates_contract),
-              JointRatesQdd: _row_step_with(_joint_fd_info, _joint_rates_contract)}
-
-
-def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` with the velocity strategy ``vel``: the row step of
-    its model (:func:`_row_step_with`), chosen by the type of ``vel`` when the caller is compiled.
+def velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    """The info hook of the velocity strategy ``vel``, chosen by its type when the caller is compiled.
     Compiled code only."""
     raise NotImplementedError("compiled code only")
 
 
-@overload(row_step, jit_options={**KERNEL_FLAGS, **NO_WRAPPERS})
-def _row_step_of(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    return _ROW_STEPS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
+def velocity_contract(vel, prog, c, rows, r, sc, info):
+    """The contract hook of the velocity strategy ``vel``, chosen by its type when the caller is compiled.
+    Compiled code only."""
+    raise NotImplementedError("compiled code only")
+
+
+_HOOKS = {Displacement: (_displacement_info, _displacement_contract),
+          JointRates: (_paper_info, _joint_rates_contract),
+          JointRatesQdd: (_joint_fd_info, _joint_rates_contract)}
+
+
+def _hook(vel, which):
+    hooks = _HOOKS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
+    return None if hooks is None else hooks[which]
+
+
+@overload(velocity_info, jit_options={**KERNEL_FLAGS, **NO_WRAPPERS})
+def _velocity_info_of(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd):
+    return _hook(vel, 0)
+
+
+@overload(velocity_contract, jit_options={**KERNEL_FLAGS, **NO_WRAPPERS})
+def _velocity_contract_of(vel, prog, c, rows, r, sc, info):
+    return _hook(vel, 1)
+
+
+# ---------------------------------------------------------------------------- one row, one sample
+
+
+@inline_jit
+def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` with the velocity strategy ``vel`` (its hooks
+    :func:`velocity_info`, :func:`velocity_contract`, chosen by its type).  Writes
+    its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
+    Results are written rather than returned because an assignment of a
+    call's result inside a ``prange`` body went wrong (test_backends); with
+    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
+    hold the truth at this sample are intersected with the prediction."""
+    X = rows.x
+    XD = rows.xd
+    XI = rows.xi
+    Q = rows.q
+    past_x = rows.past_x
+    past_q = rows.past_q
+    past_r = rows.past_r
+    tb = sc.tb
+    n = X.shape[2]
+    m = XI.shape[2]
+    D = past_x.shape[1]
+    ts = c.t_s
+    for i in range(n):
+        qk = q[b, kk, i]
+        e = c.axis[i].eps_q
+        tb[TB_QN, 0, i] = ops.sub(qk, qk, e, e)[0]
+        tb[TB_QN, 1, i] = ops.add(qk, qk, e, e)[1]
+        qdd[iqdd, 0, i] = -np.inf
+        qdd[iqdd, 1, i] = np.inf
+    # from the boxes of the last sample: before the prediction overwrites them
+    info = velocity_info(vel, prog, c, rows, r, k, q, b, kk, sc, qdd, iqdd)
+    if k > 0:
+        for i in range(n):
+            ax = c.axis[i]
+            pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
+            xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
+            X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
+            vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)
+            XD[r, 0, i], XD[r, 1, i] = ops.intersect(vl, vh, -ax.v_max, ax.v_max)
+    if use_prior:
+        for i in range(n):
+            X[r, 0, i], X[r, 1, i] = ops.intersect(X[r, 0, i], X[r, 1, i], prior.x[b, kk, 0, i], prior.x[b, kk, 1, i])
+            XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
+                                                     prior.xd[b, kk, 1, i])
+    copy_box(tb, TB_QN, Q, r, n)
+    keep_xi = c.keep_xi
+    copy_box(XI, r, tb, TB_XIW, m)
+    dead = False
+    for _ in range(c.max_iter):
+        wx0 = _wsum(X, r, n)
+        wv0 = _wsum(XD, r, n)
+        if not keep_xi:
+            copy_box(XI, r, tb, TB_XIW, m)
+        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
+        if keep_xi:
+            copy_box(tb, TB_XIW, XI, r, m)
+        newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
+        velocity_contract(vel, prog, c, rows, r, sc, info)
+        if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
+            dead = True
+            break
+        wx1 = _wsum(X, r, n)
+        wv1 = _wsum(XD, r, n)
+        gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
+        gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
+        if not (ops.maxn(gx, gv) > c.rel_tol):
+            break
+    mode = 0
+    if not dead:
+        mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
+        if c.split_boxes > 0 and mode == 0:
+            narrow = True
+            for i in range(n):
+                narrow &= X[r, 1, i] - X[r, 0, i] <= c.split_max_width
+            if narrow:
+                mode = split_prune(prog, X, r, Q, r, XI, r, c.split_boxes, c.split_tol, TWO, n, m, sc,
+                                   c.baseline.shape[0])
+                dead = empty_box(X, r, n)
+    if dead:
+        rows.row_bad[r] = k
+        mode = 0
+    # this sample joins the window of past boxes and readings
+    slot = k % D
+    for i in range(n):
+        past_x[r, slot, 0, i] = X[r, 0, i]
+        past_x[r, slot, 1, i] = X[r, 1, i]
+        past_q[r, slot, 0, i] = Q[r, 0, i]
+        past_q[r, slot, 1, i] = Q[r, 1, i]
+        past_r[r, slot, i] = q[b, kk, i]
+        qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
+    modes[iqdd] = mode
+
 
 
 @inline_jit
@@ -537,6 +544,13 @@ def run_slot(prog, c, vel, rows, scen, S, t, T, k0, q, use_record, rec, use_prio
             _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
+@jit
+def _row_step_apart(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """:func:`row_step` as a function of its own, for the body of a ``prange`` loop: inlined there, its
+    assignments of calls' results came out wrong (tests/test_backends.py)."""
+    row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd)
+
+
 def run_hypotheses_parallel(prog, c, vel, rows, scen, S, k0, q, use_record, rec, use_prior, prior):
     """As :func:`run_slot` over every scenario, the geometry hypotheses of each sample spread
     over the threads (one scenario online: its latency, not throughput);
@@ -552,7 +566,8 @@ def run_hypotheses_parallel(prog, c, vel, rows, scen, S, k0, q, use_record, rec,
                 for p in range(t, P, T):
                     r = b * P + p
                     if rows.row_bad[r] < 0:
-                        row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes, s0.row_qdd, p)
+                        _row_step_apart(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes,
+                                        s0.row_qdd, p)
             _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
