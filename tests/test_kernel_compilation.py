@@ -17,6 +17,11 @@ from __future__ import annotations
 
 import ast
 import importlib
+import json
+import os
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 from numba.core.registry import CPUDispatcher
@@ -118,3 +123,29 @@ def test_velocity_strategies_survive_the_on_disk_cache():
     for code, t in types_.items():
         assert pickle.loads(pickle.dumps(t)) == t, code
     assert len(set(types_.values())) == 3  # one driver per model, never a shared one
+
+
+_SIGNATURES = textwrap.dedent("""
+    import json
+    from numba.core.registry import CPUDispatcher
+    from crosscert.verifier.compiled import contractors, linalg, ops, step, tape, warm
+    step.run_slot.compile(warm.signature())
+    many = {f"{mod.__name__}.{name}": [str(s) for s in obj.signatures]
+            for mod in (ops, tape, linalg, contractors, step) for name, obj in vars(mod).items()
+            if isinstance(obj, CPUDispatcher) and len(obj.signatures) > 1}
+    print(json.dumps({"compiled": len(step.run_slot.signatures), "many": many}))
+""")
+
+
+def test_the_driver_compiles_each_kernel_once(tmp_path):
+    """What the syntactic check above cannot see: a variable first bound to a literal and passed on before it
+    changes (``N = 1`` in ``split_prune`` compiled ``_settle`` and ``_hull_of_pieces`` twice, for
+    ``Literal[int](1)`` and ``int64``).  The default driver compiled in a fresh process with an empty
+    numba cache: every kernel it reaches has one signature."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    proc = subprocess.run([sys.executable, "-c", _SIGNATURES], capture_output=True, text=True, env=env,
+                          timeout=900, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert got["compiled"] == 1
+    assert got["many"] == {}, "a kernel compiled once per literal argument; pass a numpy scalar (I0, ONE, ...)"

@@ -411,7 +411,7 @@ def split_prune(prog, X, ix, Q, iq, XI, ixi, max_pieces, tol, sweeps, n, m, sc, 
     sp = wi0 + cap
     wi = sc.wi
     tb = sc.tb
-    N = 1
+    N = ONE  # not the literal 1: passed on to _settle and _hull_of_pieces (see I0)
     known = 0  # pieces 0 .. known - 1 were kept unsplit: their boxes and modes are those of the last generation
     copy_box(X, ix, P, I0, n)
     while True:
