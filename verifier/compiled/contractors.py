@@ -207,7 +207,7 @@ def mode_of(prog, X, ix, Q, iq, XI, ixi, n, m, sc):
     return 0
 
 
-@jit
+@inline_jit
 def _solve_vel(prog, sc, y, slack, sweeps, off, n, same_a):
     # evaluate the vel tape (inputs already set), then [y] (at w[y], w[y + n])
     # <- enclosure of J_x u = -J_q qd from the start box [y] (+ slack at
