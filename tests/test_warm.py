@@ -7,6 +7,7 @@ those of an in-process compilation, and a child that fails or hangs must change 
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import subprocess
@@ -132,22 +133,62 @@ def test_the_driver_compiled_by_the_child_gives_the_same_answer(tmp_path, simula
     assert got == expected
 
 
-def test_by_default_a_child_only_when_a_core_is_free(monkeypatch):
-    """Unset: a child when the load average leaves a core free, none on a busy machine (it would only add
-    the CPU time of the callees it compiles again); ``1`` starts one whatever the load."""
+def test_by_default_a_child_only_when_a_core_is_free(monkeypatch, tmp_path):
+    """Unset: a child when a core is free, none on a busy machine (it would only add the CPU time of the
+    callees it compiles again); ``1`` starts one whatever the load.  A core is free when, besides this
+    thread, fewer threads are runnable at once than the other CPUs (Linux's snapshot); where that cannot
+    be read, when the one-minute load average is below their number."""
     started = []
     monkeypatch.setattr(warm.subprocess, "Popen", lambda *a, **k: started.append(a) or _Done())
     monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
     monkeypatch.setattr(warm.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(warm, "PROBE_S", 0.0)
+    loadavg = tmp_path / "loadavg"
+    monkeypatch.setattr(warm, "LOADAVG", str(loadavg))
     monkeypatch.delenv(warm.DISABLE, raising=False)
-    monkeypatch.setattr(warm.os, "getloadavg", lambda: (1.5, 1.0, 1.0))
-    assert not warm.start("sound")
+
+    def child(load, snapshot=None):
+        monkeypatch.setattr(warm.os, "getloadavg", lambda: (load, 1.0, 1.0))
+        if snapshot is None:
+            loadavg.unlink(missing_ok=True)
+        else:
+            loadavg.write_text(f"{load:.2f} 1.00 1.00 {snapshot}/345 12345\n")
+        n = len(started)
+        running = warm.start("sound") and warm.wait(SOUND) == 0
+        assert running == (len(started) == n + 1)
+        return running
+
+    assert not child(1.5)  # no snapshot: the load average decides
+    assert child(0.3)
+    assert child(1.5, snapshot=1)  # an idle machine after an install: the average still counts the install
+    assert not child(0.3, snapshot=2)  # another thread runs now
+    loadavg.write_text("garbage")
+    assert warm.runnable_now() is None
+    monkeypatch.setattr(warm.os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert not child(0.0, snapshot=1)  # one CPU
+    monkeypatch.setattr(warm.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
     monkeypatch.setenv(warm.DISABLE, "1")
-    assert warm.start("sound") and warm.wait(SOUND) == 0
-    monkeypatch.delenv(warm.DISABLE)
-    monkeypatch.setattr(warm.os, "getloadavg", lambda: (0.3, 1.0, 1.0))
-    assert warm.start("sound") and warm.wait(SOUND) == 0
-    assert len(started) == 2
+    assert child(1.5, snapshot=3)
+    monkeypatch.setenv(warm.DISABLE, "0")
+    assert not child(0.0, snapshot=1)
+
+
+def test_the_snapshot_is_the_fewest_runnable_of_several(monkeypatch, tmp_path):
+    """A thread that runs at one instant does not hide an idle core: the least of :data:`warm.PROBES` reads."""
+    counts = iter([3, 2, 1, 2, 3, 3, 3])
+    real_open = open
+
+    def fake_open(path, *a, **k):
+        if path == "loadavg-file":
+            return io.StringIO(f"0.50 0.40 0.30 {next(counts)}/100 999\n")
+        return real_open(path, *a, **k)
+
+    monkeypatch.setattr(warm, "LOADAVG", "loadavg-file")
+    monkeypatch.setattr(warm, "PROBE_S", 0.0)
+    monkeypatch.setattr("builtins.open", fake_open)
+    assert warm.runnable_now() == 1
+    monkeypatch.setattr(warm, "LOADAVG", str(tmp_path / "missing"))
+    assert warm.runnable_now() is None
 
 
 class _Done:

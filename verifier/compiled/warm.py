@@ -36,8 +36,8 @@ import numpy as np
 
 from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
 
-__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "example_arguments", "signature", "cached", "core_free",
-           "start", "wait", "finish", "pending", "main"]
+__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "LOADAVG", "PROBES", "PROBE_S", "example_arguments", "signature",
+           "cached", "runnable_now", "core_free", "start", "wait", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -129,14 +129,14 @@ def start(velocity_model="sound") -> bool:
     if code not in (SOUND, JOINT_FD, PAPER):
         return False
     choice = os.environ.get(DISABLE, "").strip()
-    if choice == "0" or (choice != "1" and not core_free()):
+    if choice == "0":
         return False
     with _LOCK:
         child = _CHILDREN.get(code)
         if child is not None and child.poll() is None:
             return True
         try:
-            if cached(code):
+            if cached(code) or (choice != "1" and not core_free()):  # the probe (20 ms) only on a first run
                 return False
             child = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL)
@@ -160,20 +160,53 @@ def _watch(child, code: int, ready: threading.Event) -> None:
                 ready.set()
 
 
+#: Linux's snapshot of the scheduler: the fourth field of this file counts the threads runnable at this instant
+#: (the reader included).  The one-minute load average still counts work that has just ended, such as the
+#: install before a first run: after ``pip install .`` on 2 cores it stays above 1 for a minute, and no child
+#: was started on an idle machine.
+LOADAVG = "/proc/loadavg"
+#: Snapshots :func:`runnable_now` takes, :data:`PROBE_S` s apart (s): the fewest counts, so that a thread that
+#: happened to run at one instant does not hide an idle core.
+PROBES = 5
+PROBE_S = 0.004
+
+
+def runnable_now() -> int | None:
+    """The fewest threads runnable at once in :data:`PROBES` snapshots of :data:`LOADAVG` (the calling thread
+    included), or None when the file cannot be read or parsed (not Linux)."""
+    least = None
+    for i in range(PROBES):
+        if i:
+            time.sleep(PROBE_S)
+        try:
+            with open(LOADAVG, encoding="ascii") as f:
+                count = int(f.read().split()[3].split("/")[0])
+        except (OSError, ValueError, IndexError):
+            return None
+        least = count if least is None else min(least, count)
+    return least
+
+
 def core_free() -> bool:
-    """Whether a second core may compile beside this process: at least two CPUs for this process and a
-    one-minute load average below one less than their number.  On a busy machine a child adds its CPU time
-    (the callees it shares with the pose enumeration, compiled in both processes) and gains no wall time
-    (benchmarks/README.md)."""
+    """Whether a second core may compile beside this process: at least two CPUs for this process and, besides
+    the calling thread, fewer threads runnable than the other CPUs (:func:`runnable_now`), or where that
+    cannot be read, a one-minute load average below one less than their number.  On a busy machine a child
+    adds its CPU time (the callees it shares with the pose enumeration, compiled in both processes) and gains
+    no wall time (benchmarks/README.md)."""
     try:
         cpus = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):
         cpus = os.cpu_count() or 1
+    if cpus < 2:
+        return False
+    now = runnable_now()
+    if now is not None:
+        return now - 1 < cpus - 1
     try:
         load = os.getloadavg()[0]
     except (AttributeError, OSError):
         load = 0.0
-    return cpus >= 2 and load < cpus - 1
+    return load < cpus - 1
 
 
 def pending() -> list[int]:
