@@ -60,8 +60,6 @@ from .ops import KERNEL_FLAGS, NO_WRAPPERS, inline_jit, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 
-
-
 class Rows(NamedTuple):
     """Row arrays of the state (see :class:`verifier.step.TrackerState`)."""
 
@@ -351,6 +349,7 @@ _HOOKS = {Displacement: (_displacement_info, _displacement_contract),
 
 
 def _hook(vel, which):
+    """Hook ``which`` (0: info, 1: contract) of the strategy whose numba type is ``vel`` (None: not a strategy)."""
     hooks = _HOOKS.get(vel.instance_class) if isinstance(vel, types.BaseNamedTuple) else None
     return None if hooks is None else hooks[which]
 
@@ -459,7 +458,6 @@ def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qd
         past_r[r, slot, i] = q[b, kk, i]
         qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
     modes[iqdd] = mode
-
 
 
 @inline_jit
