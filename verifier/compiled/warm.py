@@ -136,7 +136,7 @@ def start(velocity_model="sound") -> bool:
         if child is not None and child.poll() is None:
             return True
         try:
-            if cached(code) or (choice != "1" and not core_free()):  # the probe (20 ms) only on a first run
+            if cached(code) or (choice != "1" and not core_free()):  # the probe (about 16 ms) only on a first run
                 return False
             child = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL)
