@@ -203,8 +203,8 @@ class _Done:
 
 def test_the_wait_ends_once_the_driver_is_cached_and_the_child_is_stopped_at_exit(monkeypatch):
     """The child says the driver is cached, then goes on (the one-motion kernels): ``wait`` returns 0 then,
-    without waiting for its exit, and the exit handler stops it.  A line for another velocity model, or
-    none, does not end the wait."""
+    without waiting for its exit, and the exit handler stops it and joins the thread reading its output.  A
+    line for another velocity model, or none, does not end the wait."""
     monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
     monkeypatch.setenv(warm.DISABLE, "1")
     say = f"import sys, time; print({warm.READY!r}, int(sys.argv[1]) + 1, flush=True); time.sleep(%s); " \
@@ -219,8 +219,20 @@ def test_the_wait_ends_once_the_driver_is_cached_and_the_child_is_stopped_at_exi
     child = warm._CHILDREN[SOUND]
     assert warm.wait(SOUND, timeout=60) == 0
     assert child.poll() is None and warm.pending() == [] and warm._FINISHING == [child]
+    reader = warm._READERS[child]
+    assert reader.is_alive()
     warm._stop_all()
-    assert child.poll() is not None and warm._FINISHING == []
+    # stopped, and its reader joined: no thread reads a pipe while the interpreter finalises
+    assert child.poll() is not None and warm._FINISHING == [] and not reader.is_alive() and warm._READERS == {}
+    joined = []
+
+    class Reader:
+        def join(self, timeout=None):
+            joined.append(timeout)
+
+    warm._READERS[_Done()] = Reader()
+    warm._stop_all()
+    assert joined and warm._READERS == {}
 
 
 def test_the_one_motion_kernels_wait_for_a_finishing_child(monkeypatch):

@@ -63,6 +63,8 @@ _CHILDREN: dict[int, subprocess.Popen] = {}
 _READY: dict[subprocess.Popen, threading.Event] = {}
 #: Children whose driver is in the cache, still compiling the one-motion kernels (stopped at exit)
 _FINISHING: list[subprocess.Popen] = []
+#: child -> the thread reading its output (joined once the child is stopped at exit)
+_READERS: dict[subprocess.Popen, threading.Thread] = {}
 
 
 def example_arguments(velocity_model: int = SOUND) -> tuple:
@@ -142,8 +144,9 @@ def start(velocity_model="sound") -> bool:
                                      stderr=subprocess.DEVNULL)
             _CHILDREN[code] = child
             ready = _READY[child] = threading.Event()
-            threading.Thread(target=_watch, args=(child, code, ready), name="crosscert-compile-child",
-                             daemon=True).start()
+            reader = _READERS[child] = threading.Thread(target=_watch, args=(child, code, ready),
+                                                        name="crosscert-compile-child", daemon=True)
+            reader.start()
         except Exception:  # no child: the driver compiles in this process
             return False
     return True
@@ -279,9 +282,13 @@ def _stop_all() -> None:
         children = list(_CHILDREN.values()) + _FINISHING
         _CHILDREN.clear()
         _FINISHING[:] = []
+        readers = list(_READERS.values())
+        _READERS.clear()
     for child in children:
         if child.poll() is None:
             _stop(child)
+    for reader in readers:  # the pipes are at their end: no thread reads while the interpreter finalises
+        reader.join(2.0)
 
 
 def main(argv=None) -> int:
