@@ -204,7 +204,7 @@ def core_free() -> bool:
         return False
     now = runnable_now()
     if now is not None:
-        return now - 1 < cpus - 1
+        return now < cpus  # besides this thread, fewer runnable than the other CPUs
     try:
         load = os.getloadavg()[0]
     except (AttributeError, OSError):
