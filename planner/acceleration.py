@@ -6,18 +6,21 @@ for an angle: :attr:`robots.Robot.pose_units`).  Each axis' bound comes from
 one :class:`AccelerationSource`, decided on that axis alone, so that no bound
 of one axis is ever computed from another axis:
 
+* ``robot a_max`` (the default): the robot's physical bound ``a_max``, the
+  only number that holds whatever the controller does (the source paper's
+  assumption);
 * ``given``: the caller's bound (``PlanningBounds.a_max``);
-* ``plan peak + margin``: an axis the plan accelerates gets its planned peak
-  enlarged by ``PlanningBounds.a_margin`` (room for the controller's tracking
-  error, relative to what the plan asks of that axis);
-* ``robot tracking margin``: an axis the plan does not accelerate (or
-  accelerates less than the margin) gets the robot's declared
-  ``tracking_a_margin``;
-* ``robot a_max``: without a declared margin, such an axis gets the robot's
-  physical bound ``a_max``: the only number that holds whatever the
-  controller does.
+* ``plan peak + margin``: asked for explicitly (``PlanningBounds.a_margin``):
+  an axis the plan accelerates gets its planned peak enlarged by that
+  relative margin, an assumption about the controller's tracking error;
+* ``plan peak + robot tracking margin``: the robot declares how far its
+  controller lets the executed acceleration deviate from the plan
+  (``Robot.tracking_a_margin``): the planned peak plus that margin.
 
-See docs/planning.md, "The acceleration assumption".
+No bound exceeds the robot's ``a_max`` (the physical bound holds too), and a
+plan that asks more than ``a_max`` of some axis is refused: no execution of it
+exists under the robot's bound.  See docs/planning.md, "The acceleration
+assumption".
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ class AccelerationSource(StrEnum):
     """Where one axis' acceleration bound comes from."""
 
     PLAN_PEAK = "plan peak + margin"
-    TRACKING_MARGIN = "robot tracking margin"
+    TRACKING_MARGIN = "plan peak + robot tracking margin"
     ROBOT_A_MAX = "robot a_max"
     GIVEN = "given"
 
@@ -125,7 +128,7 @@ def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
     plan : PlannedTrajectory
         Its ``xdd`` (K, n) gives the planned peak of each axis, in that axis' unit per s^2.
     b : PlanningBounds
-        Resolved bounds: ``a_max`` (given, per axis) or ``a_margin`` (relative).
+        Resolved bounds: ``a_max`` (given, per axis) or ``a_margin`` (relative; ``None``: no margin asked for).
     robot : robots.Robot
         Its ``pose_units``, ``tracking_a_margin`` and ``a_max``.
 
@@ -133,44 +136,50 @@ def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
     -------
     AccelerationAssumption
         Axis ``i`` depends only on axis ``i`` of the plan and of the robot:
-        ``given`` when ``b.a_max`` is set; else, when the plan accelerates the
-        axis (peak above :data:`PLAN_AT_REST` of ``a_max_i``), its peak times
-        ``1 + a_margin`` (or the robot's tracking margin when declared and
-        larger); else the tracking margin when declared, else the robot's
-        ``a_max_i``.
+        ``given`` when ``b.a_max`` is set; else, with ``b.a_margin`` set and
+        the axis accelerated by the plan (peak above :data:`PLAN_AT_REST` of
+        ``a_max_i``), its peak times ``1 + a_margin``; else, when the robot
+        declares a tracking margin, the peak plus that margin; else the
+        robot's ``a_max_i``.  Never above ``a_max_i``.
 
     Raises
     ------
     InputError
-        ``b.a_max`` below the plan's peak on some axis (the message names the
-        axis, both values and the unit).
+        ``b.a_max`` or the robot's ``a_max`` below the plan's peak on some
+        axis (the message names the axis, both values and the unit).
     """
     peak = np.max(np.abs(np.asarray(plan.xdd, float)), axis=0)
     units = robot.acceleration_units
     if peak.shape != (robot.n,):
         raise InputError(f"the plan has {peak.size} pose axes, robot {robot.name} has {robot.n}")
+    _check_peak(peak, robot.a_max, units, "the robot's a_max", "no execution of this plan exists under it; "
+                "slow the plan down or lower its peak acceleration")
     if b.a_max is not None:
-        low = [i for i in range(robot.n) if b.a_max[i] < peak[i]]
-        if low:
-            raise InputError("bounds contradict the plan: " + "; ".join(
-                f"axis {i + 1}: a_max = {b.a_max[i]:g} {units[i]} is below the planned peak {peak[i]:.6g} {units[i]}"
-                for i in low) + "; raise a_max on that axis or lower a_peak")
+        _check_peak(peak, b.a_max, units, "a_max", "raise a_max on that axis or lower a_peak")
         return AccelerationAssumption(tuple(AxisAcceleration(float(b.a_max[i]), units[i], AccelerationSource.GIVEN)
                                             for i in range(robot.n)))
     margin = robot.tracking_a_margin
     axes = []
     for i in range(robot.n):
-        if peak[i] > PLAN_AT_REST * robot.a_max[i]:
-            planned = float(peak[i] * (1.0 + b.a_margin))
-            if margin is not None and margin[i] > planned:
-                axes.append(AxisAcceleration(margin[i], units[i], AccelerationSource.TRACKING_MARGIN))
-            else:
-                axes.append(AxisAcceleration(planned, units[i], AccelerationSource.PLAN_PEAK))
+        a_max = float(robot.a_max[i])
+        if b.a_margin is not None and peak[i] > PLAN_AT_REST * a_max:
+            axes.append(AxisAcceleration(min(float(peak[i] * (1.0 + b.a_margin)), a_max), units[i],
+                                         AccelerationSource.PLAN_PEAK))
         elif margin is not None:
-            axes.append(AxisAcceleration(margin[i], units[i], AccelerationSource.TRACKING_MARGIN))
+            axes.append(AxisAcceleration(min(float(peak[i] + margin[i]), a_max), units[i],
+                                         AccelerationSource.TRACKING_MARGIN))
         else:
-            axes.append(AxisAcceleration(robot.a_max[i], units[i], AccelerationSource.ROBOT_A_MAX))
+            axes.append(AxisAcceleration(a_max, units[i], AccelerationSource.ROBOT_A_MAX))
     return AccelerationAssumption(tuple(axes))
+
+
+def _check_peak(peak, bound, units, name: str, advice: str) -> None:
+    """InputError naming every axis whose planned peak exceeds ``bound`` (``name`` says whose bound)."""
+    low = [i for i in range(len(peak)) if bound[i] < peak[i]]
+    if low:
+        raise InputError("bounds contradict the plan: " + "; ".join(
+            f"axis {i + 1}: {name} = {bound[i]:g} {units[i]} is below the planned peak {peak[i]:.6g} {units[i]}"
+            for i in low) + f"; {advice}")
 
 
 def derived_a_max(plan, b, robot) -> tuple[float, ...]:

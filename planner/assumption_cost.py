@@ -27,7 +27,7 @@ from crosscert.verifier.settings import Verdict
 from .acceleration import AccelerationAssumption, robot_a_max_assumption
 from .certify.crossing import CrossingCertificate, certify_crossing
 from .progress import suffixed
-from .refute import verified_counterexample
+from .refute import SearchCompleteness, verified_counterexample
 
 __all__ = ["ComparisonOutcome", "AtRobotAMax", "certify_at_robot_a_max", "compares", "speed_guess"]
 
@@ -70,13 +70,16 @@ class AtRobotAMax:
     v_low: float | None = None
     v_min_at_lower_end: bool = False
     elapsed_s: float = 0.0
+    #: What ``refutation_bound`` rests on (:class:`planner.refute.SearchCompleteness`); None: not searched.
+    refutation_search: SearchCompleteness | None = None
 
     def summary(self) -> dict:
         """JSON-ready summary (m/s, s; ``a_max`` per axis with unit and source)."""
         return {"outcome": self.outcome.value, "a_max": self.a_max.summary(),
                 "verdict": None if self.verdict is None else self.verdict.value, "v_min_mps": self.v_min,
                 "refutation_bound_mps": self.refutation_bound, "v_low_mps": self.v_low,
-                "v_min_at_lower_end": self.v_min_at_lower_end, "elapsed_s": self.elapsed_s}
+                "v_min_at_lower_end": self.v_min_at_lower_end, "elapsed_s": self.elapsed_s,
+                "refutation_search": None if self.refutation_search is None else self.refutation_search.value}
 
 
 def _outcome(robot, cert: CrossingCertificate) -> ComparisonOutcome:
@@ -147,16 +150,16 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
     # ...and the counterexample found there starts every scan speed's search (a start, verified as any)
     warm = None if scan is None else next((verified_counterexample(r) for r in cert.refutation
                                            if r.speed == known and r.verified), None)
-    bounds = replace(cert.bounds, a_max=ref.values)
+    bounds = replace(cert.bounds, a_max=ref.values, a_margin=None)
     other = certify_crossing(robot, task, bounds, v_low=start, v_high=v_high, tol=tol, monte_carlo_runs=0,
                              refute=refute, refute_speeds=scan, executor=executor, seed=seed,
                              progress=suffixed(progress, " at the robot's a_max"),
                              kin=kin, imodel=imodel, bounce=False, v_guess=speed_guess(cert.v_min, used, ref),
                              refute_warm=warm, refute_tol=tol if refute_tol is None else refute_tol)
-    bound = other.refutation_bound
+    bound, search = other.refutation_bound, other.refutation_search
     if known is not None and (bound is None or bound < known):
         # a verified counterexample under the default's bounds satisfies the robot's wider ones
-        bound = known
+        bound, search = known, SearchCompleteness.FOUND
     return replace(cert, at_robot_a_max=AtRobotAMax(
         ComparisonOutcome.COMPUTED, ref, other.verdict, other.v_min, bound, start, other.v_min_at_lower_end,
-        other.elapsed_s))
+        other.elapsed_s, search))

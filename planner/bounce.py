@@ -76,6 +76,11 @@ class BounceGap:
     floor: float | None
     floor_rows: tuple
 
+    @property
+    def floor_search(self) -> refute.SearchCompleteness:
+        """What ``floor`` rests on: a verified crossing, crossing searches that found none, or none that ended."""
+        return refute.completeness(self.floor_rows)
+
     def summary(self) -> dict:
         """JSON-ready summary (SI units)."""
         return {
@@ -83,6 +88,7 @@ class BounceGap:
             "tracker": [{"turn_back_m": d, "verdict": v.value} for d, v in zip(self.distances, self.verdicts)],
             "certified_from_m": self.certified_from,
             "crossing_floor_m": self.floor,
+            "crossing_floor_search": self.floor_search.value,
             "gap_m": None if self.certified_from is None or self.floor is None else self.certified_from - self.floor,
             "crossing_searches": [
                 {"turn_back_m": r.parameter, "counterexample": bool(r.verified), "outcome": r.outcome.value,

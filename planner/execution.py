@@ -108,15 +108,16 @@ class ExecutionClass:
     def xi_box(self) -> tuple[np.ndarray, np.ndarray]:
         return self.xi_lo.copy(), self.xi_hi.copy()
 
-    def assumptions(self, robot, t_s: float, a_max) -> Assumptions:
+    def assumptions(self, robot, t_s: float, a_max, xd0=None) -> Assumptions:
         """What a certifying run of this class assumes: its reading error, drift model and geometry box, the
-        robot's ``xd0``, with sampling period ``t_s`` (s) and ``a_max`` (per pose axis, its unit/s^2)."""
+        initial speed bound ``xd0`` (per pose axis, its unit/s; ``None``: the robot's), with sampling period
+        ``t_s`` (s) and ``a_max`` (per pose axis, its unit/s^2)."""
         drift = None
         if self.drift_per_sample is not None:
             # d per sample as a rate, rounded up so that j t_s rate >= j d
             drift = (self.fast_error, float(np.nextafter(self.drift_per_sample / t_s, np.inf)))
         return Assumptions.for_robot(robot, t_s=t_s, eps_q=self.reading_error, a_max=a_max, drift=drift,
-                                     xi_box=self.xi_box)
+                                     xi_box=self.xi_box, xd0=xd0)
 
     def summary(self) -> dict:
         return {

@@ -1,4 +1,4 @@
-"""Plans of a crossing: the three time laws along the task's straight segment.
+"""Plans of a crossing: the three time laws along the task's straight segment, or a given path re-timed.
 
 * :func:`plan_crossing` — a rest-to-rest trajectory along the straight segment
   from ``task.start`` to ``task.goal`` that crosses the nominal Type 2 locus at
@@ -17,8 +17,8 @@ from crosscert.robots.errors import InputError, SimulationError
 
 from .acceleration import derived_a_max
 from .generate import GenerationLimits, generate_crossing
-from .sampling import align_to_samples
-from .simulate import RAMP_PEAK, TimeLaw, ramp_length
+from .path import PathTask, path_speed_ceiling, plan_along_path, smoothstep_law
+from .simulate import RAMP_PEAK
 from .task import CrossingTask, Method, PlannedTrajectory, PlanningBounds, crossing_on_segment, parse_option
 
 __all__ = ["plan_crossing", "speed_ceiling", "derived_a_max"]
@@ -69,35 +69,19 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     robot = kin.robot
     b = bounds.for_robot(robot)
     v_sing = V.positive("v_sing", v_sing)
+    method = b.method if method is None else parse_option(Method, "planning method", method)
+    if isinstance(task, PathTask):
+        if method is not Method.SMOOTHSTEP:
+            raise InputError(f"a given path is re-timed with the smoothstep law, not {method.value!r}")
+        return plan_along_path(kin, task, v_sing, b)
     xi = robot.xi_center
     c = crossing_on_segment(kin, task, xi)
     s_star, u, L = c.s_star, c.u, c.length
-    method = b.method if method is None else parse_option(Method, "planning method", method)
     if method is Method.TIME_OPTIMAL:
         return _plan_time_optimal(kin, task, v_sing, b, xi, s_star, u, L, limits)
     if method is Method.DYNAMIC:
         return _plan_dynamic(kin, task, v_sing, b, xi)
-    T, D = ramp_length(v_sing, b.a_peak)
-    room = min(s_star, L - s_star)
-    if D > room:
-        v_max = float(np.sqrt(2.0 * b.a_peak * room / RAMP_PEAK))
-        raise InputError(
-            f"no feasible crossing at v_sing = {v_sing} m/s: its speed ramps need {1e3 * D:.1f} mm but the crossing "
-            f"point is {1e3 * s_star:.1f} mm from the start and {1e3 * (L - s_star):.1f} mm from the goal; "
-            f"v_sing <= {v_max:.3f} m/s at a_peak = {b.a_peak} m/s^2"
-        )
-    law = TimeLaw.build(0.0, [
-        (b.t_rest, 0.0, 0.0),
-        (T, 0.0, v_sing),
-        ((s_star - D) / v_sing, v_sing, v_sing),
-        ((L - s_star - D) / v_sing, v_sing, v_sing),
-        (T, v_sing, 0.0),
-        (b.t_rest, 0.0, 0.0),
-    ])
-    # put the crossing instant on a sample (the initial rest grows by < t_s)
-    at = align_to_samples(b.t_rest + T + (s_star - D) / v_sing, law.duration, b.t_s)
-    t = np.arange(at.samples) * b.t_s
-    s, v, a = law.evaluate(t - at.shift)
+    t, s, v, a, k_event = smoothstep_law(b, v_sing, s_star, L)
     X = task.start[None] + s[:, None] * u[None]
     XD = v[:, None] * u[None]
     XDD = a[:, None] * u[None]
@@ -112,8 +96,9 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
             raise InputError(f"planned path left the working mode: {exc}") from None
     QD = kin.joint_velocity(X, Q, xi, XD)
     QDD = kin.joint_acceleration(X, Q, xi, XD, QD, XDD)
-    return PlannedTrajectory(t=t, q=Q, qd=QD, qdd=QDD, x=X, xd=XD, xdd=XDD, t_s=b.t_s, k_sing=at.k_event, v_sing=v_sing,
+    return PlannedTrajectory(t=t, q=Q, qd=QD, qdd=QDD, x=X, xd=XD, xdd=XDD, t_s=b.t_s, k_sing=k_event, v_sing=v_sing,
                              crossing_point=task.start + s_star * u, xi_plan=xi)
+
 
 
 def _time_optimal_setup(kin, task, b, xi, s_star, u, L, limits):
@@ -149,6 +134,8 @@ def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
     """
     robot = kin.robot
     b = bounds.for_robot(robot)
+    if isinstance(task, PathTask):
+        return path_speed_ceiling(kin, task, b) * (1 - CEILING_SHRINK)
     xi = robot.xi_center
     c = crossing_on_segment(kin, task, xi)
     s_star, u, L = c.s_star, c.u, c.length

@@ -129,10 +129,13 @@ class PlanningBounds:
         End-effector acceleration bound per pose axis, in that axis' unit per
         s^2 (m/s^2 or rad/s^2, ``robot.pose_units``); one number stands for
         every axis only when all axes share a unit.  ``None``: derived from
-        each plan, axis by axis (:func:`planner.acceleration.acceleration_assumption`).
-    a_margin : float
-        Relative margin of the derived bound of an axis the plan accelerates
-        (its planned peak times ``1 + a_margin``).
+        from the robot, axis by axis (:func:`planner.acceleration.acceleration_assumption`):
+        its physical ``a_max``, or its declared tracking margin around the plan.
+    a_margin : float, optional
+        Asked-for tracking margin, relative: an axis the plan accelerates is
+        bounded by its planned peak times ``1 + a_margin`` (an assumption about
+        the controller, stated as such in the certificate).  ``None``
+        (default): no margin around the plan.
     a_peak : float
         Peak acceleration of the planned speed ramps, m/s^2.
     t_s : float, optional
@@ -169,12 +172,16 @@ class PlanningBounds:
         m/s at about twice certify's time (docs/tracker.md, "One motion, one
         geometry"); an optimisation loop that values time over the last 3 %
         of speed passes 0.
+    xd0 : float or array (n,), optional
+        Initial speed bound per pose axis, its unit per s: the executions start
+        with ``|x'(0)| <= xd0`` (robot default: near rest).  A given plan that
+        does not start at rest states its initial speed here.
     """
 
     eps_q: float | None = None
     tracking_error: float = 0.0
     a_max: tuple | None = None
-    a_margin: float = 0.1
+    a_margin: float | None = None
     a_peak: float = 60.0
     t_s: float | None = None
     t_rest: float = 0.02
@@ -186,6 +193,7 @@ class PlanningBounds:
     execution: ExecutionKind = ExecutionKind.CARTESIAN
     reasoning: Reasoning = Reasoning.WINDOW
     one_motion: int = ONE_MOTION_SAMPLES
+    xd0: tuple | None = None
     #: Name of the robot whose defaults :meth:`for_robot` filled in (``None``: not yet bound).
     robot_name: str | None = field(default=None, init=False, compare=False)
     #: The robot itself and these bounds before its defaults were filled in: binding to another robot
@@ -201,9 +209,14 @@ class PlanningBounds:
             set_(self, "t_s", check_bound("t_s", self.t_s, 1))
         if self.a_max is not None:
             set_(self, "a_max", tuple(float(v) for v in check_bound("a_max", self.a_max, max(np.size(self.a_max), 1))))
+        if self.xd0 is not None:
+            set_(self, "xd0", tuple(float(v) for v in check_bound("xd0", self.xd0, max(np.size(self.xd0), 1))))
         set_(self, "a_peak", V.positive("a_peak", self.a_peak))
         set_(self, "tracking_error", V.positive("tracking_error", self.tracking_error, allow_zero=True))
-        set_(self, "a_margin", V.positive("a_margin", self.a_margin, allow_zero=True))
+        if self.a_margin is not None:
+            if self.a_max is not None:
+                raise InputError("a_margin and a_max both set the acceleration bound: give one")
+            set_(self, "a_margin", V.positive("a_margin", self.a_margin, allow_zero=True))
         set_(self, "t_rest", V.positive("t_rest", self.t_rest, allow_zero=True))
         if self.xi_splits is not None:
             set_(self, "xi_splits", tuple(self.xi_splits))
@@ -234,22 +247,29 @@ class PlanningBounds:
             set_(out, "xi_splits", getattr(robot, "xi_splits", None))
         if given.a_max is not None:
             set_(out, "a_max", _per_axis_a_max(given.a_max, robot))
+        if given.xd0 is not None:
+            set_(out, "xd0", _per_axis(given.xd0, robot, "xd0", robot.velocity_units, robot.xd0))
         return out
 
 
 def _per_axis_a_max(value: tuple, robot) -> tuple[float, ...]:
     """A given ``a_max`` (checked positive): one bound per pose axis (one number only when every axis has the
     same unit)."""
-    units = robot.acceleration_units
+    return _per_axis(value, robot, "a_max", robot.acceleration_units, robot.a_max, " (its physical a_max)")
+
+
+def _per_axis(value: tuple, robot, name: str, units, example, why: str = "") -> tuple[float, ...]:
+    """A given per-axis bound ``name`` in ``units``: one entry per pose axis (one number only when every axis
+    has the same unit; ``example``: the robot's own values, for the message)."""
     if len(value) == 1:
         if robot.mixed_units:
             raise InputError(
-                f"a_max = {list(value)} is one number, but robot {robot.name}'s pose axes are in "
-                f"({', '.join(units)}): give one bound per axis, e.g. a_max = "
-                f"({', '.join(f'{v:g}' for v in robot.a_max)}) (its physical a_max)")
+                f"{name} = {list(value)} is one number, but robot {robot.name}'s pose axes are in "
+                f"({', '.join(units)}): give one bound per axis, e.g. {name} = "
+                f"({', '.join(f'{v:g}' for v in example)}){why}")
         return value * robot.n
     if len(value) != robot.n:
-        raise InputError(f"a_max needs {robot.n} entries, got {len(value)} (one bound per pose axis of robot "
+        raise InputError(f"{name} needs {robot.n} entries, got {len(value)} (one bound per pose axis of robot "
                          f"{robot.name}, in {', '.join(units)})")
     return value
 

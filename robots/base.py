@@ -102,11 +102,12 @@ class Robot:
         How far the executed end-effector acceleration may deviate from the
         planned one, per axis, in its unit per s^2: the tracking error the
         robot's controller allows, ``|x''_executed - x''_planned| <=
-        tracking_a_margin``.  A planning-time certificate takes it as the
-        acceleration bound of an axis its plan does not accelerate.  Declare it
-        only with a stated reason (a controller's specification, a measurement);
-        ``None`` (default): not declared, and such an axis is bounded by the
-        robot's ``a_max``, the bound that holds whatever the controller does.
+        tracking_a_margin``.  A planning-time certificate then bounds each
+        axis by the plan's peak plus this margin (never above ``a_max``).
+        Declare it only with a stated reason (a controller's specification, a
+        measurement); ``None`` (default): not declared, and every axis is
+        bounded by the robot's ``a_max``, the bound that holds whatever the
+        controller does.
         Each entry is positive and at most ``a_max``.
     joint_units : tuple of PoseUnit (or ``"m"`` / ``"rad"``), length n, optional
         Unit of each joint coordinate: ``"rad"`` for a revolute joint, ``"m"``

@@ -136,32 +136,42 @@ def _benchmark_task(robot: str) -> CrossingTask:
     return benchmark_task(get_entry(robot))
 
 
-#: Default certification (smoothstep plans, ``PlanningBounds()`` defaults,
-#: ``certify_crossing``'s defaults: v_low 0.6 m/s, tol 0.01 m/s, 50 Monte Carlo
-#: runs, refutation on) of each robot's benchmark task: what ``crosscert certify``
-#: prints.  About 15 s warm on 2 cores (45 s before 2026-12-02), so only ``pytest -m slow`` runs it
-#: (tests/test_certify.py::test_default_certification_of_the_benchmark_task).
+#: Default certification (smoothstep plans, ``PlanningBounds()`` defaults: the robot's a_max on every axis;
+#: ``certify_crossing``'s defaults: v_low 0.6 m/s, tol 0.01 m/s, 50 Monte Carlo runs, refutation on) of each
+#: robot's benchmark task: what ``crosscert certify`` prints.  About 25 s warm on 2 cores, so only
+#: ``pytest -m slow`` runs it (tests/test_certify.py::test_default_certification_of_the_benchmark_task).
 DEFAULT_CERTIFICATION = {
-    # DexTAR: docs/planning.md, "Measured on the DexTAR benchmark task"
-    # (2026-11-25; 1.1980 m/s, 1.1889 m/s fails; refutation bound 0.84375 m/s,
-    # verified bounces up to there, IPOPT infeasible at 0.85 m/s), and
-    # benchmarks/README.md, "certify per phase" (2026-12-01, commit 7e17a51,
-    # cold, cached and warm runs all 1.198 / 0.844 m/s).  Re-measured
-    # 2026-12-01 on the working tree over 316f1b0: 1.198 / 0.84375 m/s, 15.4 s.  With window reasoning
-    # (issue 9, 2026-12-01 over 4f0a0c5): 0.9987 m/s, Monte Carlo 50/50.  Bisection search (issue 19,
-    # 2026-12-02): 0.9929 m/s (0.9876 m/s fails), refutation bound 0.84375 m/s, Monte Carlo 50/50.  Proved
-    # execution class (issue 21, 2026-12-02): 0.9876 m/s (0.9822 m/s fails), the rest unchanged.  Window
-    # halving along the parameter that spreads the pose most (issue 20, 2026-12-02): 0.9663 m/s (0.9610 m/s
-    # fails), refutation bound 0.84375 m/s, Monte Carlo 50/50.  The acceleration bound between samples
-    # (issue 20, 2026-12-02, verifier.motion_model): 0.9610 m/s (0.9557 m/s fails), the rest unchanged.  With
-    # the one-motion step in certify's windows (issue 20, 2026-12-02, verifier.one_motion,
-    # PlanningBounds(one_motion=40)): 0.9292 m/s (0.9238 m/s fails), ratio 1.101, with the refutation and the
-    # contraction (0.9398 m/s with the refutation alone); off by default (its cost).  On by default, the
-    # refutation bound bisected to a tenth of tol (issue 20, 2026-12-04): 0.9292 m/s (0.9238 m/s fails),
-    # refutation bound 0.8484 m/s (0.84375 at tol), ratio 1.095, Monte Carlo 49/50 (the miss: unknown).
-    "dextar": CertificationExpectation(v_min=0.9292, v_min_forward=1.198, v_min_tol=0.01, refutation_bound=0.8484,
-                                       measured="docs/planning.md (2026-11-25, 2026-12-01), benchmarks/README.md"),
+    # DexTAR at a_max (80, 80) m/s^2 (docs/planning.md, "Measured on the DexTAR benchmark task"): 1.0247 m/s
+    # (1.0194 m/s fails), refutation bound 0.9375 m/s (bisected to a tenth of tol), ratio 1.093, Monte Carlo
+    # 50/50, bounces certified from 10.0 mm (floor 9.50 mm); the forward tracker alone 1.3114 m/s.
+    "dextar": CertificationExpectation(v_min=1.0247, v_min_forward=1.3114, v_min_tol=0.01, refutation_bound=0.9375,
+                                       measured="crosscert certify, robot a_max on both axes"),
 }
+
+#: A curved DexTAR path (named reference problem of the re-timing of a given path): a circular arc of radius
+#: ``radius`` m through the benchmark crossing point, its tangent there at ``angle_deg`` from the benchmark
+#: direction, ``half_angle`` rad either side (0.06 m of arc).  Its smoothstep timing certifies from about 1.39 m/s
+#: under the robot's a_max (1.026 m/s on the straight benchmark task); a counterexample exists at 1.11 m/s.
+ARC = {"radius": 0.1, "angle_deg": 30.0, "half_angle": 0.6, "knots": 601, "certified": 1.45, "not_certified": 1.2}
+
+
+@lru_cache(maxsize=None)
+def arc_task():
+    """The :data:`ARC` path as a ``planner.path.PathTask`` (cached)."""
+    from crosscert.planner.path import path_task_from_poses
+
+    kin = kinematics()
+    b = benchmark_crossing()
+    a = math.radians(ARC["angle_deg"])
+    u = np.asarray(b.direction, float)
+    t = np.array([math.cos(a) * u[0] - math.sin(a) * u[1], math.sin(a) * u[0] + math.cos(a) * u[1]])
+    normal = np.array([-t[1], t[0]])
+    phi = np.linspace(-ARC["half_angle"], ARC["half_angle"], ARC["knots"])
+    R = ARC["radius"]
+    X = b.point + R * np.sin(phi)[:, None] * t + R * (1.0 - np.cos(phi))[:, None] * normal
+    q_start = kin.ik_path(np.linspace(b.point, X[0], 50), DEXTAR.xi_center, b.q_point)[-1]
+    return path_task_from_poses(kin, X, q_start, "arc")
+
 
 #: Linear systems ``A z <= b``, ``lo <= z <= hi`` (``A`` dense, one variable here) with multipliers ``y``, for the
 #: Farkas certificate of :func:`verifier.one_motion.prove_infeasible`.  ``float_only``: feasible (``z = 5.2``
@@ -175,7 +185,17 @@ FARKAS = {
                    np.array([1.0, 1.0])),
 }
 
-#: ``crosscert certify``'s plan speeds (m/s) around the one-motion refutation (verifier.one_motion, 2026-12-02):
+#: The relative tracking margin (``PlanningBounds.a_margin``) under which the plans of :data:`ONE_MOTION_PLAN`
+#: and the window tests were measured: y within the plan's peak + 10 % (66 m/s^2), x within the robot's
+#: 80 m/s^2.  The mechanisms those tests guard (one-motion refutation and narrowing, the acceleration bound
+#: between samples) decide those plans only under that bound; the default is the robot's a_max on both axes.
+MARGIN = 0.1
+
+#: :data:`MARGIN`'s certification of the DexTAR benchmark task (``crosscert certify --a-margin 0.1``): v_min
+#: 0.9292 m/s (0.9238 m/s fails), refutation bound 0.8484 m/s, Monte Carlo 49/50.
+MARGIN_CERTIFICATION = {"v_min": 0.9292, "refutation_bound": 0.8484}
+
+#: ``crosscert certify --a-margin 0.1``'s plan speeds (m/s) around the one-motion refutation (verifier.one_motion, 2026-12-02):
 #: undecided without it (the bounce hypothesis survives with 10 sub-boxes), certified with it; and the
 #: refutation bound, where a verified bounce exists (the bounce hypothesis must survive).
 #: ``contracted``: undecided by the refutation alone, certified once the one-motion relaxation also narrows the

@@ -38,13 +38,28 @@ def test_robots_declare_the_unit_of_each_pose_axis():
     assert all(r.tracking_a_margin is None for r in (DEXTAR, RPR3, GOUGH_STEWART))
 
 
-def test_no_axis_bound_comes_from_another_axis_of_another_unit():
-    """The 3-RPR's pure translation: the rotation axis' bound is the robot's, whatever the translation peak.
+def test_by_default_every_axis_takes_the_robots_physical_a_max():
+    """No margin asked for, none declared: the robot's a_max on every axis, whatever the plan's peaks."""
+    for robot, peaks in ((RPR3, (66.0, 0.0, 150.0)), (DEXTAR, (6.0, 66.0))):
+        a = acceleration_assumption(_plan(*peaks), _resolved(robot), robot)
+        assert a.sources == (SRC.ROBOT_A_MAX,) * robot.n
+        assert a.values == tuple(robot.a_max)
+        assert [x.unit for x in a.axes] == list(robot.acceleration_units)
 
-    The rule before issue 23 gave the rotation axis 10 % of the largest translation peak (6.6 and 660 here).
-    """
-    b = _resolved(RPR3)
-    for peak in (66.0, 6600.0):
+
+def test_a_plan_above_the_robots_a_max_is_refused():
+    """No execution of such a plan exists under the robot's bound: certifying it would assume the impossible."""
+    with pytest.raises(InputError, match=r"axis 2: the robot's a_max = 80 m/s\^2 is below the planned peak 81 m/s\^2"):
+        acceleration_assumption(_plan(6.0, 81.0), _resolved(DEXTAR), DEXTAR)
+    with pytest.raises(InputError, match="the robot's a_max"):
+        acceleration_assumption(_plan(6.0, 81.0), _resolved(DEXTAR, a_margin=0.1), DEXTAR)
+
+
+def test_no_axis_bound_comes_from_another_axis_of_another_unit():
+    """The 3-RPR's pure translation, a margin asked for: the rotation axis' bound is the robot's, whatever the
+    translation peak (10 % of a m/s^2 peak is no rad/s^2 bound)."""
+    b = _resolved(RPR3, a_margin=0.1)
+    for peak in (6.6, 66.0):
         a = acceleration_assumption(_plan(peak, 0.0, 0.0), b, RPR3)
         assert a.sources == (SRC.PLAN_PEAK, SRC.ROBOT_A_MAX, SRC.ROBOT_A_MAX)
         assert a.values == pytest.approx((1.1 * peak, 80.0, 200.0))
@@ -53,16 +68,30 @@ def test_no_axis_bound_comes_from_another_axis_of_another_unit():
     a = acceleration_assumption(_plan(0.0, 0.0, 150.0), b, RPR3)
     assert a.values == pytest.approx((80.0, 80.0, 165.0))
     assert a.sources == (SRC.ROBOT_A_MAX, SRC.ROBOT_A_MAX, SRC.PLAN_PEAK)
+    # the margin never lifts a bound above the robot's physical one
+    a = acceleration_assumption(_plan(75.0, 0.0, 0.0), b, RPR3)
+    assert a.values == (80.0, 80.0, 200.0) and a.sources[0] is SRC.PLAN_PEAK
 
 
-def test_a_declared_tracking_margin_is_the_bound_of_an_axis_the_plan_does_not_accelerate():
+def test_a_declared_tracking_margin_bounds_each_axis_by_the_planned_peak_plus_the_margin():
+    """``|x''_executed - x''_planned| <= margin`` gives ``|x''_executed| <= peak + margin``, never above a_max."""
     robot = dataclasses.replace(RPR3, tracking_a_margin=(5.0, 4.0, 30.0))
     a = acceleration_assumption(_plan(66.0, 2.0, 0.0), _resolved(robot), robot)
-    # axis 2: the plan's 2.2 m/s^2 is below the margin, which then bounds it
-    assert a.sources == (SRC.PLAN_PEAK, SRC.TRACKING_MARGIN, SRC.TRACKING_MARGIN)
-    assert a.values == pytest.approx((72.6, 4.0, 30.0))
-    assert a.describe() == ("axis 1: 72.6 m/s^2 (plan peak + margin); axis 2: 4 m/s^2 (robot tracking margin); "
-                            "axis 3: 30 rad/s^2 (robot tracking margin)")
+    assert a.sources == (SRC.TRACKING_MARGIN,) * 3
+    assert a.values == pytest.approx((71.0, 6.0, 30.0))
+    assert a.describe() == ("axis 1: 71 m/s^2 (plan peak + robot tracking margin); axis 2: 6 m/s^2 (plan peak + "
+                            "robot tracking margin); axis 3: 30 rad/s^2 (plan peak + robot tracking margin)")
+    a = acceleration_assumption(_plan(78.0, 2.0, 0.0), _resolved(robot), robot)
+    assert a.values[0] == 80.0  # 78 + 5 capped by the physical bound
+    # an asked-for relative margin takes precedence on the axes the plan accelerates
+    a = acceleration_assumption(_plan(66.0, 2.0, 0.0), _resolved(robot, a_margin=0.1), robot)
+    assert a.sources == (SRC.PLAN_PEAK, SRC.PLAN_PEAK, SRC.TRACKING_MARGIN)
+    assert a.values == pytest.approx((72.6, 2.2, 30.0))
+
+
+def test_a_margin_and_a_max_together_are_refused():
+    with pytest.raises(InputError, match="a_margin and a_max both"):
+        PlanningBounds(a_max=80.0, a_margin=0.1)
 
 
 def test_given_bounds_are_named_given_and_checked_against_the_plan():
@@ -122,10 +151,11 @@ def test_cli_a_max_per_axis_errors(argv, message, tmp_path, capsys):
 
 
 def test_certificate_json_of_the_3rpr_names_units_sources_and_the_robot_a_max_run(tmp_path, capsys):
-    """``certify --robot 3rpr``, coarse: every axis' bound with its unit and source, and v_min at the robot's a_max."""
+    """``certify --robot 3rpr --a-margin 0.1``, coarse: every axis' bound with its unit and source, and v_min at
+    the robot's a_max beside it."""
     out = tmp_path / "c"
-    argv = ["certify", "--robot", "3rpr", "--tol", "0.25", "--monte-carlo", "0", "--no-refute", "--no-progress",
-            "--out", str(out)]
+    argv = ["certify", "--robot", "3rpr", "--a-margin", "0.1", "--tol", "0.25", "--monte-carlo", "0", "--no-refute",
+            "--no-progress", "--out", str(out)]
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert ("a_max used: axis 1: 66 m/s^2 (plan peak + margin); axis 2: 80 m/s^2 (robot a_max); "
@@ -134,6 +164,7 @@ def test_certificate_json_of_the_3rpr_names_units_sources_and_the_robot_a_max_ru
     report = json.loads((out / "certificate.json").read_text())
     assert report["schema"] == "crosscert-certificate/3"
     assert report["acceleration_units"] == ["m/s^2", "m/s^2", "rad/s^2"]
+    assert report["bounds"]["a_margin"] == 0.1
     assert report["a_max_used"] == [
         {"value": pytest.approx(66.0), "unit": "m/s^2", "source": "plan peak + margin"},
         {"value": 80.0, "unit": "m/s^2", "source": "robot a_max"},
@@ -143,6 +174,26 @@ def test_certificate_json_of_the_3rpr_names_units_sources_and_the_robot_a_max_ru
     assert at["outcome"] == "computed" and [x["value"] for x in at["a_max"]] == [80.0, 80.0, 200.0]
     assert report["v_min_at_robot_a_max_mps"] == at["v_min_mps"] is not None
     assert report["v_min_at_robot_a_max_mps"] >= report["v_min_mps"]  # the run starts at the default's v_min
+
+
+def test_the_default_certificate_is_the_robots_a_max_and_runs_once(tmp_path, capsys):
+    """No --a-max, no --a-margin: the robot's a_max on every axis, so no second certification."""
+    out = tmp_path / "c"
+    argv = ["certify", "--robot", "3rpr", "--tol", "0.25", "--monte-carlo", "0", "--no-refute", "--no-progress",
+            "--out", str(out)]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert ("a_max used: axis 1: 80 m/s^2 (robot a_max); axis 2: 80 m/s^2 (robot a_max); "
+            "axis 3: 200 rad/s^2 (robot a_max)") in text
+    report = json.loads((out / "certificate.json").read_text())
+    assert report["bounds"]["a_margin"] is None
+    assert report["at_robot_a_max"]["outcome"] == "coincides"
+
+
+def test_cli_refuses_a_margin_with_a_max(tmp_path, capsys):
+    assert main(["certify", "--a-max", "80", "--a-margin", "0.1", "--out", str(tmp_path / "c"), "--no-progress"]) == 2
+    assert "--a-margin and --a-max both" in _one_line_error(capsys)
+    assert not (tmp_path / "c").exists()
 
 
 def test_given_a_max_is_stated_as_given_and_the_robot_run_skipped_when_they_coincide(tmp_path, capsys):

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from adversarial import near_scenarios
-from problems import FARKAS, ONE_MOTION_PLAN, interval_model
+from problems import FARKAS, MARGIN, ONE_MOTION_PLAN, interval_model
 from crosscert.robots import DEXTAR
 from crosscert.verifier import one_motion as OM
 from crosscert.verifier.settings import TrackerSettings
@@ -252,7 +252,7 @@ def test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_fl
     from crosscert.verifier.window import Refutation
 
     kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
-    with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES)
+    with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES, a_margin=MARGIN)
     run = certify_speed(kin, interval_model(), task, with_step, ONE_MOTION_PLAN["certified"])
     assert run.forward.verdict is Verdict.UNKNOWN
     assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
@@ -273,7 +273,8 @@ def test_certify_runs_the_step_by_default_and_not_when_the_bounds_say_0():
 
     assert PlanningBounds().one_motion == OM.ONE_MOTION_SAMPLES == 40
     kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
-    run = certify_speed(kin, interval_model(), task, PlanningBounds(one_motion=0), ONE_MOTION_PLAN["certified"])
+    run = certify_speed(kin, interval_model(), task, PlanningBounds(one_motion=0, a_margin=MARGIN),
+                        ONE_MOTION_PLAN["certified"])
     assert run.window.verdict is Verdict.UNKNOWN, run.window.summary()
 
 
@@ -364,7 +365,7 @@ def test_the_contractor_certifies_the_certify_plan_at_0930():
     from crosscert.verifier.settings import Verdict
 
     kin, task = KinematicModel(DEXTAR), benchmark_task(get_entry("dextar"))
-    with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES)
+    with_step = PlanningBounds(one_motion=OM.ONE_MOTION_SAMPLES, a_margin=MARGIN)
     run = certify_speed(kin, interval_model(), task, with_step, ONE_MOTION_PLAN["contracted"])
     assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
 

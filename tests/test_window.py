@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from adversarial import near_scenarios
-from problems import check_contains, interval_model
+from problems import MARGIN, check_contains, interval_model
 from crosscert.planner.certify.plan import execution_class, tracker_settings
 from crosscert.planner.plan import derived_a_max, plan_crossing
 from crosscert.planner.task import PlanningBounds
@@ -214,7 +214,7 @@ def test_planning_run_at_one_metre_per_second(speed, certified):
     from crosscert.robots import KinematicModel
 
     kin = KinematicModel(DEXTAR)
-    b = PlanningBounds().for_robot(DEXTAR)
+    b = PlanningBounds(a_margin=MARGIN).for_robot(DEXTAR)
     plan = plan_crossing(kin, benchmark_task(entry), speed, b)
     cls = execution_class(kin, plan, b)
     s = tracker_settings(DEXTAR, b, derived_a_max(plan, b, DEXTAR), cls)
@@ -429,7 +429,7 @@ def test_acceleration_bound_between_samples_certifies_the_plan_at_0961(monkeypat
     from crosscert.robots import KinematicModel
 
     run = certify_speed(KinematicModel(DEXTAR), interval_model(), benchmark_task(get_entry("dextar")),
-                        PlanningBounds(), 0.961)
+                        PlanningBounds(a_margin=MARGIN), 0.961)
     assert run.forward.verdict is Verdict.UNKNOWN
     assert run.window.verdict is Verdict.MODE_CHANGED, run.window.summary()
 
@@ -486,6 +486,6 @@ def test_a_sub_box_the_one_motion_step_left_as_it_was_is_not_asked_again(monkeyp
 
     monkeypatch.setattr(W, "one_motion_rows", watching)
     run = certify_speed(KinematicModel(DEXTAR), interval_model(), benchmark_task(get_entry("dextar")),
-                        PlanningBounds(one_motion=40), 0.8548)
+                        PlanningBounds(one_motion=40, a_margin=MARGIN), 0.8548)
     assert run.window.verdict is Verdict.UNKNOWN
     assert len(kept) > 0 and len(again) >= 20 and not any(again), (len(kept), len(again), sum(again))

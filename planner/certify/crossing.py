@@ -36,12 +36,14 @@ from ..montecarlo import MonteCarloResult, monte_carlo_confirmation
 from ..acceleration import AccelerationAssumption, derived_a_max
 from ..plan import plan_crossing, speed_ceiling
 from ..simulate import random_geometry
+from ..path import PathTask
 from ..task import CrossingTask, PlannedTrajectory, PlanningBounds, crossing_on_segment
 from ..progress import Phase, enter
 from ..worker import SubprocessExecutor
 from .plan import search_v_min
 
-__all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refute_speed", "Refuter", "refutation_search",
+__all__ = ["CrossingCertificate", "certify_crossing", "package_versions", "refute_speed", "refute_overrides", "Refuter",
+           "refutation_search",
            "REFUTE_CAP_VARIABLES", "REFUTE_CPU_TIME", "REFUTE_TOL_DIVISOR", "scan_speeds", "SCAN_FROM", "SCAN_STEP"]
 
 log = logging.getLogger(__name__)
@@ -108,6 +110,13 @@ class CrossingCertificate:
     bounce: BounceGap | None = field(default=None, repr=False)
     at_robot_a_max: object = field(default=None, repr=False)
     acceleration_units: tuple = ()
+    refutation_ran: bool = False
+    plan_source: object = None  # planner.certify.trajectory.PlanSource of a given plan; None: planned here
+
+    @property
+    def refutation_search(self) -> refute.SearchCompleteness | None:
+        """What ``refutation_bound`` rests on (:class:`planner.refute.SearchCompleteness`); None: not run."""
+        return refute.completeness(self.refutation) if self.refutation_ran else None
 
     @property
     def certified_below_v_min(self) -> list:
@@ -119,7 +128,9 @@ class CrossingCertificate:
     @property
     def v_min_at_lower_end(self) -> bool:
         """``v_min`` is the slowest speed tried: a smaller one may certify too (lower ``v_low``)."""
-        return self.v_min is not None and self.v_min <= min(t.v_sing for t in self.trials)
+        if self.v_min is None or self.plan_source is not None:  # a given plan has one speed, searched nowhere
+            return False
+        return self.v_min <= min(t.v_sing for t in self.trials)
 
     def _named(self, xi) -> dict | None:
         """A geometry vector as ``{parameter name: value}`` (SI)."""
@@ -140,6 +151,7 @@ class CrossingCertificate:
         return {
             "schema": CERTIFICATE_SCHEMA,
             "robot": self.robot_name,
+            "plan": None if self.plan_source is None else self.plan_source.summary(),
             "task": None if self.task is None else {"start_m": self.task.start.tolist(), "goal_m": self.task.goal.tolist(),
                                                     "working_guess_rad": self.task.working_guess.tolist()},
             "acceleration_units": list(self.acceleration_units),
@@ -155,6 +167,7 @@ class CrossingCertificate:
             "verdict": self.verdict.value,
             "v_min_mps": self.v_min,
             "refutation_bound_mps": self.refutation_bound,
+            "refutation_search": None if self.refutation_search is None else self.refutation_search.value,
             "gap_mps": None if self.v_min is None or self.refutation_bound is None else self.v_min - self.refutation_bound,
             "certified_below_v_min_mps": self.certified_below_v_min,
             "v_min_at_lower_end": self.v_min_at_lower_end,
@@ -304,7 +317,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
         top = search.v_min if search.v_min is not None else max(t.v_sing for t in search.trials)
         ref_job = _refute_below(refuter, top, opts.tol, opts.in_background)
         bounces = None
-        if refuter is not None and search.v_min is not None and opts.bounce:
+        # the bounces of a task turn back along its straight segment: a given curved path has none of its own
+        if refuter is not None and search.v_min is not None and opts.bounce and not isinstance(task, PathTask):
             bounces = _start_bounces(job, search.v_min, refuter, starts)
             t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
         mc = _confirm(job, run, monte_carlo_runs, seed, progress, None if refuter is None else refuter.executor)
@@ -342,7 +356,7 @@ def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: b
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
     b = (bounds or PlanningBounds()).for_robot(robot)
-    m0 = crossing_on_segment(kin, task, robot.xi_center).m0
+    m0 = task.m0 if isinstance(task, PathTask) else crossing_on_segment(kin, task, robot.xi_center).m0
     v_feasible = speed_ceiling(kin, task, b)
     v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)
     v_low = V.positive("v_low", v_low)
@@ -501,6 +515,7 @@ def _certificate(job: _Job, search, run, mc, ref_bound, ref, gap, clock, t0) -> 
         window=win,
         bounce=gap,
         acceleration_units=robot.acceleration_units,
+        refutation_ran=ref is not None,
     )
 
 
@@ -531,6 +546,15 @@ def load_model(robot) -> None:
     kinematic_model(robot)
 
 
+def refute_overrides(b: PlanningBounds, a_max) -> dict:
+    """The bounds a counterexample search of a certifying run uses (:func:`planner.refute.refutation_bound`'s
+    ``bounds``): the readings within ``eps_q + tracking_error``, ``a_max`` per axis, and the stated initial speed."""
+    out = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
+    if b.xd0 is not None:
+        out["v0_max"] = np.asarray(b.xd0, float)
+    return out
+
+
 def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
 
@@ -547,7 +571,7 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
         nan = float("nan")
         return refute.SpeedRefutation(float(v), 0, False, False, None, nan, nan, nan, f"no plan: {exc}", 0.0, ())
     a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b, robot)
-    overrides = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
+    overrides = refute_overrides(b, a_max)
     return refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
                                    bounds=overrides, max_cpu_time=REFUTE_CPU_TIME, warm=warm,
                                    cap_variables=REFUTE_CAP_VARIABLES).rows[0]

@@ -77,6 +77,7 @@ __all__ = [
     "minimal_v_sing",
     "search_v_min",
     "certify_speed",
+    "certify_planned",
     "CertifiedRun",
     "SpeedSearch",
 ]
@@ -104,7 +105,7 @@ CERTIFY_WINDOW_GEOMETRIES = 16
 def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -> TrackerSettings:
     """Tracker settings of a certifying run: the class's assumptions (reading error, drift, geometry box) at
     the plan's ``t_s`` and ``a_max`` (per axis, its unit/s^2), with the bounds' geometry hypotheses."""
-    return TrackerSettings(assumptions=cls.assumptions(robot, b.t_s, a_max), xi_splits=b.xi_splits)
+    return TrackerSettings(assumptions=cls.assumptions(robot, b.t_s, a_max, b.xd0), xi_splits=b.xi_splits)
 
 
 def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
@@ -217,9 +218,21 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
     where another process holds the other cores).
     """
     b = bounds.for_robot(kin.robot)
-    plan = plan_crossing(kin, task, v_sing, b)
+    return certify_planned(kin, imodel, plan_crossing(kin, task, v_sing, b), b, progress=progress, parallel=parallel)
+
+
+def certify_planned(kin, imodel, plan: PlannedTrajectory, bounds, *, m0: int | None = None, progress=None,
+                    parallel: bool = True) -> CertifiedRun:
+    """Certify one plan alone: its execution class, the forward run, then window passes if undecided.
+
+    ``m0``: the plan's initial assembly mode (default: the mode of its first pose and joints at the
+    planning geometry).  Its verdict ``MODE_CHANGED`` certifies every admissible execution of the plan
+    (module docstring).
+    """
+    b = bounds.for_robot(kin.robot)
     cls = execution_class(kin, plan, b)
-    m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
+    if m0 is None:
+        m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
     acceleration = acceleration_assumption(plan, b, kin.robot)
     forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
     window = None

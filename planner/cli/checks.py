@@ -231,6 +231,11 @@ def check_command(a, entry) -> None:
                 duration / robot.t_s, robot.n)
         _output_file(a.output, "--output", (".csv",))
         return
+    if cmd == "certify" and a.plan is not None:
+        _given_plan(a, robot)
+        return
+    if cmd == "certify" and (a.initial_mode is not None or a.xd0 is not None or a.retime):
+        raise InputError("--initial-mode, --xd0 and --retime are about a given plan: use them with --plan")
     if cmd in ("plan", "certify"):
         direction, length = _task_segment(a, entry)
         _a_peak_within_robot(a.a_peak, direction, robot)
@@ -241,9 +246,7 @@ def check_command(a, entry) -> None:
         _output_file(a.output, "--output", (".csv",))
         return
     if cmd == "certify":
-        _bound("--eps-q", "eps_q", a.eps_q, robot, MAX_JOINT_ERROR)
-        _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
-        _a_max_per_axis(a, robot)
+        _certify_bounds(a, robot)
         _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
         _in("--v-high", a.v_high, a.v_low, MAX_SPEED, unit=" m/s")
         _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")
@@ -377,6 +380,44 @@ def _study(a) -> None:
                 samples, entry.robot.n, scenarios=max(runs, 1), tracked=True,
                 hint="raise [certify] v_low or lower monte_carlo_runs")
     a.spec = spec
+
+
+def _certify_bounds(a, robot) -> None:
+    """``certify``'s bounds, with or without ``--plan``: reading error, tracking error, acceleration."""
+    _bound("--eps-q", "eps_q", a.eps_q, robot, MAX_JOINT_ERROR)
+    _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
+    _a_max_per_axis(a, robot)
+    if a.a_margin is not None and a.a_max is not None:
+        raise InputError("--a-margin and --a-max both set the acceleration bound: give one")
+    _in("--a-margin", a.a_margin, 0.0, 10.0, lo_open=False)
+
+
+def _given_plan(a, robot) -> None:
+    """``certify --plan``: the options that apply, the file readable, its samples within the limits."""
+    given = [o for o, v in (("--start", a.start), ("--goal", a.goal), ("--v-high", a.v_high)) if v is not None]
+    if given:
+        raise InputError(f"--plan certifies the given trajectory: {', '.join(given)} plan a task; drop them")
+    _certify_bounds(a, robot)
+    _in("--monte-carlo", a.monte_carlo, 0, MAX_MONTE_CARLO, lo_open=False)
+    if a.retime:
+        _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
+        _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")
+        _in("--refute-tol", a.refute_tol, MIN_TOL / 10, 1.0, lo_open=False, unit=" m/s")
+    if a.xd0 is not None:
+        if len(a.xd0) not in (1, robot.n) or (len(a.xd0) == 1 and robot.mixed_units):
+            raise InputError(f"--xd0 takes {robot.n} comma-separated bounds for robot {robot.name} (axes in "
+                             f"{', '.join(robot.velocity_units)}){' or one for all' if not robot.mixed_units else ''}, "
+                             f"got {len(a.xd0)}")
+        for i, v in enumerate(a.xd0):
+            _bound("--xd0" if len(a.xd0) == 1 else f"--xd0 (axis {i + 1})", "xd0", v, robot, MAX_SPEED)
+    path = Path(a.plan)
+    if not path.is_file():
+        raise InputError(f"--plan: {a.plan} is not a readable file")
+    with open(path, "rb") as fh:
+        samples = sum(1 for _ in fh) - 1
+    _budget(f"certify --plan {a.plan} with --monte-carlo {a.monte_carlo}", samples, robot.n,
+            scenarios=max(a.monte_carlo, 1), tracked=True, hint="shorten the plan or lower --monte-carlo")
+    _output_folder(a.out, "--out", ("certificate.json",))
 
 
 def _task_segment(a, entry) -> tuple[np.ndarray, float]:

@@ -191,18 +191,35 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
     s.add_argument("--a-peak", type=number, default=SIM_A_PEAK, help="peak acceleration of the ramps, m/s^2")
     s.add_argument("-o", "--output", required=True, help="CSV file to write")
 
-    ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound")
+    ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound; "
+                            "or the verdict of your own planned trajectory (--plan)")
     _task_options(ce)
+    ce.add_argument("--plan", metavar="FILE",
+                    help="certify this planned trajectory instead of planning the task: CSV t,q1..qn[,x1..xn] at a "
+                         "constant step, starting at rest (docs/file-formats.md, 'Planned trajectory')")
+    ce.add_argument("--retime", action="store_true",
+                    help="with --plan: keep the plan's path and re-time it: the slowest speed at the singularity at "
+                         "which this path certifies (written as a plan to --out) and the refutation bound on it")
+    ce.add_argument("--initial-mode", type=int, choices=(1, -1),
+                    help="with --plan of joints only: the assembly mode at its first sample (+1/-1)")
+    ce.add_argument("--xd0", type=numbers, metavar="V[,V...]",
+                    help="with --plan: the initial speed bound per pose axis, each in its unit per s (default: the "
+                         "robot's, a start at rest)")
     ce.add_argument("--a-max", type=numbers, metavar="A[,A...]",
                     help="end-effector acceleration bound per pose axis, each in its axis' unit (m/s^2 or rad/s^2), "
-                         "comma-separated; one number for every axis when they share a unit (default: per axis, the "
-                         "planned peak + 10%% where the plan accelerates, else the robot's tracking margin or a_max; "
+                         "comma-separated; one number for every axis when they share a unit (default: the robot's "
+                         "physical a_max on every axis, or its declared tracking margin around the plan; "
                          "docs/planning.md)")
+    ce.add_argument("--a-margin", type=number, metavar="R",
+                    help="assume the controller tracks the plan's acceleration within a relative margin R: an axis "
+                         "the plan accelerates is bounded by its planned peak x (1 + R) instead of the robot's a_max "
+                         "(an assumption about the controller, printed with the certificate; default: none)")
     ce.add_argument("--eps-q", type=number, help=f"encoder error bound, {_unit(robot, 'eps_q')} (" + _robot_default(robot, "eps_q") + ")")
     ce.add_argument("--tracking-error", type=number, default=0.0, help="extra joint tracking error allowed, rad")
-    ce.add_argument("--execution", choices=[k.value for k in ExecutionKind], default=ExecutionKind.CARTESIAN.value,
+    ce.add_argument("--execution", choices=[k.value for k in ExecutionKind],
                     help="executions the certificate covers: 'cartesian' follow the planned path with any geometry "
-                         "in the calibration box; 'joint' keep the joints within eps_q + tracking error of the plan")
+                         "in the calibration box; 'joint' keep the joints within eps_q + tracking error of the plan "
+                         "(default: cartesian; with --plan, joint when the file gives no poses)")
     ce.add_argument("--a-peak", type=number, default=PLAN_A_PEAK, help="peak acceleration of the planned ramps, m/s^2")
     ce.add_argument("--method", choices=[m.value for m in Method], default=Method.SMOOTHSTEP.value, help=METHOD_HELP)
     ce.add_argument("--one-motion", type=count, default=ONE_MOTION_SAMPLES, metavar="SAMPLES",

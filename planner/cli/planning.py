@@ -7,16 +7,22 @@ from pathlib import Path
 
 import numpy as np
 
+from crosscert.robots.registry import get_entry
 from crosscert.verifier.files import atomic_write
+from crosscert.verifier.settings import Verdict
 from crosscert.verifier.plots import plot_certificate, plot_run
 from crosscert.verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max, compares
 from ..certify.crossing import certify_crossing
+from ..certify.trajectory import certify_path, certify_trajectory
 from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
-from ..task import Method, PlanningBounds
+from ..models import kinematic_model
+from ..progress import suffixed
+from ..refute import SearchCompleteness
+from ..task import ExecutionKind, Method, PlanningBounds
 from .setup import compile_ahead, phase_bar, task_setup
 
 __all__ = ["plan", "certify"]
@@ -36,15 +42,13 @@ def plan(a) -> int:
 def certify(a) -> int:
     """``crosscert certify``: v_min, its certificate, the refutation bound; a table, a JSON report and a figure."""
     compile_ahead()  # while this process plans (IPOPT) and compiles the tapes and the pose enumeration
+    if a.plan is not None:
+        return _certify_given_plan(a)
     entry, kin, task = task_setup(a)
     robot = entry.robot
-    a_max = None if a.a_max is None else (a.a_max[0] if len(a.a_max) == 1 else a.a_max)
-    bounds = PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a_max, a_peak=a.a_peak,
-                            method=a.method, dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
-                            execution=a.execution, one_motion=a.one_motion)
+    bounds = _bounds(a, entry, a.execution or ExecutionKind.CARTESIAN)
     out = Path(a.out)
-    units = {u.value for u in robot.joint_units}
-    joint_unit = units.pop() if len(units) == 1 else "rad or m (per joint)"
+    joint_unit = _joint_unit(robot)
     bar = phase_bar(not a.no_progress, "certify")
     # one worker process for both certifications' counterexample searches: the second reuses the
     # first's imports and NLP solvers (planner.refute builds one per sample count)
@@ -93,7 +97,7 @@ def certify(a) -> int:
         print(f"{r.v_sing:12.4f} {1e3 * r.max_width_pose:10.2f} {r.max_width_velocity:11.3f} "
               f"{r.forward_verdict.value:>15} {r.verdict.value:>15}")
     vmin = "none (no tried speed certifies)" if cert.v_min is None else f"{cert.v_min:.4f} m/s"
-    ref = "not computed" if a.no_refute else ("none found" if cert.refutation_bound is None else f"{cert.refutation_bound:.4f} m/s")
+    ref = _bound_text(cert.refutation_bound, cert.refutation_search, "m/s", 1.0, ".4f")
     print(f"minimal certified v_sing: {vmin}")
     if cert.v_min_at_lower_end:
         print(f"note: v_min is the slowest speed tried; lower --v-low (now {a.v_low} m/s) to look for a smaller one")
@@ -108,7 +112,7 @@ def certify(a) -> int:
     g = cert.bounce
     if g is not None:
         cf = "none (not at 30 mm)" if g.certified_from is None else f"{1e3 * g.certified_from:.1f} mm"
-        fl = "none found" if g.floor is None else f"{1e3 * g.floor:.2f} mm"
+        fl = _bound_text(g.floor, g.floor_search, "mm", 1e3, ".2f")
         print(f"bounces at {g.speed:.4f} m/s turning back short of the locus: mode-unchanged certified from {cf}; "
               f"crossing floor (no sound tracker certifies at or closer): {fl}")
     mc = cert.monte_carlo
@@ -132,6 +136,121 @@ def certify(a) -> int:
     return 0
 
 
+def _bounds(a, entry, execution) -> PlanningBounds:
+    """The certification's bounds from ``certify``'s options."""
+    a_max = None if a.a_max is None else (a.a_max[0] if len(a.a_max) == 1 else a.a_max)
+    xd0 = getattr(a, "xd0", None)
+    return PlanningBounds(eps_q=a.eps_q, tracking_error=a.tracking_error, a_max=a_max, a_margin=a.a_margin,
+                          a_peak=a.a_peak, method=a.method,
+                          dynamics=entry.require_dynamics() if a.method == Method.DYNAMIC else None,
+                          execution=execution, one_motion=a.one_motion, xd0=None if xd0 is None else tuple(xd0))
+
+
+def _joint_unit(robot) -> str:
+    units = {u.value for u in robot.joint_units}
+    return units.pop() if len(units) == 1 else "rad or m (per joint)"
+
+
+def _certify_given_plan(a) -> int:
+    """``crosscert certify --plan FILE``: the verdict of the user's own plan, on the certificate's schema."""
+    entry = get_entry(a.robot)
+    robot = entry.robot
+    bounds = _bounds(a, entry, a.execution or ExecutionKind.CARTESIAN)
+    out = Path(a.out)
+    bar = phase_bar(not a.no_progress, "certify")
+    kin = kinematic_model(robot)
+    retimed = None
+    pool = None if a.no_refute or not a.retime else SubprocessExecutor()
+    try:
+        cert = certify_trajectory(robot, a.plan, bounds, initial_mode=a.initial_mode, execution=a.execution,
+                                  monte_carlo_runs=a.monte_carlo, refute_plan=not a.no_refute, seed=a.seed,
+                                  progress=bar, kin=kin)
+        if a.retime:
+            retimed = certify_path(robot, cert.trajectory, cert.bounds, source=a.plan, v_low=a.v_low, tol=a.tol,
+                                   refute_tol=a.refute_tol, monte_carlo_runs=0, refute=not a.no_refute, seed=a.seed,
+                                   progress=suffixed(bar, " of the re-timed path"), kin=kin, executor=pool)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+        if bar is not None:
+            bar.close()
+    report = cert.summary()
+    report["retimed_path"] = None if retimed is None else retimed.summary()
+    report["command_line"] = ["crosscert", *a.argv]
+    out.mkdir(parents=True, exist_ok=True)
+    figure = _figure(cert, cert.bounds, out, _joint_unit(robot))
+    files = []
+    if figure is not None:
+        fn, *args, kwargs = figure[1]
+        fn(*args, **kwargs)
+        files.append(figure[0])
+    if retimed is not None and retimed.trajectory is not None:
+        p = retimed.trajectory
+        files.append(out / f"retimed_plan_{retimed.v_min:.3f}.csv")
+        write_trajectory(files[-1], p.t, p.q, x=p.x)
+        report["retimed_path"]["plan_file"] = str(files[-1])
+    js = out / "certificate.json"
+    atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
+    files.append(js)
+    if a.json:
+        print(json.dumps(report))
+        return 0
+    print(plan_verdict_line(cert) if retimed is None else retimed_line(cert, retimed))
+    r = cert.trials[0]
+    print(f"forward tracker: {r.forward_verdict.value}; widest boxes m_x {1e3 * r.max_width_pose:.2f} mm, "
+          f"m_xd {r.max_width_velocity:.3f} m/s" + ("" if cert.window is None
+                                                    else f"; window reasoning: {cert.window.verdict.value}"))
+    mc = cert.monte_carlo
+    if mc is not None:
+        print(f"Monte Carlo: {mc.detected_in_class}/{mc.in_class} admissible executions also decided by the run-time "
+              f"tracker ({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
+              f"{len(mc.wrong_verdicts)} wrong verdicts")
+    print(describe_execution(cert.execution, _joint_unit(robot)))
+    print("a_max used: " + cert.a_max_used.describe())
+    src = cert.plan_source
+    print(f"plan: {src.file}, sha256 {src.sha256}, {src.samples} samples at t_s = {src.t_s:g} s, poses {src.poses}")
+    print(f"elapsed {cert.elapsed_s:.1f} s ({', '.join(f'{k} {v:.1f}' for k, v in cert.timings_s.items())})")
+    for f in files:
+        print(f"wrote {f}")
+    return 0
+
+
+def plan_verdict_line(cert) -> str:
+    """The one line a user acts on: the given plan's speed at the singularity, its verdict and, when it is not
+    certified, what the counterexample search says."""
+    r = cert.trials[0]
+    head = f"your plan ({r.v_sing:.3f} m/s at the singularity): "
+    if cert.verdict is Verdict.MODE_CHANGED:
+        return head + "certified mode-changed for every admissible execution"
+    if cert.verdict is Verdict.INCONSISTENT:
+        return head + "inconsistent: the plan contradicts the bounds (no verdict)"
+    text = head + f"not certified ({cert.verdict.value})"
+    search = cert.refutation_search
+    if search is None:
+        return text + "; counterexample search not run"
+    if search is SearchCompleteness.FOUND:
+        return text + "; a verified counterexample explains its readings: no sound method certifies it"
+    return text + "; counterexample on its readings: " + search.describe()
+
+
+def retimed_line(cert, retimed) -> str:
+    """The one line of ``certify --plan --retime``: the plan's verdict, the slowest speed at which its path
+    certifies, and below which speed no sound method certifies it (or what that search rests on)."""
+    r = cert.trials[0]
+    line = f"your plan ({r.v_sing:.3f} m/s at the singularity): " + (
+        "certified" if cert.verdict is Verdict.MODE_CHANGED else f"not certified ({cert.verdict.value})")
+    if retimed.v_min is None:
+        line += f"; this path certifies at no speed tried up to {max(t.v_sing for t in retimed.trials):.3f} m/s"
+    else:
+        line += f"; this path certifies from {retimed.v_min:.3f} m/s"
+    search = retimed.refutation_search
+    if search is None:
+        return line
+    if retimed.refutation_bound is not None:
+        return line + f"; no sound method certifies it at or below {retimed.refutation_bound:.3f} m/s"
+    return line + "; counterexamples on the path: " + search.describe()
+
+
 def _print_at_robot_a_max(cert, no_refute: bool) -> None:
     """The v_min and refutation bound under the robot's physical a_max, or why they are not given."""
     at = cert.at_robot_a_max
@@ -147,7 +266,19 @@ def _print_at_robot_a_max(cert, no_refute: bool) -> None:
         vmin += f" (the slowest speed tried, {at.v_low:.4f} m/s)"
     ref = "not computed" if no_refute else ("none found" if at.refutation_bound is None
                                             else f"{at.refutation_bound:.4f} m/s")
+    if at.refutation_search is not None:
+        ref = _bound_text(at.refutation_bound, at.refutation_search, "m/s", 1.0, ".4f")
     print(f"at the robot's a_max ({robot_bound}): minimal certified v_sing {vmin}; refutation bound {ref}")
+
+
+def _bound_text(value, search, unit: str, scale: float, fmt: str) -> str:
+    """A refutation bound or crossing floor with what it rests on: never "none found" for searches that all
+    stopped at a limit (``search``: :class:`planner.refute.SearchCompleteness`, None when not run)."""
+    if search is None:
+        return "not computed"
+    if value is None:
+        return search.describe()
+    return f"{format(scale * value, fmt)} {unit}"
 
 
 def _figure(cert, bounds, out: Path, joint_unit: str):
@@ -159,18 +290,21 @@ def _figure(cert, bounds, out: Path, joint_unit: str):
         return None
     e, p = cert.enclosures, cert.trajectory
     name = cert.robot_name
-    png = out / f"certificate_{name}_{cert.v_min:.3f}.png"
+    given = cert.plan_source is not None
+    v = cert.trials[0].v_sing if given else cert.v_min
+    png = out / (f"certificate_{name}_plan.png" if given else f"certificate_{name}_{v:.3f}.png")
+    what = f"your plan at {v:.3f} m/s ({cert.verdict.value})" if given else f"crossing at v_min = {v:.3f} m/s"
     forward = {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode}
-    text = (f"{bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
+    text = (f"{'given' if given else bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
             f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
             f"t_s = {cert.bounds.t_s:.3g} s, "
             f"{cert.execution.kind.value} executions")
     if cert.window is not None:  # the window passes certified: draw them, the forward pass only beside them
         call = (plot_certificate, png, p.t_s, forward, cert.window, p.x, p.xd, p.k_sing,
-                {"title": f"{name}: crossing at v_min = {cert.v_min:.3f} m/s certified by window reasoning",
+                {"title": f"{name}: {what}, window reasoning",
                  "bounds": text})
     else:
         call = (plot_run, png, p.t_s, forward, p.x, p.xd, p.k_sing,
-                {"title": f"{name}: crossing at v_min = {cert.v_min:.3f} m/s certified by the forward pass",
+                {"title": f"{name}: {what}, forward pass",
                  "truth": "planned", "bounds": text})
     return png, call

@@ -40,7 +40,16 @@ from .problem import (
     SearchOutcome,
     ipopt_outcome,
 )
-from .results import BounceSearch, CrossingFloor, RecordingRefutation, RefutationBound, SpeedRefutation, Verification
+from .results import (
+    BounceSearch,
+    CrossingFloor,
+    RecordingRefutation,
+    RefutationBound,
+    SearchCompleteness,
+    SpeedRefutation,
+    Verification,
+    completeness,
+)
 from .search import crossing_floor, refutation_bound, verified_counterexample
 from .verify import BRANCH_TOL, STATE_TOL, verify_bounce, verify_counterexample, verify_crossing
 
@@ -60,9 +69,11 @@ __all__ = [
     "RecordingRefutation",
     "RefutationBound",
     "RefutingExplainer",
+    "SearchCompleteness",
     "SearchOutcome",
     "SpeedRefutation",
     "Verification",
+    "completeness",
     "crossing_floor",
     "verified_counterexample",
     "fk_branch_guess",

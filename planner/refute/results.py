@@ -10,13 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
 from .problem import Counterexample, CounterexampleKind, SearchOutcome, ipopt_outcome
 
 __all__ = ["BounceSearch", "CrossingFloor", "RecordingRefutation", "RefutationBound", "SpeedRefutation", "Verification",
-           "deciding_attempt"]
+           "SearchCompleteness", "completeness", "deciding_attempt"]
 
 @dataclass(frozen=True)
 class Verification:
@@ -124,6 +125,47 @@ def deciding_attempt(attempts: Sequence[BounceSearch]) -> BounceSearch | None:
     if converged:
         return converged[-1]
     return attempts[-1] if attempts else None
+
+
+#: Outcomes of an attempt that ended on its own (a local conclusion); a time or iteration cap, a solver error
+#: or no solve at all says nothing about the neighbourhood the attempt started in.
+_ENDED = (SearchOutcome.INFEASIBLE, SearchOutcome.REJECTED, SearchOutcome.NOT_CONVERGED)
+
+
+class SearchCompleteness(StrEnum):
+    """What a set of counterexample searches (one bound or floor) rests on, beside its value.
+
+    ``NOT_SEARCHED_TO_COMPLETION`` is never reported as "none found": every search stopped at its time or
+    iteration cap or failed inside the solver (or none ran), so the absence of a counterexample says
+    nothing, not even locally.
+    """
+
+    #: A verified counterexample exists: the bound (or floor) is a value.
+    FOUND = "counterexample-found"
+    #: No verified counterexample, and at least one search ended on its own (a candidate rejected, locally
+    #: infeasible, stalled): "none found" by a local solver, never a proof that none exists.
+    NONE_FOUND = "none-found"
+    #: No verified counterexample, and every search stopped at a limit or none ran.
+    NOT_SEARCHED_TO_COMPLETION = "not-searched-to-completion"
+
+    def describe(self) -> str:
+        """The words a printout uses for a missing bound."""
+        if self is SearchCompleteness.NOT_SEARCHED_TO_COMPLETION:
+            return ("not searched to completion (every search stopped at its time or iteration limit or failed in "
+                    "the solver, or none ran)")
+        if self is SearchCompleteness.NONE_FOUND:
+            return "none found (a local search: not a proof that none exists)"
+        return "found"
+
+
+def completeness(rows) -> SearchCompleteness:
+    """:class:`SearchCompleteness` of the rows of one search (``SpeedRefutation`` or ``RecordingRefutation``)."""
+    rows = list(rows)
+    if any(r.verified for r in rows):
+        return SearchCompleteness.FOUND
+    if any(a.outcome in _ENDED for r in rows for a in r.attempts):
+        return SearchCompleteness.NONE_FOUND
+    return SearchCompleteness.NOT_SEARCHED_TO_COMPLETION
 
 
 def row_outcome(verified: bool, attempts) -> SearchOutcome:
