@@ -132,6 +132,20 @@ class CrossingCertificate:
             return False
         return self.v_min <= min(t.v_sing for t in self.trials)
 
+    def certified_run(self) -> dict | None:
+        """What a run-time check of an execution needs (:mod:`planner.certify.envelope`): the sample at which
+        the certifying run decided (its forward pass's streak start, else the plan's last sample: the window
+        passes read the whole run) and the initial and final modes; None without a decided certificate."""
+        if self.enclosures is None or self.trajectory is None or self.verdict not in (Verdict.MODE_CHANGED,
+                                                                                       Verdict.MODE_UNCHANGED):
+            return None
+        e = self.enclosures
+        forward = e.verdict is self.verdict and e.certified_at_step >= 0
+        final = -e.initial_mode if self.verdict is Verdict.MODE_CHANGED else e.initial_mode
+        return {"decided_at_sample": int(e.certified_at_step) if forward else len(self.trajectory.q) - 1,
+                "decided_by": "forward" if forward else "window", "initial_mode": int(e.initial_mode),
+                "final_mode": int(final)}
+
     def _named(self, xi) -> dict | None:
         """A geometry vector as ``{parameter name: value}`` (SI)."""
         if xi is None:
@@ -189,6 +203,7 @@ class CrossingCertificate:
                 for r in self.refutation
             ],
             "window": None if self.window is None else self.window.summary(),
+            "certified_run": self.certified_run(),
             "bounce": None if self.bounce is None else self.bounce.summary(),
             "monte_carlo": None if self.monte_carlo is None else self.monte_carlo.summary(),
             "versions": self.versions,

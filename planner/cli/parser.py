@@ -137,6 +137,11 @@ def _tracker_options(p, robot):
                    help="joint-data error model (paper = quantisation only, NOT sound)")
     p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
                    help="tracker implementation: compiled kernels or the numpy reference (same results)")
+    p.add_argument("--certificate", metavar="JSON",
+                   help="a certificate.json of crosscert certify: while the readings stay in its certified envelope "
+                        "around the plan, its verdict holds for this execution from the sample its run decided")
+    p.add_argument("--certified-plan", metavar="FILE",
+                   help="with --certificate: the certified plan file (default: the one it names, beside it)")
 
 
 def _task_options(p):

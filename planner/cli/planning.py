@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from crosscert.verifier.trajfile import write_trajectory
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max, compares
 from ..certify.crossing import certify_crossing
-from ..certify.trajectory import certify_path, certify_trajectory
+from ..certify.trajectory import PlanSource, certify_path, certify_trajectory
 from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
@@ -82,6 +83,10 @@ def certify(a) -> int:
     report = cert.summary()
     report["command_line"] = ["crosscert", *a.argv]
     out.mkdir(parents=True, exist_ok=True)
+    if cert.trajectory is not None:
+        # the certified plan beside its certificate: what `monitor --certificate` holds a run against
+        files.append(out / CERTIFIED_PLAN)
+        report["plan"] = _write_plan(files[-1], cert.trajectory)
     if figure is not None and drawing is None:
         fn, *args, kwargs = figure[1]
         fn(*args, **kwargs)
@@ -117,9 +122,10 @@ def certify(a) -> int:
               f"crossing floor (no sound tracker certifies at or closer): {fl}")
     mc = cert.monte_carlo
     if mc is not None:
-        print(f"Monte Carlo at v_min: {mc.detected_in_class}/{mc.in_class} admissible executions detected "
-              f"({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
-              f"{len(mc.wrong_verdicts)} wrong verdicts")
+        print(f"Monte Carlo at v_min: {mc.detected_in_class}/{mc.in_class} admissible executions also decided by "
+              f"the run-time tracker alone ({mc.detected}/{mc.runs} in all; every admissible one is covered by the "
+              f"certificate), {len(mc.containment_failures)} containment failures, {len(mc.wrong_verdicts)} wrong "
+              "verdicts")
     phases = ", ".join(f"{k} {v:.1f}" for k, v in cert.timings_s.items())
     if cert.execution is not None:
         print(describe_execution(cert.execution, joint_unit))
@@ -134,6 +140,17 @@ def certify(a) -> int:
     for f in files:
         print(f"wrote {f}")
     return 0
+
+
+#: The file ``certify`` writes the certified plan of a task to, in ``--out`` (its certificate names it).
+CERTIFIED_PLAN = "certified_plan.csv"
+
+
+def _write_plan(path: Path, plan) -> dict:
+    """Write ``plan`` (t, q, x) and return the certificate's ``plan`` entry: its file name and sha256."""
+    write_trajectory(path, plan.t, plan.q, x=plan.x)
+    return PlanSource(path.name, hashlib.sha256(path.read_bytes()).hexdigest(), len(plan.t), float(plan.t_s),
+                      "planned").summary()
 
 
 def _bounds(a, entry, execution) -> PlanningBounds:
@@ -203,8 +220,8 @@ def _certify_given_plan(a) -> int:
     mc = cert.monte_carlo
     if mc is not None:
         print(f"Monte Carlo: {mc.detected_in_class}/{mc.in_class} admissible executions also decided by the run-time "
-              f"tracker ({mc.detected}/{mc.runs} in all), {len(mc.containment_failures)} containment failures, "
-              f"{len(mc.wrong_verdicts)} wrong verdicts")
+              f"tracker alone ({mc.detected}/{mc.runs} in all; every admissible one is covered by the certificate), "
+              f"{len(mc.containment_failures)} containment failures, {len(mc.wrong_verdicts)} wrong verdicts")
     print(describe_execution(cert.execution, _joint_unit(robot)))
     print("a_max used: " + cert.a_max_used.describe())
     src = cert.plan_source
@@ -282,7 +299,7 @@ def _bound_text(value, search, unit: str, scale: float, fmt: str) -> str:
 
 
 def _figure(cert, bounds, out: Path, joint_unit: str):
-    """``(png path, (function, *args, kwargs))`` of the certificate's figure; None without a certificate.
+    """``(png path, (function, *args, kwargs))`` of the certificate's figure; None without a certifying run.
 
     The call is a module-level function with picklable arguments, so the worker process can draw it.
     """
@@ -293,7 +310,12 @@ def _figure(cert, bounds, out: Path, joint_unit: str):
     given = cert.plan_source is not None
     v = cert.trials[0].v_sing if given else cert.v_min
     png = out / (f"certificate_{name}_plan.png" if given else f"certificate_{name}_{v:.3f}.png")
-    what = f"your plan at {v:.3f} m/s ({cert.verdict.value})" if given else f"crossing at v_min = {v:.3f} m/s"
+    subject = f"your plan at {v:.3f} m/s" if given else f"crossing at v_min = {v:.3f} m/s"
+    done = "certified" if cert.verdict is Verdict.MODE_CHANGED else f"{cert.verdict.value} after"
+
+    def what(by):
+        return f"{subject} {done} by {by}" if done == "certified" else f"{subject}: {done} {by}"
+
     forward = {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode}
     text = (f"{'given' if given else bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
             f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
@@ -301,10 +323,10 @@ def _figure(cert, bounds, out: Path, joint_unit: str):
             f"{cert.execution.kind.value} executions")
     if cert.window is not None:  # the window passes certified: draw them, the forward pass only beside them
         call = (plot_certificate, png, p.t_s, forward, cert.window, p.x, p.xd, p.k_sing,
-                {"title": f"{name}: {what}, window reasoning",
+                {"title": f"{name}: {what('window reasoning')}",
                  "bounds": text})
     else:
         call = (plot_run, png, p.t_s, forward, p.x, p.xd, p.k_sing,
-                {"title": f"{name}: {what}, forward pass",
+                {"title": f"{name}: {what('the forward pass')}",
                  "truth": "planned", "bounds": text})
     return png, call

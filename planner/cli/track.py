@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from crosscert.robots.errors import CrosscertError, TrajectoryFileError
+from crosscert.robots.errors import CrosscertError, InputError, TrajectoryFileError
 from crosscert.verifier.plots import plot_run
 from crosscert.verifier.step import Backend, Event
 from crosscert.verifier.tracker import Tracker
@@ -19,6 +19,7 @@ from crosscert.verifier.tracker import initial_box_from_mode, verdict_of
 from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
 from crosscert.verifier.window import FixedLagWindow, Reasoning, VerdictReason, track_window
 
+from ..certify.envelope import CertifiedEnvelope, EnvelopeMonitor, EnvelopeState
 from ..progress import Phase, enter
 from ..refute import RefutingExplainer
 from .setup import compile_ahead, phase_bar, tracker_setup
@@ -109,8 +110,9 @@ def check(a) -> int:
     if a.backend == Backend.COMPILED.value:
         compile_ahead(a.velocity_model)
     robot, model, make_settings, x0 = tracker_setup(a)
+    envelope = _envelope(a, robot)
     t0 = time.perf_counter()
-    run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False)
+    run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False, envelope=envelope)
     bar = phase_bar(not a.no_progress and not a.json, "check")
     try:
         out, name = _tracked(a, robot, model, run, bar)
@@ -122,6 +124,8 @@ def check(a) -> int:
         print(json.dumps(out))
     else:
         print(f"verdict: {out['verdict']}")
+        if out["certificate"] is not None:
+            print(out["certificate"]["describe"])
         if out["window"] is not None:
             w = out["window"]
             hyps = ", ".join("final mode {:+d} {}".format(h["final_mode"], h["status"]) for h in w["hypotheses"])
@@ -206,8 +210,9 @@ class Monitor:
         Print every event as it happens (``monitor``).
     """
 
-    def __init__(self, a, model, make_settings, x0, *, record: bool = False, echo: bool = True):
+    def __init__(self, a, model, make_settings, x0, *, record: bool = False, echo: bool = True, envelope=None):
         self.a, self.model, self.make_settings, self.x0 = a, model, make_settings, x0
+        self.envelope = envelope  # --certificate: planner.certify.envelope.EnvelopeMonitor
         self.record, self.echo = record, echo
         self.tracker = None
         self.x0_used = None  # the initial box the tracker started from
@@ -219,6 +224,7 @@ class Monitor:
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
         self.latency = LatencyStats()
+        self.envelope_latency = LatencyStats()
         self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
 
     def feed(self, line: int, t: float, q, t_s: float | None) -> None:
@@ -230,6 +236,10 @@ class Monitor:
                 return
             settings = self.make_settings(t_s)
             self.t_s = float(t_s)
+            if self.envelope is not None and abs(self.t_s - self.envelope.envelope.t_s) > 1e-9 * self.t_s:
+                raise InputError(f"--certificate: the recording's step is {self.t_s:g} s, the certified plan's "
+                                 f"{self.envelope.envelope.t_s:g} s: the certificate covers executions sampled "
+                                 "at its plan's period")
             x0 = self.x0
             if x0 is None:
                 x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
@@ -242,6 +252,8 @@ class Monitor:
                 self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
                                        spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
         for line, t, q in self.pending:
+            if self.envelope is not None:
+                self._feed_envelope(line, t, q)
             if self.lagger is not None:
                 self._feed_lagged(line, t, q)
                 continue
@@ -258,6 +270,18 @@ class Monitor:
                 text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
                 print(json.dumps(ev) if self.a.json else text, flush=True)
         self.pending.clear()
+
+    def _feed_envelope(self, line: int, t: float, q) -> None:
+        """``--certificate``: the reading against the certified envelope; an event when the state changes."""
+        before = self.envelope.status.state
+        t0 = time.perf_counter_ns()
+        st = self.envelope.update(q)
+        self.envelope_latency.add(time.perf_counter_ns() - t0)
+        if st.state is before or not self.echo or st.state is EnvelopeState.BEYOND_PLAN:
+            return
+        ev = {"event": f"certificate-{st.state.value}", "k": st.k, "t": t, "line": line, **st.summary()}
+        print(json.dumps(ev) if self.a.json else f"sample {st.k} (t = {t:.9g} s): {self.envelope.describe()}",
+              flush=True)
 
     def _feed_lagged(self, line: int, t: float, q) -> None:
         """``--lag``: events of sample ``k - lag``, known once sample ``k`` is read."""
@@ -309,13 +333,27 @@ class Monitor:
         if self.lagger is not None and bad < 0:
             final = int(self.mode_now)
         so_far = verdict_of(init, final, bad >= 0).value
+        certificate, step = None, (int(st.streak[0]) if final else None)
+        if self.envelope is not None:
+            env, status = self.envelope.envelope, self.envelope.status
+            certificate = {**status.summary(), "decided_at_sample": env.decided_at, "describe": self.envelope.describe(),
+                           "latency_us_mean": self.envelope_latency.mean_us(),
+                           "latency_us_max": self.envelope_latency.max_us()}
+            if status.state is EnvelopeState.CERTIFIED and so_far != Verdict.INCONSISTENT.value:
+                # the readings held to the certified run through its decision and up to now: its verdict is this
+                # run's; a decided tracker that disagrees means an assumption was violated
+                if so_far != Verdict.UNKNOWN.value and so_far != env.verdict.value:
+                    so_far = Verdict.INCONSISTENT.value
+                else:
+                    so_far, init, final, step = env.verdict.value, env.initial_mode, env.final_mode, env.decided_at
         return {
+            "certificate": certificate,
             # a verdict is about the whole recording: an interrupted one has only a prefix's
             "verdict": Verdict.UNKNOWN.value if error is not None else so_far,
             "verdict_so_far": so_far,
             "initial_mode": init,
             "final_mode": final,
-            "certified_at_step": int(st.streak[0]) if final else None,
+            "certified_at_step": step,
             "inconsistent_at_step": bad if bad >= 0 else None,
             "steps": 0 if st is None else st.k,
             "t_s": None if st is None else float(self.tracker.config.settings.t_s),
@@ -340,6 +378,8 @@ class Monitor:
                                                    f"{out['verdict_so_far']})" if error else ""))
             for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
                 print(f"{key}: {out[key]}")
+            if out["certificate"] is not None:
+                print(out["certificate"]["describe"])
             if out["steps"]:
                 print(f"update latency: mean {out['latency_us_mean']} us, p99 {out['latency_us_p99']} us, "
                       f"max {out['latency_us_max']} us")
@@ -347,6 +387,16 @@ class Monitor:
         if out["inconsistent_at_step"] is not None and error is None:  # else the error is the one line on stderr
             print(INCONSISTENT_HINT.format(k=out["inconsistent_at_step"]), file=sys.stderr)
         return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
+
+
+def _envelope(a, robot):
+    """``--certificate``: the envelope check of this run (read and checked before any input), or None."""
+    if getattr(a, "certificate", None) is None:
+        if getattr(a, "certified_plan", None) is not None:
+            raise InputError("--certified-plan goes with --certificate")
+        return None
+    eps_q = robot.eps_q if a.eps_q is None else a.eps_q
+    return EnvelopeMonitor(CertifiedEnvelope.load(a.certificate, robot, eps_q, a.certified_plan))
 
 
 def load_kernels(robot, model, settings, spread_hypotheses):
@@ -369,7 +419,7 @@ def monitor(a) -> int:
     settings.validated(robot.n)  # bad bounds fail before any input is read
     if a.backend == Backend.COMPILED.value:
         load_kernels(robot, model, settings, a.spread_hypotheses)
-    mon = Monitor(a, model, make_settings, x0)
+    mon = Monitor(a, model, make_settings, x0, envelope=_envelope(a, robot))
     with open_trajectory(a.trajectory) as (src, name):
         reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
                                   q_range=(robot.q_lo_array, robot.q_hi_array))
