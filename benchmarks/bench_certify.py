@@ -56,7 +56,7 @@ PARTS = (
     ("  plans (plan_crossing)", "planner/plan.py", "plan_crossing"),
     ("  execution classes (cartesian_class)", "planner/execution.py", "cartesian_class"),
     ("  forward tracker runs (track)", "verifier/tracker.py", "track"),
-    ("  window passes (track_window)", "verifier/window.py", "track_window"),
+    ("  window passes (track_window)", "verifier/window/offline.py", "track_window"),
     ("Monte Carlo (monte_carlo_runs)", "planner/montecarlo.py", "monte_carlo_runs"),
     ("  batched forward tracking (track_batch)", "verifier/tracker.py", "track_batch"),
     ("refutation bound (refute_speed)", "planner/certify/crossing.py", "refute_speed"),
@@ -69,7 +69,7 @@ PARTS = (
     ("  IPOPT iterations (ParametricSolver.solve)", "planner/ipopt.py", "solve"),
     ("  solver builds (ParametricSolver.__init__)", "planner/ipopt.py", "__init__"),
     ("  trusted checks (verify_counterexample)", "planner/refute/verify.py", "verify_counterexample"),
-    ("every window pass (verifier.window._run)", "verifier/window.py", "_run"),
+    ("every window pass (verifier.window.passes.run_pass)", "verifier/window/passes.py", "run_pass"),
     ("every compiled kernel call (compiled/step.py run)", "verifier/compiled/step.py", "run"),
     ("CasADi numeric kinematics (KinematicModel._call)", "robots/kinematics.py", "_call"),
 )

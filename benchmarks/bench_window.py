@@ -219,26 +219,26 @@ def _cpu() -> str:
 
 
 class _Clock:
-    """Wall time spent inside some functions of :mod:`verifier.window` (patched in its namespace)."""
+    """Wall time spent inside some functions called by the window's modules (patched in their namespaces)."""
 
-    def __init__(self, module, names):
-        self.module, self.total = module, {}
-        self.saved = {n: getattr(module, n) for n in names if hasattr(module, n)}
+    def __init__(self, modules, names):
+        self.total = {}
+        self.saved = {(m, n): getattr(m, n) for m in modules for n in names if hasattr(m, n)}
 
     def __enter__(self):
-        for name, fn in self.saved.items():
+        for (module, name), fn in self.saved.items():
             def timed(*a, _fn=fn, _name=name, **kw):
                 t0 = time.perf_counter()
                 try:
                     return _fn(*a, **kw)
                 finally:
                     self.total[_name] = self.total.get(_name, 0.0) + time.perf_counter() - t0
-            setattr(self.module, name, timed)
+            setattr(module, name, timed)
         return self
 
     def __exit__(self, *exc):
-        for name, fn in self.saved.items():
-            setattr(self.module, name, fn)
+        for (module, name), fn in self.saved.items():
+            setattr(module, name, fn)
 
 
 def _digest(w) -> str:
@@ -367,7 +367,9 @@ def speed(geometries: int, parts: str = "S1,S2,S3", explain: bool = False) -> No
     q = runs[und[0]]
     print(f"[S2] where an undecided run spends its time (geometry {und[0]}, {len(q)} samples)", flush=True)
     ex = _explainer(explain)
-    with _Clock(W, ("advance", "pose_solutions", "contract_tubes", "one_motion_rows")) as clock:
+    # the modules that call them: verifier.window's passes and hypotheses (one module in older checkouts)
+    modules = [getattr(W, m) for m in ("passes", "hypotheses") if hasattr(W, m)] or [W]
+    with _Clock(modules, ("advance", "pose_solutions", "contract_tubes", "one_motion_rows")) as clock:
         t0 = time.perf_counter()
         track_window(im, q, s, initial_mode=1, **({"explainer": ex} if explain else {}))
         total = time.perf_counter() - t0

@@ -16,10 +16,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import crosscert.verifier.window as W  # noqa: E402
+import crosscert.verifier.window.offline as O  # noqa: E402
 from crosscert.verifier.one_motion import refute_row  # noqa: E402
 
 CAPTURED = []
-_real_decide = W._decide
+_real_decide = O.decide
 
 
 def _capture(hyps, passes, *a, **kw):
@@ -28,7 +29,7 @@ def _capture(hyps, passes, *a, **kw):
     return out
 
 
-W._decide = _capture
+O.decide = _capture  # where track_window looks it up
 
 
 def rows_report(label, hyps, q, xi_true, size, velocity):

@@ -38,8 +38,8 @@ _API = {
     "TrackerSettings": "verifier.settings",
     "Verdict": "verifier.settings",
     "track": "verifier.tracker",
-    "track_window": "verifier.window",
-    "FixedLagWindow": "verifier.window",
+    "track_window": "verifier.window.offline",
+    "FixedLagWindow": "verifier.window.online",
     "Trajectory": "verifier.trajectory",
     "read_trajectory": "verifier.trajfile",
     # robots and errors

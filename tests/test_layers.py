@@ -139,6 +139,17 @@ def test_the_contract_sees_a_violation(tmp_path):
     assert ("planner.cli", ("main",), 3) in found
 
 
+def test_the_contract_resolves_imports_inside_a_sub_package(tmp_path):
+    """In a sub-package (``verifier.window``), a sibling's private name is still across modules, and ``..``
+    reaches the parent package: a private helper shared by sibling modules must be made public."""
+    bad = tmp_path / "mod.py"
+    bad.write_text("from .hypotheses import _decide\nfrom ..step import advance\nfrom . import passes\n")
+    found = _imports("verifier.window.mod", bad)
+    assert ("verifier.window.hypotheses", ("_decide",), 1) in found
+    assert ("verifier.step", ("advance",), 2) in found
+    assert ("verifier.window.passes", (), 3) in found  # a sibling module, not a name
+
+
 # ------------------------------------------------------------------ one owner of the assumptions
 #: The bounds robots.assumptions owns; only it decides whether a value of one is admissible.
 BOUNDS = {"eps_q", "t_s", "a_max", "xd0", "v_max", "v0_max", "eps_q_fast", "drift_rate"}

@@ -212,8 +212,9 @@ def test_compiled_contraction_is_the_reference_on_a_window_run(monkeypatch):
     """The tubes the window contracts on the catalogue's slow crossing (``crossing_0500``, a few rounds), after
     every pass: the kernel gives numpy's floats bit for bit (the window's compiled backend uses the kernel,
     and its verdicts and reported tubes are those of the reference's contraction)."""
-    import crosscert.verifier.window as W
+    import crosscert.verifier.window.hypotheses as H
     from problems import CATALOGUE, default_settings, interval_model, run_of
+    from crosscert.verifier.window import track_window
 
     seen = []
 
@@ -221,9 +222,9 @@ def test_compiled_contraction_is_the_reference_on_a_window_run(monkeypatch):
         seen.append((x.copy(), xd.copy(), t_s, np.array(a_max)))
         return contract_tubes(x, xd, t_s, a_max, *args, **kw)
 
-    monkeypatch.setattr(W, "contract_tubes", spy)
+    monkeypatch.setattr(H, "contract_tubes", spy)
     run = run_of(CATALOGUE["crossing_0500"])
-    W.track_window(interval_model(), run.q_meas, default_settings(), initial_mode=1, max_geometries=4)
+    track_window(interval_model(), run.q_meas, default_settings(), initial_mode=1, max_geometries=4)
     assert len(seen) >= 4
     pairs = 0
     for x, xd, t_s, a in seen:

@@ -244,7 +244,7 @@ def test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_fl
     """``crosscert certify``'s plan at 0.9557 m/s: undecided by the passes alone (the bounce hypothesis
     survives with 10 sub-boxes), certified once the rows of a spent budget are refuted one motion at a time;
     at the refutation bound (0.8438 m/s, a verified bounce explains the readings) the bounce hypothesis
-    survives.  Fails without the call in ``verifier.window._decide``."""
+    survives.  Fails without the call in ``verifier.window.hypotheses.decide``."""
     from crosscert.planner.certify.plan import certify_speed
     from crosscert.planner.task import PlanningBounds, benchmark_task
     from crosscert.robots import KinematicModel, get_entry
@@ -358,7 +358,7 @@ def test_the_contractor_certifies_the_certify_plan_at_0930():
     rows' sub-boxes are narrowed to the geometries one motion explains (and another round runs with them).
     (At the refutation bound the bounce hypothesis survives the same step:
     ``test_the_one_motion_refutation_certifies_the_plan_at_09557_and_not_at_the_floor``.)  Fails without the
-    narrowing kept in ``verifier.window._Hypothesis.one_motion``."""
+    narrowing kept in ``verifier.window.hypotheses.Hypothesis.one_motion``."""
     from crosscert.planner.certify.plan import certify_speed
     from crosscert.planner.task import PlanningBounds, benchmark_task
     from crosscert.robots import KinematicModel, get_entry

@@ -11,7 +11,7 @@ Removal checks (each made a test here fail, 2026-12-01): the velocity sign
 flip of the time reversal (``_reverse``), undecided boxes kept in the final
 box of a hypothesis (``m in (mode, 0)``), the velocity prior of the passes.
 2026-12-02 (issue 20), the geometry sub-boxes kept from pass to pass
-(``_Hypothesis.take``): shrunk by one ulp per side, the true geometry test
+(``Hypothesis.take``): shrunk by one ulp per side, the true geometry test
 fails; shrunk by 10 % of their width per side, the adversarial soundness test
 (pose tube without the truth at sample 0), the true geometry test and the
 test of runs ending at the locus fail.
@@ -88,7 +88,7 @@ def test_window_keeps_the_true_geometry(results):
     """The rows' calibration sub-boxes are contracted by every sample of every pass (``keep_xi``) and kept
     from pass to pass: the true geometry (at a corner of ``[xi]`` in most runs) must stay in one of the
     true hypothesis' surviving sub-boxes.  Removal check: shrinking the sub-boxes a pass returns by one ulp
-    on each side (``_Hypothesis.take``) loses the corner geometries, and this test fails."""
+    on each side (``Hypothesis.take``) loses the corner geometries, and this test fails."""
     passed = sum(_true_geometry_kept(sc, res) for sc, res in results)
     assert passed >= 3, passed  # not vacuous: the window passes ran under the true hypothesis
 
@@ -119,7 +119,7 @@ def test_recordings_ending_at_the_locus(settings, before):
     hypothesis is true, so the run is neither inconsistent nor certified; before it, the true mode survives.
 
     End to end, the guard of the undecided forward-kinematics solutions in the final boxes
-    (``_hull_of_mode``): with them dropped, the tubes of both hypotheses lose the truth at the last sample
+    (``hull_of_mode``): with them dropped, the tubes of both hypotheses lose the truth at the last sample
     of the cut on the locus (``before`` = 0), and this test fails."""
     from problems import simulate
 
@@ -151,10 +151,10 @@ def test_early_stop_is_reported(settings, monkeypatch):
     violation is simulated: every window pass after the forward one reports its rows empty, so the first
     hypothesis is refuted at its first pass and the second never runs one (fails when the survivor is
     reported complete)."""
-    import crosscert.verifier.window as W
+    import crosscert.verifier.window.passes as P
     from problems import simulate
 
-    real = W._run
+    real = P.run_pass
 
     def emptied(config, q, x0, xi_rows, prior):
         x, xd, md, bad, xi = real(config, q, x0, xi_rows, prior)
@@ -164,7 +164,7 @@ def test_early_stop_is_reported(settings, monkeypatch):
     honest = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
     assert honest.forward_verdict is Verdict.UNKNOWN
     assert all(h.complete for h in honest.hypotheses), honest.summary()  # neither refuted: every round ran
-    monkeypatch.setattr(W, "_run", emptied)
+    monkeypatch.setattr(P, "run_pass", emptied)
     res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4)
     first, second = res.hypotheses
     assert first.status is HypothesisStatus.REFUTED and first.passes == 1 and first.complete, res.summary()
@@ -175,7 +175,7 @@ def test_early_stop_is_reported(settings, monkeypatch):
 def test_final_boxes_keep_poses_of_undecided_mode(settings):
     """On the locus the true pose is the limit of both modes: the final box of either hypothesis holds it."""
     from problems import simulate
-    from crosscert.verifier.window import _final_box
+    from crosscert.verifier.window.passes import _final_box
 
     run = simulate(1.0, True, 0)
     k = run.k_sing
@@ -268,16 +268,16 @@ def test_rounds_go_to_the_hypothesis_with_fewest_rows(settings, monkeypatch):
     those with budget left.  On a simulated run where nothing is refuted, a hypothesis has budget left
     exactly while it has a round to come.  Removal check: giving every round to the first open hypothesis
     (no balancing) fails here."""
-    import crosscert.verifier.window as W
+    import crosscert.verifier.window.hypotheses as H
     from problems import simulate
 
-    order, real = [], W._round
+    order, real = [], H._round
 
     def logged(h, passes, max_passes, rel_tol):
         order.append((h.m, passes.rows))
         real(h, passes, max_passes, rel_tol)
 
-    monkeypatch.setattr(W, "_round", logged)
+    monkeypatch.setattr(H, "_round", logged)
     run = simulate(1.0, False, 0)
     # one_motion=0: the one-motion refutation decides this run (2026-12-02), and a refutation ends the rounds
     res = track_window(interval_model(), run.q_meas, settings, initial_mode=1, max_geometries=4, one_motion=0)
@@ -344,16 +344,16 @@ def test_fixed_lag_runs_only_rows_that_can_change_the_answer(runs, settings, mon
     """The fixed-lag window runs its (hypothesis, geometry) rows a pair at a time and stops once no row left
     can change the answer: the results must be those of running every row at once (on runs where the
     window certifies lagged modes the tracker did not)."""
-    import crosscert.verifier.window as W
+    import crosscert.verifier.window.online as O
 
     def results(sc):
         x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
-        fl = W.FixedLagWindow(interval_model(), settings, x0, lag=20)
+        fl = O.FixedLagWindow(interval_model(), settings, x0, lag=20)
         return [fl.update(q) for q in sc.q_meas]
 
     for sc in (runs[3], runs[N_RUNS + 4], runs[N_RUNS + 9]):
         lazy = results(sc)
-        monkeypatch.setattr(W, "_LAG_BATCH", 10 ** 6)  # every useful row in the first call: nothing skipped
+        monkeypatch.setattr(O, "_LAG_BATCH", 10 ** 6)  # every useful row in the first call: nothing skipped
         full = results(sc)
         monkeypatch.undo()
         assert lazy == full, sc.name
@@ -365,7 +365,7 @@ def test_halving_follows_the_pose_spread_and_covers_the_parent():
     through a shared float split point, and along the widest relative width where the spread is not finite."""
     from problems import simulate
     from crosscert.verifier.step import partition_xi
-    from crosscert.verifier.window import _bisect, _pose_spread
+    from crosscert.verifier.window.hypotheses import _bisect, _pose_spread
 
     im = interval_model()
     XI = im.xi_box()
@@ -389,12 +389,12 @@ def test_halving_follows_the_pose_spread_and_covers_the_parent():
 
 
 def test_the_pose_spread_of_rows_evaluated_together_is_that_of_each_alone():
-    """``_Hypothesis.split`` evaluates both ends of every row in one call (per-row readings): each row's
+    """``Hypothesis.split`` evaluates both ends of every row in one call (per-row readings): each row's
     spread must be bit for bit what a call of its own gives, or the halving (and so the verdicts) would
     depend on how rows are batched."""
     from problems import simulate
     from crosscert.verifier.step import partition_xi
-    from crosscert.verifier.window import _pose_spread
+    from crosscert.verifier.window.hypotheses import _pose_spread
 
     im = interval_model()
     XI = im.xi_box()
@@ -418,12 +418,12 @@ def test_acceleration_bound_between_samples_certifies_the_plan_at_0961(monkeypat
     """``crosscert certify``'s plan at 0.961 m/s (derived a_max 80 / 66 m/s^2): undecided by the passes
     alone (the bounce hypothesis survives with 9-10 sub-boxes), certified once every pass's tubes are
     contracted with the two-sample acceleration bound (verifier.motion_model, docs/soundness.md, "Window
-    reasoning", step 8).  Removal check (2026-12-02): without the call in ``_Hypothesis.take`` this test
+    reasoning", step 8).  Removal check (2026-12-02): without the call in ``Hypothesis.take`` this test
     fails (``unknown``).  The one-motion step (step 9) is off here: it certifies this plan on its own."""
-    import crosscert.verifier.window as W
+    import crosscert.verifier.window.hypotheses as H
     from crosscert.planner.certify.plan import certify_speed
 
-    monkeypatch.setattr(W, "one_motion_rows",
+    monkeypatch.setattr(H, "one_motion_rows",
                         lambda model, s, q, XI, *a, **kw: (np.zeros(len(XI[0]), dtype=bool), XI[0].copy(), XI[1].copy()))
     from crosscert.planner.task import benchmark_task
     from crosscert.robots import KinematicModel
@@ -438,10 +438,10 @@ def test_the_compiled_contraction_changes_no_reported_box(monkeypatch):
     """The window's compiled backend contracts its tubes with the compiled pair kernel
     (``contract_tubes(compiled=True)``); with numpy's contraction instead, the same run reports the same
     verdicts, passes and sub-boxes and the same tubes, bit for bit (catalogue problem ``crossing_0500``)."""
-    import crosscert.verifier.window as W
+    import crosscert.verifier.window.hypotheses as H
     from problems import CATALOGUE, default_settings, run_of
 
-    real, calls = W.contract_tubes, []
+    real, calls = H.contract_tubes, []
 
     def reference(*args, compiled=False, **kw):
         calls.append(compiled)
@@ -449,7 +449,7 @@ def test_the_compiled_contraction_changes_no_reported_box(monkeypatch):
 
     run, s = run_of(CATALOGUE["crossing_0500"]), default_settings()
     kernel = track_window(interval_model(), run.q_meas, s, initial_mode=1, max_geometries=8)
-    monkeypatch.setattr(W, "contract_tubes", reference)
+    monkeypatch.setattr(H, "contract_tubes", reference)
     numpy = track_window(interval_model(), run.q_meas, s, initial_mode=1, max_geometries=8)
     assert calls and all(calls)  # the compiled backend asked for the kernel, and got numpy's here
     assert sum(h.passes for h in kernel.hypotheses) >= 4, kernel.summary()
@@ -467,13 +467,13 @@ def test_a_sub_box_the_one_motion_step_left_as_it_was_is_not_asked_again(monkeyp
     """``crosscert certify``'s plan at 0.8548 m/s (undecided, the step runs seven times): a sub-box that a step
     returned unchanged (not dropped, not narrowed) is not passed to the step again while it stays the same,
     and the verdict is the same as when every row is asked.  Fails without the rows kept in
-    ``_Hypothesis.one_motion``."""
-    import crosscert.verifier.window as W
+    ``Hypothesis.one_motion``."""
+    import crosscert.verifier.window.hypotheses as H
     from crosscert.planner.certify.plan import certify_speed
     from crosscert.planner.task import benchmark_task
     from crosscert.robots import KinematicModel
 
-    real, kept, again = W.one_motion_rows, set(), []
+    real, kept, again = H.one_motion_rows, set(), []
 
     def watching(model, s, q, XI, X, XD, samples, **kw):
         out, lo, hi = real(model, s, q, XI, X, XD, samples, **kw)
@@ -484,7 +484,7 @@ def test_a_sub_box_the_one_motion_step_left_as_it_was_is_not_asked_again(monkeyp
                 kept.add(key)
         return out, lo, hi
 
-    monkeypatch.setattr(W, "one_motion_rows", watching)
+    monkeypatch.setattr(H, "one_motion_rows", watching)
     run = certify_speed(KinematicModel(DEXTAR), interval_model(), benchmark_task(get_entry("dextar")),
                         PlanningBounds(one_motion=40, a_margin=MARGIN), 0.8548)
     assert run.window.verdict is Verdict.UNKNOWN

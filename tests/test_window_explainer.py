@@ -34,7 +34,7 @@ from crosscert.planner.simulate import random_geometry, simulate_crossing
 from crosscert.planner.sweep import cruise_for
 from crosscert.robots import DEXTAR
 from crosscert.robots.dextar import benchmark_crossing
-import crosscert.verifier.window as W
+import crosscert.verifier.window.hypotheses as H
 from crosscert.verifier.tracker import Verdict, initial_box_from_mode
 from crosscert.verifier.trajfile import write_trajectory
 from crosscert.verifier.window import (
@@ -91,8 +91,8 @@ def test_an_undecidable_recording_stops_early_with_both_modes_explained(undecida
     _, q = undecidable
     im, s = interval_model(), default_settings()
     steps = []
-    real = W.one_motion_rows
-    monkeypatch.setattr(W, "one_motion_rows", lambda *a, **k: steps.append(1) or real(*a, **k))
+    real = H.one_motion_rows
+    monkeypatch.setattr(H, "one_motion_rows", lambda *a, **k: steps.append(1) or real(*a, **k))
     plain = track_window(im, q, s, initial_mode=1, max_geometries=BUDGET)
     assert plain.verdict is Verdict.UNKNOWN and plain.reason is VerdictReason.BUDGET, plain.summary()
     assert len(steps) >= 2, steps  # each hypothesis' one-motion step ran

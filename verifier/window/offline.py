@@ -1,0 +1,226 @@
+"""The offline window: :func:`track_window`, the verdict of a whole recording."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from crosscert.robots import arguments as V
+from crosscert.robots.errors import InputError
+
+from ..one_motion import ONE_MOTION_SAMPLES
+from ..settings import TrackerSettings, Verdict
+from ..step import Backend, configure, partition_xi
+from ..tracker import initial_box_from_mode, verdict_of
+from .explain import Explainer, ExplainRequest
+from .hypotheses import Hypothesis, decide
+from .passes import FinalBoxes, Passes, run_pass, tube_hull
+from .results import HypothesisResult, HypothesisStatus, Refutation, VerdictReason, WindowResult
+
+__all__ = ["track_window", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "WINDOW_REL_TOL"]
+
+#: Default pass budget of a round (backward and forward passes alternate).
+WINDOW_MAX_PASSES = 6
+#: Default budget of geometry sub-boxes per hypothesis (halving surviving ones between rounds).
+WINDOW_MAX_GEOMETRIES = 64
+#: Passes stop once the summed tube widths shrink by less than this fraction in a pass.
+WINDOW_REL_TOL = 0.02
+
+
+#: The verdicts a window can be asked about (``track_window(goal=...)``).
+_GOALS = (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED)
+
+
+def _goal(goal):
+    """``goal`` as a :class:`Verdict` of :data:`_GOALS`, or ``None``."""
+    if goal is None:
+        return None
+    try:
+        verdict = Verdict(goal)
+    except ValueError:
+        verdict = None
+    if verdict not in _GOALS:
+        raise InputError(f"goal must be one of {[g.value for g in _GOALS]} or None, got {goal!r}")
+    return verdict
+
+
+def _targets(hyps, m0, goal):
+    """The hypotheses whose refutation can give the verdict ``goal`` (all of them when ``goal`` is ``None``):
+    ``MODE_CHANGED`` is reached only by refuting the initial mode ``m0``, ``MODE_UNCHANGED`` only by refuting
+    the other one."""
+    if goal is None:
+        return list(hyps)
+    return [h for h in hyps if (h.m == m0) == (goal is Verdict.MODE_CHANGED)]
+
+
+def _combined_mode(modes, alive):
+    """Mode common to every live row, 0 if they differ or none lives."""
+    live = modes[alive]
+    if live.size == 0 or not np.all(live == live[0]):
+        return 0
+    return int(live[0])
+
+
+def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None,
+                 max_passes: int = WINDOW_MAX_PASSES, rel_tol: float = WINDOW_REL_TOL,
+                 max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
+                 parallel: bool = True, goal: Verdict | None = None,
+                 one_motion: int = ONE_MOTION_SAMPLES, explainer: Explainer | None = None) -> WindowResult:
+    """Verdict of a whole recording by forward-backward window passes (:mod:`verifier.window`).
+
+    Parameters
+    ----------
+    model : verifier.model.IntervalModel
+    q_meas : array_like, shape (K, n)
+        Encoder readings, rad, every ``settings.t_s`` seconds.
+    settings : TrackerSettings
+        The tracker's assumptions and settings (``xi_splits`` gives the geometry sub-boxes).
+    x0 : (lo, hi), optional
+        Initial pose box ``(n,)``, m.
+    initial_mode : {+1, -1}, optional
+        Known mode at the first sample (the initial box is then its interval
+        forward kinematics).  Give exactly one of ``x0`` and ``initial_mode``.
+    xi_box : (lo, hi), optional
+        Calibration box ``(m,)``, the robot's by default.
+    max_passes : int
+        Pass budget per hypothesis after the first forward pass.
+    rel_tol : float
+        End a round of passes once a pass shrinks the tubes by less than this fraction.
+    max_geometries : int
+        Budget of geometry sub-boxes per hypothesis: after a round that
+        neither refutes nor confirms, the surviving sub-boxes are halved
+        while their number stays within it (``settings.xi_splits``' count
+        or less: no halving).
+    backend : {"compiled", "numpy"}
+    parallel : bool
+        Compiled backend: geometry sub-boxes in parallel.
+    goal : Verdict, optional
+        The one verdict the caller asks about (``MODE_CHANGED``: a crossing to
+        certify; ``MODE_UNCHANGED``: a bounce).  Only the hypothesis whose
+        refutation gives it runs window passes; the other is left consistent
+        and incomplete, so any other answer comes out ``unknown`` (or from the
+        forward pass).  When the recording is what the caller expects, the
+        verdict is the one ``None`` gives, at a fraction of the cost: the true
+        hypothesis is never refuted, and its rounds are the costly ones.
+        ``None``: both hypotheses.
+    one_motion : int
+        Samples of the one-motion step (:mod:`verifier.one_motion`): once the budget of sub-boxes is
+        spent, after each round, a row is dropped when no single geometry of its sub-box and single
+        motion within ``a_max`` in its tubes explain the readings over this many samples around its
+        widest pose box (proved by a Farkas certificate), and the others' sub-boxes are narrowed to
+        proved bounds of the geometries that can; a step that dropped or narrowed (by
+        :data:`~verifier.window.hypotheses.ONE_MOTION_SHRINK`) earns another round without halving, up to
+        :data:`~verifier.window.hypotheses.ONE_MOTION_ROUNDS`.  0: not tried.
+    explainer : Explainer, optional
+        Asked about each hypothesis (of ``goal``'s, when given) once it has
+        spent its budget of sub-boxes, before its one-motion step; an
+        explained hypothesis runs no more rounds, and when every hypothesis
+        asked about is explained the window stops: ``unknown``, reason
+        :attr:`VerdictReason.UNDECIDABLE`.  ``None``: never asked (the
+        passes, verdict and tubes do not depend on it otherwise).
+
+    Returns
+    -------
+    WindowResult
+    """
+    t0 = time.perf_counter()
+    s = settings.validated(model.n)
+    q = np.ascontiguousarray(np.asarray(q_meas, dtype=np.float64))
+    n = model.n
+    if q.ndim != 2 or q.shape[1] != n or q.shape[0] < 1:
+        raise InputError(f"q_meas must have shape (K, {n}) with K >= 1, got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise InputError("q_meas must be finite")
+    if isinstance(max_passes, bool) or int(max_passes) != max_passes or max_passes < 0:
+        raise InputError(f"max_passes must be a non-negative integer, got {max_passes!r}")
+    if explainer is not None and not callable(explainer):
+        raise InputError(f"explainer must be callable (an Explainer) or None, got {type(explainer).__name__}")
+    if isinstance(max_geometries, bool) or int(max_geometries) != max_geometries or max_geometries < 1:
+        raise InputError(f"max_geometries must be a positive integer, got {max_geometries!r}")
+    if not (0.0 <= rel_tol < 1.0):
+        raise InputError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
+    one_motion = V.count("one_motion", one_motion)
+    goal = _goal(goal)
+    if (x0 is None) == (initial_mode is None):
+        raise InputError("give exactly one of x0 and initial_mode")
+    K = q.shape[0]
+    XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
+    sub_lo, sub_hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
+    xi_rows = (np.ascontiguousarray(sub_lo[0]), np.ascontiguousarray(sub_hi[0]))
+    P = xi_rows[0].shape[0]
+    if x0 is None:
+        x0 = initial_box_from_mode(model, q[0], initial_mode, s, xi_box=XI, backend=str(Backend(backend)))
+    x0 = tuple(np.broadcast_to(np.asarray(v, dtype=np.float64), (P, n)).copy() for v in x0)
+    flat = replace(s, xi_splits=None)
+    cfg_f = configure(model, flat, backend, parallel=parallel)
+    # the window's passes carry each row's calibration sub-box from sample to sample (keep_xi), and the
+    # rows keep it from pass to pass: the true geometry satisfies every sample's loop closure
+    cfg_wf = configure(model, replace(flat, keep_xi=True), backend, parallel=parallel)
+    cfg_b = configure(model, replace(flat, xd0=None, keep_xi=True), backend, parallel=parallel)  # final velocity: from the tubes
+
+    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, q, x0, xi_rows, None)
+    # the rows' sub-boxes after the tracker (contracted only when the settings keep them, keep_xi)
+    xi_rows = (np.maximum(xi_rows[0], fxi[0]), np.minimum(xi_rows[1], fxi[1]))
+    f_alive = fbad < 0
+    m0 = _combined_mode(fmode[:, 0], f_alive)
+    mf = _combined_mode(fmode[:, K - 1], f_alive)
+    forward_verdict = verdict_of(m0, mf, not f_alive.any())
+    tubes, results = [], []
+    if forward_verdict is Verdict.INCONSISTENT or m0 == 0:
+        results = ()
+        verdict = forward_verdict
+        reason = VerdictReason.INCONSISTENT if verdict is Verdict.INCONSISTENT else VerdictReason.NO_INITIAL_MODE
+        tubes = [(fx[f_alive], fxd[f_alive])]
+    elif mf != 0:
+        # the forward pass decided: the other final mode is refuted by its certified boxes
+        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
+                                    *tube_hull(fx[f_alive], fxd[f_alive]), xi_rows[0][f_alive], xi_rows[1][f_alive]),
+                   HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
+        verdict, reason = forward_verdict, VerdictReason.CERTIFIED
+        tubes = [(fx[f_alive], fxd[f_alive])]
+    else:
+        finals = FinalBoxes(model, q[K - 1], s, str(Backend(backend)))
+        keep = np.nonzero(f_alive)[0]
+        hyps = [Hypothesis(finals, xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep], m0, m)
+                for m in (m0, -m0)]
+        if not any(h.refuted for h in hyps):
+            full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
+            ask = None
+            if explainer is not None:
+                x0_given = None if initial_mode is not None else (x0[0][0].copy(), x0[1][0].copy())
+
+                def ask(h):
+                    return explainer(ExplainRequest(model, q, s, XI, x0_given, m0, h.m, h.xlo.copy(), h.xhi.copy(),
+                                                    *(a.copy() for a in tube_hull(h.tx, h.txd)[:2])))
+            decide(hyps, Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w,
+                    _targets(hyps, m0, goal), int(one_motion), ask)
+        else:  # refuted by the last reading alone: the other ran no pass
+            for h in hyps:
+                h.complete = h.refuted
+        results = tuple(h.result() for h in hyps)
+        tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
+        alive = [h.final_mode for h in results if h.status is not HypothesisStatus.REFUTED]
+        if not alive:
+            verdict, reason = Verdict.INCONSISTENT, VerdictReason.INCONSISTENT
+        elif len(alive) == 2:
+            verdict = Verdict.UNKNOWN
+            asked = _targets(hyps, m0, goal)
+            # the early stop: every hypothesis asked about explained (a wrong claim only costs a verdict)
+            undecidable = all(h.explained for h in asked)
+            reason = VerdictReason.UNDECIDABLE if undecidable else VerdictReason.BUDGET
+        else:
+            verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
+            reason = VerdictReason.CERTIFIED
+    tubes = [t for t in tubes if len(t[0])]
+    if tubes:
+        x_lo, x_hi, xd_lo, xd_hi = tube_hull(np.concatenate([t[0] for t in tubes]), np.concatenate([t[1] for t in tubes]))
+    else:
+        x_lo, x_hi, xd_lo, xd_hi = (np.full((K, n), np.nan) for _ in range(4))
+    with np.errstate(invalid="ignore"):
+        wx = float(np.nanmax(x_hi - x_lo)) if tubes else 0.0
+        wv = float(np.nanmax(xd_hi - xd_lo)) if tubes else 0.0
+    return WindowResult(verdict=verdict, initial_mode=m0, forward_verdict=forward_verdict, hypotheses=results,
+                        x_lo=x_lo, x_hi=x_hi, xd_lo=xd_lo, xd_hi=xd_hi, max_width_pose=wx, max_width_velocity=wv,
+                        steps=K, elapsed_s=time.perf_counter() - t0, reason=reason)
