@@ -24,7 +24,7 @@ from .simulate import RAMP_PEAK, TimeLaw, ramp_length
 from .task import CrossingTask, PlannedTrajectory
 
 __all__ = ["PathTask", "path_task_of", "path_task_from_poses", "plan_along_path", "smoothstep_law", "path_speed_ceiling",
-           "PATH_KNOT_SPACING"]
+           "time_optimal_along_path", "time_optimal_ceiling", "PATH_KNOT_SPACING"]
 
 #: Smallest spacing of the path's knots, m: a plan's rest samples (the same pose repeated) and samples closer
 #: than this are dropped, so that the spline's parameter increases strictly and its derivatives stay tame.
@@ -217,6 +217,49 @@ def smoothstep_law(b, v_sing: float, s_star: float, L: float):
     t = np.arange(at.samples) * b.t_s
     s, v, a = law.evaluate(t - at.shift)
     return t, s, v, a, at.k_event
+
+
+def _curve_samples(kin, task: PathTask, b, grid_step: float):
+    """The path sampled for the time-optimal law: about ``grid_step`` m apart with ``s*`` on a node (the end
+    may move back by less than one step), and the law's limits (``|x''| <= a_peak`` per axis, the bounds'
+    joint limits)."""
+    from . import timescale as ts_  # cvxpy and toppra load in ~1 s: only when this law is used
+
+    n1 = max(2, int(round(task.s_star / grid_step)))
+    h = task.s_star / n1
+    N = max(n1 + 2, int(np.floor(task.length / h)))
+    try:
+        samples = ts_.sample_curve(kin, task.poses, N * h, N, task.joints_at, kin.robot.xi_center)
+    except SimulationError as exc:
+        raise InputError(f"{task.source}: {exc}") from None
+    lim = ts_.ScalingLimits(qd_max=b.qd_max, qdd_max=b.qdd_max, a_max=b.a_peak)
+    return ts_, samples, lim
+
+
+def time_optimal_along_path(kin, task: PathTask, v_sing: float, b, grid_step: float) -> PlannedTrajectory:
+    """The path timed by the minimal-time scaling (cvxpy) through the locus at ``v_sing`` (m/s) under the
+    crossing criterion, ``|x''| <= a_peak`` per axis and the bounds' joint limits, rest to rest."""
+    robot = kin.robot
+    ts_, samples, lim = _curve_samples(kin, task, b, grid_step)
+    scale = _tangent_scale(task, robot)
+    try:
+        scaling = ts_.time_optimal_scaling(samples, lim, v_sing=v_sing / scale, s_star=task.s_star)
+        tt = ts_.resample(scaling, samples, b.t_s, t_rest=b.t_rest, t_rest_end=b.t_rest)
+    except SimulationError as exc:
+        raise InputError(f"{task.source}: no time-optimal timing at {v_sing} m/s: {exc}") from None
+    point = task.poses(np.array([task.s_star]))[0][0]
+    return PlannedTrajectory(t=tt.t, q=tt.q, qd=tt.qd, qdd=tt.qdd, x=tt.x, xd=tt.xd, xdd=tt.xdd, t_s=b.t_s,
+                             k_sing=tt.k_star, v_sing=float(v_sing), crossing_point=point, xi_plan=robot.xi_center)
+
+
+def time_optimal_ceiling(kin, task: PathTask, b, grid_step: float) -> float:
+    """The fastest speed at the singularity (m/s) a timing of the path reaches under the time-optimal law's
+    limits (toppra's controllable and reachable sets at ``s*``, the criterion included)."""
+    ts_, samples, lim = _curve_samples(kin, task, b, grid_step)
+    try:
+        return float(ts_.max_speed_at(samples, lim, task.s_star)) * _tangent_scale(task, kin.robot)
+    except SimulationError as exc:
+        raise InputError(f"{task.source}: no feasible crossing speed: {exc}") from None
 
 
 def plan_along_path(kin, task: PathTask, v_sing: float, b) -> PlannedTrajectory:

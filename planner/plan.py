@@ -17,7 +17,8 @@ from crosscert.robots.errors import InputError, SimulationError
 
 from .acceleration import derived_a_max
 from .generate import GenerationLimits, generate_crossing
-from .path import PathTask, path_speed_ceiling, plan_along_path, smoothstep_law
+from .path import (PathTask, path_speed_ceiling, plan_along_path, smoothstep_law, time_optimal_along_path,
+                   time_optimal_ceiling)
 from .simulate import RAMP_PEAK
 from .task import CrossingTask, Method, PlannedTrajectory, PlanningBounds, crossing_on_segment, parse_option
 
@@ -71,8 +72,10 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     v_sing = V.positive("v_sing", v_sing)
     method = b.method if method is None else parse_option(Method, "planning method", method)
     if isinstance(task, PathTask):
+        if method is Method.TIME_OPTIMAL:
+            return time_optimal_along_path(kin, task, v_sing, b, TIME_OPTIMAL_GRID_STEP)
         if method is not Method.SMOOTHSTEP:
-            raise InputError(f"a given path is re-timed with the smoothstep law, not {method.value!r}")
+            raise InputError(f"a given path is re-timed with the smoothstep or time-optimal law, not {method.value!r}")
         return plan_along_path(kin, task, v_sing, b)
     xi = robot.xi_center
     c = crossing_on_segment(kin, task, xi)
@@ -135,6 +138,8 @@ def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
     robot = kin.robot
     b = bounds.for_robot(robot)
     if isinstance(task, PathTask):
+        if b.method is Method.TIME_OPTIMAL:
+            return time_optimal_ceiling(kin, task, b, TIME_OPTIMAL_GRID_STEP) * (1 - CEILING_SHRINK)
         return path_speed_ceiling(kin, task, b) * (1 - CEILING_SHRINK)
     xi = robot.xi_center
     c = crossing_on_segment(kin, task, xi)

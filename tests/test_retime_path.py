@@ -31,6 +31,28 @@ def test_a_straight_path_re_timed_is_the_tasks_own_plan(kin, task):
     assert speed_ceiling(kin, path, b) == pytest.approx(speed_ceiling(kin, task, b), rel=1e-6)
 
 
+def test_the_time_optimal_law_along_a_straight_path_is_the_tasks_own(kin, task):
+    """toppra and cvxpy along the given path (``planner.timescale.sample_curve``): on the segment's own path,
+    the segment's time-optimal plan and ceiling."""
+    b = PlanningBounds(method="time-optimal").for_robot(DEXTAR)
+    path = path_task_of(kin, plan_crossing(kin, task, 1.3, PlanningBounds().for_robot(DEXTAR)), "segment")
+    mine, theirs = plan_crossing(kin, path, 1.2, b), plan_crossing(kin, task, 1.2, b)
+    assert mine.k_sing == theirs.k_sing and mine.q.shape == theirs.q.shape
+    assert np.max(np.abs(mine.q - theirs.q)) < 1e-6
+    assert speed_ceiling(kin, path, b) == pytest.approx(speed_ceiling(kin, task, b), rel=1e-6)
+
+
+def test_the_time_optimal_law_along_the_arc_keeps_its_limits(kin):
+    arc = problems.arc_task()
+    b = PlanningBounds(method="time-optimal").for_robot(DEXTAR)
+    plan = plan_crossing(kin, arc, 1.2, b)
+    assert np.all(np.abs(plan.xdd) <= b.a_peak * (1 + 1e-6))  # the law's bound, below the robot's a_max
+    assert np.linalg.norm(plan.xd[plan.k_sing]) == pytest.approx(1.2, rel=1e-6)
+    modes = kin.mode_batch(plan.x, plan.q, plan.xi_plan)
+    assert modes[0] == -modes[-1] != 0
+    assert speed_ceiling(kin, arc, b) > speed_ceiling(kin, arc, PlanningBounds().for_robot(DEXTAR))
+
+
 def test_the_arc_plan_accelerates_within_the_robots_bound_up_to_its_ceiling(kin):
     arc = problems.arc_task()
     b = PlanningBounds().for_robot(DEXTAR)
@@ -82,8 +104,8 @@ def test_paths_that_cannot_be_re_timed_are_refused(kin, task):
     plan = plan_crossing(kin, task, 1.1, b)
     with pytest.raises(InputError, match="fewer than 4 distinct poses"):
         path_task_of(kin, plan.__class__(**{**_fields(plan), "x": np.repeat(plan.x[:1], len(plan.x), 0)}), "rest")
-    with pytest.raises(InputError, match="smoothstep law"):
-        plan_crossing(kin, path_task_of(kin, plan, "p"), 1.0, PlanningBounds(method="time-optimal"))
+    with pytest.raises(InputError, match="smoothstep or time-optimal law, not 'dynamic'"):
+        plan_crossing(kin, path_task_of(kin, plan, "p"), 1.0, PlanningBounds(method="dynamic", dynamics=object()))
 
 
 def _fields(plan):

@@ -173,11 +173,16 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
                          f"{', '.join(str(int(k)) for k in flips[:5])}): certify one crossing per plan")
     kb = int(flips[0])
     ka = int(signed[signed < kb][-1])
-    # the crossing instant: the zero of the normalised mode between the last sample before and the first after
+    # the crossing instant: a sample on the locus (up to rounding) when there is one, else the zero of the
+    # normalised mode between the last sample before and the first after, rounded to the nearer sample
     w = nm[ka] / (nm[ka] - nm[kb])
-    k_sing = ka if w <= 0.5 else kb
-    point = x[ka] + w * (x[kb] - x[ka])
-    v = xd[k_sing]
+    if kb - ka > 1:
+        k_sing = (ka + kb) // 2
+        point = x[k_sing].copy()
+    else:
+        k_sing = ka if w <= 0.5 else kb
+        point = x[ka] + w * (x[kb] - x[ka])
+    v = _velocity_at(x, k_sing, t_s)
     lengths = [i for i, u in enumerate(robot.pose_units) if u.value == "m"] or list(range(n))
     v_sing = float(np.linalg.norm(v[lengths]))
     for a in (t, q, x, xd, xdd, qd, qdd):
@@ -186,6 +191,16 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
                              crossing_point=point, xi_plan=xi)
     source = PlanSource(name, digest if digest is not None else _arrays_digest(t, q, traj.x), K, t_s, poses)
     return plan, source
+
+
+def _velocity_at(x, k: int, t_s: float) -> np.ndarray:
+    """The velocity at sample ``k``: the mean of the two one-sided second-order differences, exact when the
+    acceleration is constant on each side (a time-optimal law switches it at the crossing), else central."""
+    if 2 <= k <= len(x) - 3:
+        left = (3.0 * x[k] - 4.0 * x[k - 1] + x[k - 2]) / (2.0 * t_s)
+        right = (-3.0 * x[k] + 4.0 * x[k + 1] - x[k + 2]) / (2.0 * t_s)
+        return 0.5 * (left + right)
+    return np.gradient(x, t_s, axis=0)[k]
 
 
 def _in_range(name, a, lo, hi, what, units) -> None:

@@ -17,7 +17,7 @@ exactly on a straight path, joint bounds up to ``O(ds^2)``.
 
 Modules, along the method:
 
-* :mod:`.path`: :func:`sample_path`, the grid and its exact derivatives;
+* :mod:`.path`: :func:`sample_path` (a segment) and :func:`sample_curve` (a given path), the grid and its exact derivatives;
 * :mod:`.limits`: :class:`ScalingLimits`, :class:`LinearPathConstraint` and their rows;
 * :mod:`.socp`: :func:`time_optimal_scaling`, the minimum-time scaling crossing
   ``s*`` at a prescribed ``v_sing`` under the crossing criterion (cvxpy
@@ -32,7 +32,7 @@ tolerances.  SI units throughout (m, rad, s).
 """
 
 from .limits import LinearPathConstraint, ScalingLimits
-from .path import PathSamples, sample_path
+from .path import PathSamples, sample_curve, sample_path
 from .reachability import max_speed_at
 from .resampling import TimedTrajectory, resample
 from .socp import FEAS_RTOL, TimeScaling, time_optimal_scaling
@@ -46,6 +46,7 @@ __all__ = [
     "TimedTrajectory",
     "max_speed_at",
     "resample",
+    "sample_curve",
     "sample_path",
     "time_optimal_scaling",
 ]

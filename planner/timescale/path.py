@@ -16,7 +16,7 @@ from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.kinematics import KinematicModel
 
-__all__ = ["PathSamples", "sample_path"]
+__all__ = ["PathSamples", "sample_path", "sample_curve"]
 
 #: A continuation step whose joints differ from the first-order prediction
 #: ``q_k + q'_k ds`` by more than this (rad) is a jump to another leg branch.
@@ -70,6 +70,16 @@ class PathSamples:
     length: float
     xi: np.ndarray
     kin: KinematicModel = field(repr=False)
+    #: ``curve(s) -> (x, x', x'')`` of a curved path (None: the straight ``p0 + s u``); :func:`sample_curve`.
+    curve: object = field(default=None, repr=False)
+
+    def poses(self, s) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``x(s)``, ``x'(s)``, ``x''(s)`` at the path parameters ``s`` (K,): three (K, n) arrays."""
+        s = np.asarray(s, float)
+        if self.curve is not None:
+            return self.curve(s)
+        n = self.u.size
+        return self.p0 + s[:, None] * self.u, np.tile(self.u, (s.size, 1)), np.zeros((s.size, n))
 
     def __post_init__(self) -> None:
         for name in ("s", "x", "x_s", "x_ss", "q", "q_s", "q_ss", "p0", "u", "xi"):
@@ -169,6 +179,46 @@ def sample_path(kin: KinematicModel, p0, u, L: float, N: int, working_guess, xi=
     QSS = kin.joint_acceleration(X, Q, xi, XS, QS, XSS)
     return PathSamples(s=s, x=X, x_s=XS, x_ss=XSS, q=Q, q_s=QS, q_ss=QSS, p0=p0, u=u,
                        length=L, xi=np.array(xi, dtype=float), kin=kin)
+
+
+def sample_curve(kin: KinematicModel, curve, L: float, N: int, joints_at, xi=None) -> PathSamples:
+    """Sample a curved path ``x(s)``, ``s in [0, L]``, on a uniform grid of ``N`` intervals, and its IK.
+
+    ``curve(s) -> (x, x', x'')`` gives the poses and their derivatives in ``s`` at the nodes (any smooth
+    parametrisation; ``s`` need not be the arc length); ``joints_at(s)`` Newton guesses of the joints on the
+    working branch.  ``q'`` and ``q''`` are exact given ``x'`` and ``x''`` (eq. (2) and its derivative), as in
+    :func:`sample_path`.
+
+    Raises
+    ------
+    SimulationError
+        IK fails, or a pose or joint leaves the robot's bounds (the message gives ``s``).
+    """
+    r = kin.robot
+    L = V.positive("L", L)
+    if isinstance(N, bool) or not isinstance(N, (int, np.integer)) or N < MIN_INTERVALS:
+        raise InputError(f"N must be an integer >= {MIN_INTERVALS}, got {N!r}")
+    N = int(N)
+    xi = r.xi_nominal_array if xi is None else V.vector("xi", xi, r.m)
+    s = L * np.arange(N + 1) / N
+    s[-1] = L
+    X, XS, XSS = (np.array(a, float) for a in curve(s))
+    Q, ok = kin.ik_batch(X, xi, joints_at(s))
+    if not ok.all():
+        k = int(np.nonzero(~ok)[0][0])
+        raise SimulationError(f"{r.name}: IK failed at s = {s[k] * 1e3:.4f} mm (x = {X[k].tolist()})")
+    inside = np.all((X >= r.x_lo_array) & (X <= r.x_hi_array), axis=1)
+    in_lim = np.all((Q >= r.q_lo_array) & (Q <= r.q_hi_array), axis=1)
+    bad = np.nonzero(~(inside & in_lim))[0]
+    if bad.size:
+        k = int(bad[0])
+        what = "outside x_bounds" if not inside[k] else "beyond the joint limits"
+        raise SimulationError(f"{r.name}: the path is {what} at s = {s[k] * 1e3:.4f} mm")
+    QS = kin.joint_velocity(X, Q, xi, XS)
+    QSS = kin.joint_acceleration(X, Q, xi, XS, QS, XSS)
+    u = XS[0] / np.linalg.norm(XS[0])
+    return PathSamples(s=s, x=X, x_s=XS, x_ss=XSS, q=Q, q_s=QS, q_ss=QSS, p0=X[0].copy(), u=u, length=L,
+                       xi=np.array(xi, dtype=float), kin=kin, curve=curve)
 
 
 def node_index(samples: PathSamples, s_star, *, exact: bool) -> int:

@@ -76,7 +76,7 @@ def resample(scaling: TimeScaling, samples: PathSamples, t_s: float, *, t_rest: 
     On interval ``i`` the path acceleration ``a_i`` is constant, so with
     ``tau = t - t_i``: ``s = s_i + sd_i tau + a_i tau^2 / 2`` and
     ``sdot = sd_i + a_i tau`` (piecewise quadratic ``s(t)``).  Then
-    ``x = p0 + s u``, ``xdot = u sdot``, ``xddot = u sddot`` (straight path),
+    ``x = x(s)``, ``xdot = x' sdot``, ``xddot = x' sddot + x'' sdot^2`` (``x' = u``, ``x'' = 0`` on a straight path),
     ``q`` by Newton IK started from the quintic Hermite interpolation of the
     samples (so on their branch), ``qdot``, ``qddot`` from eq. (2).
 
@@ -130,9 +130,9 @@ def resample(scaling: TimeScaling, samples: PathSamples, t_s: float, *, t_rest: 
     tau = t_anchor + j * t_s
     s, sd, sdd = _evaluate(scaling, tau)
     n = samples.x.shape[1]
-    X = samples.p0 + s[:, None] * samples.u
-    XD = sd[:, None] * samples.u
-    XDD = sdd[:, None] * samples.u
+    X, d1, d2 = samples.poses(s)
+    XD = d1 * sd[:, None]
+    XDD = d1 * sdd[:, None] + d2 * (sd * sd)[:, None]
     if scaling.k_star is not None:  # the crossing sample lies exactly on the node
         X[-j_lo] = samples.x[scaling.k_star]
     path = HermitePath(samples.s, samples.q, samples.q_s, samples.q_ss)
