@@ -25,8 +25,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import problems  # noqa: E402  (the named reference problems: the arc)
+from bench_window import _cpu as cpu_name  # noqa: E402  (one reading of the CPU's name for the benchmarks)
 from crosscert.planner import PlanningBounds, benchmark_task  # noqa: E402
 from crosscert.planner.certify.envelope import CertifiedEnvelope, EnvelopeMonitor, EnvelopeState  # noqa: E402
 from crosscert.planner.certify.plan import certify_speed  # noqa: E402
@@ -38,16 +40,6 @@ from crosscert.planner.simulate import quantise, random_geometry  # noqa: E402
 from crosscert.robots import DEXTAR, KinematicModel, get_entry  # noqa: E402
 from crosscert.verifier.model import IntervalModel  # noqa: E402
 from crosscert.verifier.trajfile import write_trajectory  # noqa: E402
-
-
-def cpu_name() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
 
 
 def main_bench() -> None:

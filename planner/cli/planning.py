@@ -76,10 +76,7 @@ def certify(a) -> int:
             except Exception:  # e.g. an argument the worker could not receive: drawn here below
                 drawing = None
     finally:
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
-        if bar is not None:
-            bar.close()
+        _close(pool, bar)
     report = cert.summary()
     report["command_line"] = ["crosscert", *a.argv]
     out.mkdir(parents=True, exist_ok=True)
@@ -187,10 +184,7 @@ def _certify_given_plan(a) -> int:
                                    refute_tol=a.refute_tol, monte_carlo_runs=0, refute=not a.no_refute, seed=a.seed,
                                    progress=suffixed(bar, " of the re-timed path"), kin=kin, executor=pool)
     finally:
-        if pool is not None:
-            pool.shutdown(wait=False, cancel_futures=True)
-        if bar is not None:
-            bar.close()
+        _close(pool, bar)
     report = cert.summary()
     report["retimed_path"] = None if retimed is None else retimed.summary()
     report["command_line"] = ["crosscert", *a.argv]
@@ -286,6 +280,14 @@ def _print_at_robot_a_max(cert, no_refute: bool) -> None:
     if at.refutation_search is not None:
         ref = _bound_text(at.refutation_bound, at.refutation_search, "m/s", 1.0, ".4f")
     print(f"at the robot's a_max ({robot_bound}): minimal certified v_sing {vmin}; refutation bound {ref}")
+
+
+def _close(pool, bar) -> None:
+    """Stop the counterexample worker (what it has not started is cancelled) and the progress bar."""
+    if pool is not None:
+        pool.shutdown(wait=False, cancel_futures=True)
+    if bar is not None:
+        bar.close()
 
 
 def _bound_text(value, search, unit: str, scale: float, fmt: str) -> str:

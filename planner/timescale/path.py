@@ -168,6 +168,15 @@ def sample_path(kin: KinematicModel, p0, u, L: float, N: int, working_guess, xi=
         Q[k] = Qk[0]
         QS[k] = kin.joint_velocity(X[k:k + 1], Q[k:k + 1], xi, XS[k:k + 1])[0]
         guess = Q[k] + ds * QS[k]  # tangent predictor keeps Newton on the branch
+    _within_bounds(r, s, X, Q)
+    XSS = np.zeros_like(X)  # straight path
+    QSS = kin.joint_acceleration(X, Q, xi, XS, QS, XSS)
+    return PathSamples(s=s, x=X, x_s=XS, x_ss=XSS, q=Q, q_s=QS, q_ss=QSS, p0=p0, u=u,
+                       length=L, xi=np.array(xi, dtype=float), kin=kin)
+
+
+def _within_bounds(r, s, X, Q) -> None:
+    """SimulationError at the first node whose pose leaves ``x_bounds`` or whose joints leave their limits."""
     inside = np.all((X >= r.x_lo_array) & (X <= r.x_hi_array), axis=1)
     in_lim = np.all((Q >= r.q_lo_array) & (Q <= r.q_hi_array), axis=1)
     bad = np.nonzero(~(inside & in_lim))[0]
@@ -175,10 +184,6 @@ def sample_path(kin: KinematicModel, p0, u, L: float, N: int, working_guess, xi=
         k = int(bad[0])
         what = "outside x_bounds" if not inside[k] else "beyond the joint limits"
         raise SimulationError(f"{r.name}: the path is {what} at s = {s[k] * 1e3:.4f} mm; shorten it")
-    XSS = np.zeros_like(X)  # straight path
-    QSS = kin.joint_acceleration(X, Q, xi, XS, QS, XSS)
-    return PathSamples(s=s, x=X, x_s=XS, x_ss=XSS, q=Q, q_s=QS, q_ss=QSS, p0=p0, u=u,
-                       length=L, xi=np.array(xi, dtype=float), kin=kin)
 
 
 def sample_curve(kin: KinematicModel, curve, L: float, N: int, joints_at, xi=None) -> PathSamples:
@@ -207,13 +212,7 @@ def sample_curve(kin: KinematicModel, curve, L: float, N: int, joints_at, xi=Non
     if not ok.all():
         k = int(np.nonzero(~ok)[0][0])
         raise SimulationError(f"{r.name}: IK failed at s = {s[k] * 1e3:.4f} mm (x = {X[k].tolist()})")
-    inside = np.all((X >= r.x_lo_array) & (X <= r.x_hi_array), axis=1)
-    in_lim = np.all((Q >= r.q_lo_array) & (Q <= r.q_hi_array), axis=1)
-    bad = np.nonzero(~(inside & in_lim))[0]
-    if bad.size:
-        k = int(bad[0])
-        what = "outside x_bounds" if not inside[k] else "beyond the joint limits"
-        raise SimulationError(f"{r.name}: the path is {what} at s = {s[k] * 1e3:.4f} mm")
+    _within_bounds(r, s, X, Q)
     QS = kin.joint_velocity(X, Q, xi, XS)
     QSS = kin.joint_acceleration(X, Q, xi, XS, QS, XSS)
     u = XS[0] / np.linalg.norm(XS[0])
