@@ -147,6 +147,25 @@ def test_monitor_with_the_certificate_falls_back_when_a_reading_leaves(certified
     assert left and left[0]["k"] == 30 and left[0]["joint"] == 1
     summary = lines[-1]
     assert summary["certificate"]["state"] == "left" and summary["certificate"]["left_at_sample"] == 30
+    # samples 0-29 were held while the certificate answered, tracked when sample 30 left the envelope
+    assert summary["certificate"]["tracked_later"] == 30 and summary["steps"] == len(plan.q)
+
+
+def test_monitor_inside_the_envelope_answers_from_the_certificate_and_tracks_later(certified, tmp_path, capsys):
+    """Inside the envelope each sample costs the envelope check only; the tracker runs over them at the end (for
+    the summary), and its boxes agree with the certificate's verdict (they would contradict it otherwise)."""
+    folder, plan, cert = certified
+    rec = tmp_path / "run.csv"
+    write_trajectory(rec, plan.t, plan.q)
+    shutil.copy(folder / "plan.csv", cert.parent / "plan.csv")
+    assert main(["monitor", str(rec), "--initial-mode", "1", "--certificate", str(cert), "--json"]) == 0
+    lines = [json.loads(s) for s in capsys.readouterr().out.splitlines()]
+    events = [e["event"] for e in lines[:-1]]
+    assert events[0] == "certificate-certified" and lines[0]["k"] == len(plan.q) - 1
+    summary = lines[-1]
+    assert summary["verdict"] == "mode-changed" and summary["certificate"]["state"] == "certified"
+    assert summary["latency_us_mean"] is None  # no sample waited for the tracker
+    assert summary["certificate"]["tracked_later"] == len(plan.q) == summary["steps"]
 
 
 @pytest.mark.parametrize("case", ["robot", "plan", "json"])

@@ -43,6 +43,9 @@ WINDOW_MAX_SAMPLES = 200_000
 _LATENCY_BIN_RATIO = 0.01
 _LOG_BIN_RATIO = float(np.log1p(_LATENCY_BIN_RATIO))
 _LATENCY_BINS = 3000
+#: Envelope states in which the certificate answers and the tracker may wait (``monitor --certificate``).
+_HELD = (EnvelopeState.INSIDE, EnvelopeState.CERTIFIED)
+
 #: Keys of the monitor's summary that say nothing about a file read at once.
 _MONITOR_ONLY = ("latency_us_mean", "latency_us_p99", "latency_us_max", "interrupted", "error", "verdict_so_far")
 
@@ -225,6 +228,8 @@ class Monitor:
         self.samples = 0
         self.latency = LatencyStats()
         self.envelope_latency = LatencyStats()
+        self.catch_up_latency = LatencyStats()  # --certificate: the held samples, tracked once the envelope is left
+        self.backlog = []  # --certificate: (line, t, q) held while the certificate answers
         self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
 
     def feed(self, line: int, t: float, q, t_s: float | None) -> None:
@@ -254,22 +259,40 @@ class Monitor:
         for line, t, q in self.pending:
             if self.envelope is not None:
                 self._feed_envelope(line, t, q)
+                if self.lagger is None and self.envelope.status.state in _HELD:
+                    # inside the certified envelope the certificate answers: the tracker catches up later
+                    self.backlog.append((line, t, q))
+                    continue
+                self.catch_up()
             if self.lagger is not None:
                 self._feed_lagged(line, t, q)
                 continue
-            t0 = time.perf_counter_ns()
-            r = self.tracker.update(q)
-            self.latency.add(time.perf_counter_ns() - t0)
-            if self.record:
-                for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
-                    self.boxes[key].append(v)
-            if not self.echo:
-                continue
-            for e in r.events:
-                ev = {"event": e.value, "k": r.k, "t": t, "line": line, "mode": r.mode}
-                text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
-                print(json.dumps(ev) if self.a.json else text, flush=True)
+            self._track(line, t, q, self.latency)
         self.pending.clear()
+
+    def _track(self, line: int, t: float, q, latency) -> None:
+        """One sample through the tracker: its latency, its boxes when recorded, its events when echoed."""
+        t0 = time.perf_counter_ns()
+        r = self.tracker.update(q)
+        latency.add(time.perf_counter_ns() - t0)
+        if self.record:
+            for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
+                self.boxes[key].append(v)
+        if not self.echo:
+            return
+        for e in r.events:
+            ev = {"event": e.value, "k": r.k, "t": t, "line": line, "mode": r.mode}
+            text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
+            print(json.dumps(ev) if self.a.json else text, flush=True)
+
+    def catch_up(self) -> None:
+        """``--certificate``: the samples held while the readings were in the envelope, through the tracker now
+        (when one leaves it, the plan ends, or the run's summary is asked); timed apart from the live samples."""
+        if not self.backlog or self.tracker is None:
+            return
+        for line, t, q in self.backlog:
+            self._track(line, t, q, self.catch_up_latency)
+        self.backlog.clear()
 
     def _feed_envelope(self, line: int, t: float, q) -> None:
         """``--certificate``: the reading against the certified envelope; an event when the state changes."""
@@ -319,13 +342,14 @@ class Monitor:
                 f"velocity model {s.velocity_model}")
 
     def summary(self, error: str | None = None) -> dict:
-        """The verdict, counts and latencies (us).
+        """The verdict, counts and latencies (us); the samples held by ``--certificate`` are tracked first.
 
         ``verdict_so_far`` is the verdict on the samples read (rules of
         :func:`verifier.tracker.verdict_of`); ``verdict`` is the same unless
         the input was interrupted (``error``), when it is ``unknown``: a
         prefix says nothing about the samples that never came.
         """
+        self.catch_up()
         st = None if self.tracker is None else self.tracker.state
         bad = -1 if st is None else int(st.bad_at[0])
         init = 0 if st is None else int(st.init_mode[0])
@@ -338,7 +362,9 @@ class Monitor:
             env, status = self.envelope.envelope, self.envelope.status
             certificate = {**status.summary(), "decided_at_sample": env.decided_at, "describe": self.envelope.describe(),
                            "latency_us_mean": self.envelope_latency.mean_us(),
-                           "latency_us_max": self.envelope_latency.max_us()}
+                           "latency_us_max": self.envelope_latency.max_us(),
+                           "tracked_later": self.catch_up_latency.count,
+                           "tracked_later_ms": round(self.catch_up_latency.total_ns / 1e6, 1)}
             if status.state is EnvelopeState.CERTIFIED and so_far != Verdict.INCONSISTENT.value:
                 # the readings held to the certified run through its decision and up to now: its verdict is this
                 # run's; a decided tracker that disagrees means an assumption was violated
