@@ -190,7 +190,8 @@ def test_check_t_s_states_the_period_and_warnings_name_it(crossing_csv, tmp_path
     cap = capsys.readouterr()
     assert cap.err == "" and json.loads(cap.out)["t_s"] == 0.002
     assert main(["check", str(crossing_csv), "--initial-mode", "1", "--t-s", "0.002"]) == 2  # every step is checked
-    assert "uneven sampling (step 0.001 s, sampling period 0.002 s)" in _one_line_error(capsys)
+    # a file of another period than the one stated is said to be so, not "uneven"
+    assert "the file's step is 0.001 s, --t-s says 0.002 s: drop --t-s" in _one_line_error(capsys)
 
 
 @pytest.mark.parametrize(

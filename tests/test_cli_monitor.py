@@ -120,7 +120,7 @@ def test_inconsistent_exit_3(monkeypatch, capsys, csv_text):
     [
         ("", (), "empty"),
         ("t,q1,q2\n0,{q}\n", (), "at least two samples"),
-        ("t,q1,q2\n0,{q}\n0.002,{q}\n", ("--t-s", "0.001"), "uneven sampling"),  # checks the first step too
+        ("t,q1,q2\n0,{q}\n0.002,{q}\n", ("--t-s", "0.001"), "the file's step is 0.002 s, --t-s says 0.001 s"),
         ("t,q1\n0,1\n", (), "missing column"),
     ],
 )

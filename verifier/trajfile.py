@@ -284,6 +284,15 @@ class TrajectoryReader:
                                  f"nominal {nominal:.9g} s (the first step of the time column)" + _unit_hint(step, nominal)
                                  + f"; if {step:.9g} s is right, pass --t-s {step:.9g} to state it")
 
+    def _stated_step(self, t_prev: float, t: float, line: int) -> None:
+        """The first step against the period the caller stated (``--t-s``): a file sampled at another period is
+        said to be so, not reported as uneven."""
+        step = float(t - t_prev)
+        if abs(step - self.t_s) > step_tolerance(t_prev, t, self.t_s) and abs(step - self.t_s) > JITTER_RTOL * self.t_s:
+            raise self._error(f"the file's step is {step:.9g} s, --t-s says {self.t_s:.9g} s"
+                              + _unit_hint(step, self.t_s)
+                              + ": drop --t-s to read the period from the file, or correct it")
+
     def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
         """Raise unless the step ``t - t_prev`` ending on ``line`` is within :func:`step_tolerance` of ``t_s``.
 
@@ -312,6 +321,7 @@ class TrajectoryReader:
             self._read_header()
         it = self.header.index("t")
         t_prev = None
+        first = True  # the first step: checked against a stated period with its own message
         while (row := self._next_row()) is not None:
             values = self._parse(row)
             self._check_range(values)
@@ -323,7 +333,10 @@ class TrajectoryReader:
                 if self.even:
                     if self.t_s is None:
                         self._first_step(t_prev, t, self.line)
+                    elif first:
+                        self._stated_step(t_prev, t, self.line)
                     self.check_step(t_prev, t, self.t_s, self.line)
+                first = False
             yield self.line, values
             t_prev = t
 

@@ -82,8 +82,9 @@ def true_geometry(robot, seed: int):
 
 
 def progress_bar(total, enabled: bool, desc: str):
-    """A tqdm bar on stderr (``total`` None: open-ended) and its per-sample callback, or ``(None, None)``."""
-    if not enabled:
+    """A tqdm bar on stderr (``total`` None: open-ended) and its per-sample callback, or ``(None, None)``
+    (progress off, or stderr not a terminal)."""
+    if not enabled or not _terminal():
         return None, None
     from tqdm import tqdm
 
@@ -177,5 +178,13 @@ def _compile_listener(bar: PhaseBar):
 
 
 def phase_bar(enabled: bool, desc: str):
-    """A :class:`PhaseBar` (None when progress is off)."""
-    return PhaseBar(desc) if enabled else None
+    """A :class:`PhaseBar` (None when progress is off, or stderr is not a terminal: a log gets no bar)."""
+    return PhaseBar(desc) if enabled and _terminal() else None
+
+
+def _terminal() -> bool:
+    """Whether stderr is a terminal (progress bars are drawn there only)."""
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # replaced or closed stderr
+        return False

@@ -27,7 +27,8 @@ from .setup import compile_ahead, phase_bar, tracker_setup
 __all__ = ["check", "monitor", "Monitor"]
 
 #: What ``check`` and ``monitor`` print on stderr for an inconsistent run.
-INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box, eps_q or the initial box is "
+INCONSISTENT_HINT = ("a box became empty at step {k}: a_max, the calibration box, eps_q, the initial speed bound "
+                     "(--xd0: a recording that starts while the robot moves needs it) or the initial box is "
                      "violated by the data")
 
 
@@ -137,7 +138,7 @@ def check(a) -> int:
                 print("window reason: undecidable: each final mode is explained by a verified admissible motion, "
                       "so no sound method can decide this recording (stopped early)")
         for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
-            print(f"{key}: {out[key]}")
+            print(f"{key}: {_value_text(key, out)}")
         print(f"max width pose (m_x): {1e3 * out['max_width_pose_m']:.3f} mm")
         print(f"max width velocity (m_xd): {out['max_width_velocity_mps']:.4g} m/s")
         print(f"elapsed: {out['elapsed_s']:.2f} s")
@@ -403,7 +404,7 @@ class Monitor:
             print(f"verdict: {out['verdict']}" + (f" (input interrupted; on the {out['steps']} samples read: "
                                                    f"{out['verdict_so_far']})" if error else ""))
             for key in ("initial_mode", "final_mode", "certified_at_step", "inconsistent_at_step", "steps"):
-                print(f"{key}: {out[key]}")
+                print(f"{key}: {_value_text(key, out)}")
             if out["certificate"] is not None:
                 print(out["certificate"]["describe"])
             if out["steps"]:
@@ -413,6 +414,19 @@ class Monitor:
         if out["inconsistent_at_step"] is not None and error is None:  # else the error is the one line on stderr
             print(INCONSISTENT_HINT.format(k=out["inconsistent_at_step"]), file=sys.stderr)
         return 3 if out["verdict"] == Verdict.INCONSISTENT.value else 0
+
+
+def _value_text(key: str, out: dict) -> str:
+    """A summary value in words where JSON has null: the step of a verdict no single sample decided."""
+    v = out[key]
+    if v is not None:
+        return str(v)
+    if key == "certified_at_step":
+        decided = out["verdict"] in (Verdict.MODE_CHANGED.value, Verdict.MODE_UNCHANGED.value)
+        if decided and out.get("window") is not None:
+            return "none: decided by window reasoning over the whole run"
+        return "none: the final mode is not certified"
+    return "none"
 
 
 def _envelope(a, robot):
