@@ -24,7 +24,7 @@ from .simulate import RAMP_PEAK, TimeLaw, ramp_length
 from .task import CrossingTask, PlannedTrajectory
 
 __all__ = ["PathTask", "path_task_of", "path_task_from_poses", "plan_along_path", "smoothstep_law", "path_speed_ceiling",
-           "time_optimal_along_path", "time_optimal_ceiling", "PATH_KNOT_SPACING"]
+           "time_optimal_along_path", "time_optimal_ceiling", "joints_along", "PATH_KNOT_SPACING", "SCAN_NEIGHBOURHOOD"]
 
 #: Smallest spacing of the path's knots, m: a plan's rest samples (the same pose repeated) and samples closer
 #: than this are dropped, so that the spline's parameter increases strictly and its derivatives stay tame.
@@ -157,6 +157,31 @@ def _path_task(kin, xk, qk, xi, source: str) -> PathTask:
     return task
 
 
+#: Largest joint change (rad; m for a prismatic joint) between a planned pose's IK and its guess (the scan or
+#: the knots, interpolated) that keeps the working branch; beyond it the joints come from a continuation instead.
+SCAN_NEIGHBOURHOOD = 0.05
+
+
+def joints_along(kin, X, XD, XDD, xi, guess, working_guess, what: str):
+    """Joints (rad), rates and accelerations (K, n) of the planned poses ``X`` and their rates (SI): one batched
+    Newton from ``guess`` (on the working branch), the continuation from ``working_guess`` along the path where
+    a pose does not converge within :data:`SCAN_NEIGHBOURHOOD` of it.
+
+    Raises
+    ------
+    InputError
+        The continuation fails (``what`` names the path in the message).
+    """
+    Q, ok = kin.ik_batch(X, xi, guess)
+    if not ok.all() or np.max(np.abs(Q - guess)) > SCAN_NEIGHBOURHOOD:
+        try:
+            Q = kin.ik_path(X, xi, working_guess)
+        except SimulationError as exc:
+            raise InputError(f"{what} left the working mode: {exc}") from None
+    QD = kin.joint_velocity(X, Q, xi, XD)
+    return Q, QD, kin.joint_acceleration(X, Q, xi, XD, QD, XDD)
+
+
 def _tangent_scale(task: PathTask, robot) -> float:
     """``|x'(s*)|`` over the length axes: path parameter speed times it is the speed at the singularity."""
     _x, d1, _d2 = task.poses(np.array([task.s_star]))
@@ -276,14 +301,8 @@ def plan_along_path(kin, task: PathTask, v_sing: float, b) -> PlannedTrajectory:
     X, d1, d2 = task.poses(s)
     XD = d1 * sd[:, None]
     XDD = d1 * sdd[:, None] + d2 * (sd * sd)[:, None]
-    Q, ok = kin.ik_batch(X, xi, task.joints_at(s))
-    if not ok.all():
-        try:
-            Q = kin.ik_path(X, xi, task.working_guess)
-        except SimulationError as exc:
-            raise InputError(f"{task.source}: the re-timed path left the working mode: {exc}") from None
-    QD = kin.joint_velocity(X, Q, xi, XD)
-    QDD = kin.joint_acceleration(X, Q, xi, XD, QD, XDD)
+    Q, QD, QDD = joints_along(kin, X, XD, XDD, xi, task.joints_at(s), task.working_guess,
+                              f"{task.source}: the re-timed path")
     point = task.poses(np.array([task.s_star]))[0][0]
     return PlannedTrajectory(t=t, q=Q, qd=QD, qdd=QDD, x=X, xd=XD, xdd=XDD, t_s=b.t_s, k_sing=k_event,
                              v_sing=float(v_sing), crossing_point=point, xi_plan=xi)

@@ -17,8 +17,8 @@ from crosscert.robots.errors import InputError, SimulationError
 
 from .acceleration import derived_a_max
 from .generate import GenerationLimits, generate_crossing
-from .path import (PathTask, path_speed_ceiling, plan_along_path, smoothstep_law, time_optimal_along_path,
-                   time_optimal_ceiling)
+from .path import (PathTask, joints_along, path_speed_ceiling, plan_along_path, smoothstep_law,
+                   time_optimal_along_path, time_optimal_ceiling)
 from .simulate import RAMP_PEAK
 from .task import CrossingTask, Method, PlannedTrajectory, PlanningBounds, crossing_on_segment, parse_option
 
@@ -27,9 +27,6 @@ __all__ = ["plan_crossing", "speed_ceiling", "derived_a_max"]
 #: Path grid of the time-optimal law, m: fine enough that the cone program's
 #: finite differences do not limit the speed at the crossing (~0.1 mm).
 TIME_OPTIMAL_GRID_STEP = 1e-4
-#: Largest joint change (rad; m for a prismatic joint) between a planned pose and its nearest scan point (<= 0.25 mm away)
-#: that keeps the working branch; beyond it the plan's joints come from a continuation instead.
-_SCAN_NEIGHBOURHOOD = 0.05
 #: Relative shrink of the speed ceiling, so a plan at the ceiling is feasible
 #: despite rounding in the ramp lengths.
 CEILING_SHRINK = 1e-6
@@ -88,17 +85,8 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
     X = task.start[None] + s[:, None] * u[None]
     XD = v[:, None] * u[None]
     XDD = a[:, None] * u[None]
-    # one batched Newton from the segment's scan (0.5 mm apart, on the working branch); the
-    # continuation along the path where a pose does not converge next to it
-    guess = c.joints_at(s)
-    Q, ok = kin.ik_batch(X, xi, guess)
-    if not ok.all() or np.max(np.abs(Q - guess)) > _SCAN_NEIGHBOURHOOD:
-        try:
-            Q = kin.ik_path(X, xi, task.working_guess)
-        except SimulationError as exc:
-            raise InputError(f"planned path left the working mode: {exc}") from None
-    QD = kin.joint_velocity(X, Q, xi, XD)
-    QDD = kin.joint_acceleration(X, Q, xi, XD, QD, XDD)
+    # the guesses: the segment's scan (0.5 mm apart, on the working branch)
+    Q, QD, QDD = joints_along(kin, X, XD, XDD, xi, c.joints_at(s), task.working_guess, "planned path")
     return PlannedTrajectory(t=t, q=Q, qd=QD, qdd=QDD, x=X, xd=XD, xdd=XDD, t_s=b.t_s, k_sing=k_event, v_sing=v_sing,
                              crossing_point=task.start + s_star * u, xi_plan=xi)
 

@@ -87,11 +87,7 @@ def certify(a) -> int:
     if figure is not None and drawing is None:
         fn, *args, kwargs = figure[1]
         fn(*args, **kwargs)
-    js = out / "certificate.json"
-    atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
-    files.append(js)
-    if a.json:
-        print(json.dumps(report))
+    if _write_report(out, report, files, a.json):
         return 0
     # widths are the forward tracker's boxes (the paper's Table II); the verdict includes the window passes
     print(f"{'v_sing (m/s)':>12} {'m_x (mm)':>10} {'m_xd (m/s)':>11} {'forward':>15} {'verdict':>15}")
@@ -200,11 +196,7 @@ def _certify_given_plan(a) -> int:
         files.append(out / f"retimed_plan_{retimed.v_min:.3f}.csv")
         write_trajectory(files[-1], p.t, p.q, x=p.x)
         report["retimed_path"]["plan_file"] = str(files[-1])
-    js = out / "certificate.json"
-    atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
-    files.append(js)
-    if a.json:
-        print(json.dumps(report))
+    if _write_report(out, report, files, a.json):
         return 0
     print(plan_verdict_line(cert) if retimed is None else retimed_line(cert, retimed))
     r = cert.trials[0]
@@ -280,6 +272,16 @@ def _print_at_robot_a_max(cert, no_refute: bool) -> None:
     if at.refutation_search is not None:
         ref = _bound_text(at.refutation_bound, at.refutation_search, "m/s", 1.0, ".4f")
     print(f"at the robot's a_max ({robot_bound}): minimal certified v_sing {vmin}; refutation bound {ref}")
+
+
+def _write_report(out: Path, report: dict, files: list, as_json: bool) -> bool:
+    """Write ``certificate.json`` (appended to ``files``); with ``--json`` also print it and say so (True)."""
+    js = out / "certificate.json"
+    atomic_write(js, lambda fh: fh.write(json.dumps(report, indent=1)), what="--out")
+    files.append(js)
+    if as_json:
+        print(json.dumps(report))
+    return as_json
 
 
 def _close(pool, bar) -> None:
