@@ -19,6 +19,7 @@ from scipy.optimize import brentq
 
 from crosscert.robots.errors import InputError, SimulationError
 
+from .locus import sign_changes
 from .sampling import align_to_samples
 from .simulate import RAMP_PEAK, TimeLaw, ramp_length
 from .task import CrossingTask, PlannedTrajectory
@@ -133,11 +134,10 @@ def _path_task(kin, xk, qk, xi, source: str) -> PathTask:
     nm = kin.normalised_mode_batch(xk, qk, xi)
     sign = np.sign(nm)
     m0 = int(kin.mode(xk[0], qk[0], xi))
-    signed = np.flatnonzero(sign != 0)  # a knot on the locus up to rounding is bracketed by its neighbours
-    changes = np.flatnonzero(sign[signed[:-1]] * sign[signed[1:]] < 0)
-    if changes.size != 1 or m0 == 0:
-        raise InputError(f"{source}: the path must meet the Type 2 locus once, it does {changes.size} times")
-    j, j1 = int(signed[changes[0]]), int(signed[changes[0] + 1])
+    ka, kb = sign_changes(sign)  # a knot on the locus up to rounding is bracketed by its neighbours
+    if ka.size != 1 or m0 == 0:
+        raise InputError(f"{source}: the path must meet the Type 2 locus once, it does {ka.size} times")
+    j, j1 = int(ka[0]), int(kb[0])
     task = PathTask(start=xk[0], goal=xk[-1], working_guess=qk[0], s_knots=sk, x_knots=xk, q_knots=qk, s_star=0.0,
                     m0=m0, source=source)
 

@@ -221,18 +221,16 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
     return certify_planned(kin, imodel, plan_crossing(kin, task, v_sing, b), b, progress=progress, parallel=parallel)
 
 
-def certify_planned(kin, imodel, plan: PlannedTrajectory, bounds, *, m0: int | None = None, progress=None,
+def certify_planned(kin, imodel, plan: PlannedTrajectory, bounds, *, progress=None,
                     parallel: bool = True) -> CertifiedRun:
     """Certify one plan alone: its execution class, the forward run, then window passes if undecided.
 
-    ``m0``: the plan's initial assembly mode (default: the mode of its first pose and joints at the
-    planning geometry).  Its verdict ``MODE_CHANGED`` certifies every admissible execution of the plan
-    (module docstring).
+    The initial assembly mode is that of the plan's first pose and joints at the planning geometry.  Its
+    verdict ``MODE_CHANGED`` certifies every admissible execution of the plan (module docstring).
     """
     b = bounds.for_robot(kin.robot)
     cls = execution_class(kin, plan, b)
-    if m0 is None:
-        m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
+    m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
     acceleration = acceleration_assumption(plan, b, kin.robot)
     forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
     window = None

@@ -38,6 +38,7 @@ from crosscert.verifier.trajfile import read_trajectory
 
 from .. import refute
 from ..acceleration import derived_a_max
+from ..locus import sign_changes
 from ..montecarlo import monte_carlo_confirmation
 from ..progress import Phase, enter
 from ..simulate import random_geometry
@@ -163,16 +164,15 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
     if initial_mode is not None and initial_mode != m0:
         raise InputError(f"{name}: --initial-mode {initial_mode:+d} contradicts the given poses, which start in "
                          f"mode {m0:+d}")
-    signed = np.flatnonzero(modes != 0)
-    flips = signed[1:][modes[signed[1:]] != modes[signed[:-1]]]
+    ka_all, kb_all = sign_changes(modes.astype(float))  # a sample on the locus (mode 0) is bracketed once
+    flips = kb_all
     if flips.size == 0:
         raise InputError(f"{name}: the plan never crosses a Type 2 singularity (det J_x keeps its sign, mode "
                          f"{m0:+d} from the first sample to the last): there is no assembly-mode change to certify")
     if flips.size > 1:
         raise InputError(f"{name}: the plan crosses the Type 2 locus {flips.size} times (samples "
                          f"{', '.join(str(int(k)) for k in flips[:5])}): certify one crossing per plan")
-    kb = int(flips[0])
-    ka = int(signed[signed < kb][-1])
+    ka, kb = int(ka_all[0]), int(kb_all[0])
     # the crossing instant: a sample on the locus (up to rounding) when there is one, else the zero of the
     # normalised mode between the last sample before and the first after, rounded to the nearer sample
     w = nm[ka] / (nm[ka] - nm[kb])
@@ -296,7 +296,7 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
     clock = {"setup": time.perf_counter() - t0}
     t1 = time.perf_counter()
     enter(progress, Phase.SEARCH, 1, unit="plan")
-    run = certify_planned(kin, imodel, plan, b, m0=m0, parallel=parallel)
+    run = certify_planned(kin, imodel, plan, b, parallel=parallel)
     if progress is not None:
         progress(1)
     clock["certificate"] = time.perf_counter() - t1
