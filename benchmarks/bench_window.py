@@ -1,14 +1,12 @@
 """Window reasoning (verifier.window): detection power and cost per sample, against the forward tracker.
 
-Prints three tables (docs/tracker.md, "Window reasoning"):
+Prints two tables (docs/tracker.md, "Window reasoning"; the online monitor's: benchmarks/bench_online.py):
 
 1. simulated benchmark crossings at 0.9-1.3 m/s, 20 true geometries each (the
    centre and 19 seeded ones, every other at a corner of the box): runs
    certified by the forward tracker and by the window passes, wrong verdicts,
    time per run and per sample;
 2. bounces at 1.2 m/s turning back 0-20 mm before the locus (3 geometries);
-3. the fixed-lag online variant (``crosscert monitor --lag``): latency per
-   sample and how many samples it certifies late.
 
 Run: ``python benchmarks/bench_window.py`` (about 10 minutes on 2 cores).
 
@@ -22,10 +20,6 @@ S1b. (since 2026-12-02) the same runs asked only ``mode-changed``
 S2. where one undecided run spends its time: the kernel passes
     (``advance``), the forward-kinematics enumeration of the final boxes
     (``pose_solutions``) and the rest (tube bookkeeping in Python);
-S3. ``FixedLagWindow.update`` (what ``crosscert monitor --lag N`` times per
-    sample) with lags 20 and 50: mean, p99 and max per sample on a 6.42 s
-    recording (``crosscert simulate --v-sing 1.458 --t-rest 6.221``) and on
-    the catalogue's 1.1 m/s crossing and 1.2 m/s bounce.
 
 ``--explain`` (since 2026-12-03, issues 17 and 20): S1 and S2 pass
 ``planner.refute.RefutingExplainer`` to ``track_window`` (what ``crosscert check``
@@ -34,8 +28,7 @@ stops early, ``unknown`` with reason ``undecidable``; each run also prints
 the explainer's questions, answers and IPOPT wall time, and S2 the
 explainer's share of the undecided run.
 
-``--parts S3`` runs only the fixed-lag part (``--geometries N``: fewer
-geometries in S1).
+``--parts S1`` or ``--parts S2`` runs one part (``--geometries N``: fewer geometries in S1).
 
 ``--bounce-floor`` (``--speeds V``, default 1.0; ``--geometries N``) asks, for the bounce of each
 true geometry turning back ``d`` before the locus at ``V`` m/s, where its crossing floor is (the largest
@@ -59,9 +52,7 @@ from __future__ import annotations
 
 import inspect
 import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -69,13 +60,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from problems import default_settings, interval_model, kinematics, simulate  # noqa: E402
+from problems import default_settings, interval_model, kinematics  # noqa: E402
 from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
 from crosscert.planner.sweep import cruise_for  # noqa: E402
 from crosscert.robots import DEXTAR  # noqa: E402
 from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 from crosscert.verifier.tracker import initial_box_from_mode, track  # noqa: E402
-from crosscert.verifier.window import FixedLagWindow, track_window  # noqa: E402
+from crosscert.verifier.window import track_window  # noqa: E402
 
 
 def _true_geometries(n: int) -> list:
@@ -120,23 +111,6 @@ def main() -> None:
         res = [_run(simulate_bounce, 1.2, xi, short=short, cruise=max(5e-3, cruise_for(1.2) - short / 2))
                for xi in geoms[:3]]
         print(short, [(r[0], r[1], f"{r[4]:.1f}") for r in res], flush=True)
-    print("[3] fixed lag: run, lag, latency mean / max, lagged samples certified, of them not by the tracker")
-    im, s = interval_model(), default_settings()
-    for v, bounce in ((1.1, False), (1.2, True)):
-        run = simulate(v, bounce, 0)
-        x0 = initial_box_from_mode(im, run.q_meas[0], 1, s)
-        for lag in (20, 50):
-            fl = FixedLagWindow(im, s, x0, lag=lag)
-            t, res, fwd = [], [], []
-            for q in run.q_meas:
-                t0 = time.perf_counter()
-                res.append(fl.update(q))
-                t.append(time.perf_counter() - t0)
-                fwd.append(int(fl.tracker.state.mode[0]))
-            lagged = [r for r in res if r.lagged >= 0]
-            late = sum(r.lagged_mode != 0 and fwd[r.lagged] == 0 for r in lagged)
-            print(f"{'bounce' if bounce else 'crossing'} {v} m/s  lag {lag}  {1e3 * np.mean(t):.1f} / "
-                  f"{1e3 * np.max(t):.1f} ms  {np.mean([r.lagged_mode != 0 for r in lagged]):.3f}  {late}", flush=True)
 
 
 def ceiling(speeds, starts: int, geometries: int = 20) -> None:
@@ -257,17 +231,6 @@ def _digest(w) -> str:
     return h.hexdigest()[:12]
 
 
-def _lag_latency(im, s, q, lag):
-    x0 = initial_box_from_mode(im, q[0], 1, s)
-    fl = FixedLagWindow(im, s, x0, lag=lag)
-    t = np.empty(len(q))
-    for k, qk in enumerate(q):
-        t0 = time.perf_counter()
-        fl.update(qk)
-        t[k] = time.perf_counter() - t0
-    return t
-
-
 def _explainer(explain: bool):
     """A fresh ``RefutingExplainer`` with ``--explain`` (imported only then: older checkouts have none)."""
     if not explain:
@@ -301,14 +264,11 @@ def _asked(ex) -> str:
                                        f"ipopt {a.solve_s:.2f} s wall {a.wall_s:.2f} s" for a in ex.log) or "not asked")
 
 
-def speed(geometries: int, parts: str = "S1,S2,S3", explain: bool = False) -> None:
+def speed(geometries: int, parts: str = "S1,S2", explain: bool = False) -> None:
     import crosscert.verifier.window as W
 
     print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
     im, s = interval_model(), default_settings()
-    if "S1" not in parts and "S2" not in parts:
-        _speed_lag(im, s)
-        return
     runs = [_crossing(1.0, xi).q_meas for xi in _true_geometries(geometries)]
     kw = {}
     if explain:  # warm-up of the searches too: the explainer's NLPs of both kinds built once per process
@@ -379,37 +339,6 @@ def speed(geometries: int, parts: str = "S1,S2,S3", explain: bool = False) -> No
     for name, v in sorted(clock.total.items(), key=lambda kv: -kv[1]):
         print(f"  {name:15s} {v:7.3f} s  {100 * v / total:5.1f} %", flush=True)
     print(f"  {'the rest':15s} {rest:7.3f} s  {100 * rest / total:5.1f} %   (total {total:.3f} s)", flush=True)
-    if "S3" in parts:
-        _speed_lag(im, s)
-
-
-def _speed_lag(im, s) -> None:
-    print("[S3] FixedLagWindow.update per sample (monitor --lag): mean / p99 / max, ms", flush=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        csv = Path(tmp) / "rec.csv"
-        subprocess.run([sys.executable, "-m", "crosscert", "simulate", "--v-sing", "1.458", "--t-rest", "6.221",
-                        "-o", str(csv)], check=True, capture_output=True)
-        head = [c.strip() for c in csv.open().readline().split(",")]
-        rec = np.loadtxt(csv, delimiter=",", skiprows=1)[:, [head.index(f"q{i + 1}") for i in range(im.n)]]
-    cases = [("6.42 s recording, 1.458 m/s", rec), ("1.1 m/s crossing", simulate(1.1, False, 0).q_meas),
-             ("1.2 m/s bounce", simulate(1.2, True, 0).q_meas)]
-    _lag_latency(im, s, cases[1][1][:60], 20)  # warm-up
-    from crosscert.verifier.tracker import Tracker
-
-    for name, q in cases:
-        tr, t = Tracker(im, s, initial_box_from_mode(im, q[0], 1, s)), np.empty(len(q))
-        for k, qk in enumerate(q):
-            t0 = time.perf_counter()
-            tr.update(qk)
-            t[k] = time.perf_counter() - t0
-        t *= 1e3
-        print(f"  {name:28s} ({len(q)} samples) no lag (Tracker.update): {t.mean():.3f} / "
-              f"{np.percentile(t, 99):.2f} / {t.max():.2f}", flush=True)
-        for lag in (20, 50):
-            t = 1e3 * _lag_latency(im, s, q, lag)
-            print(f"  {name:28s} ({len(q)} samples) lag {lag}: {t.mean():.3f} / {np.percentile(t, 99):.2f} / "
-                  f"{t.max():.2f}", flush=True)
-    print(f"  {_load('')}", flush=True)
 
 
 if __name__ == "__main__":
@@ -423,7 +352,7 @@ if __name__ == "__main__":
                 int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20)
     elif "--speed" in sys.argv:
         speed(int(sys.argv[sys.argv.index("--geometries") + 1]) if "--geometries" in sys.argv else 20,
-              sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2,S3",
+              sys.argv[sys.argv.index("--parts") + 1] if "--parts" in sys.argv else "S1,S2",
               "--explain" in sys.argv)
     else:
         main()

@@ -39,7 +39,7 @@ _API = {
     "Verdict": "verifier.settings",
     "track": "verifier.tracker",
     "track_window": "verifier.window.offline",
-    "FixedLagWindow": "verifier.window.online",
+    "OnlineMonitor": "verifier.window.online",
     "Trajectory": "verifier.trajectory",
     "read_trajectory": "verifier.trajfile",
     # robots and errors

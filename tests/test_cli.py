@@ -78,20 +78,29 @@ def test_simulate_then_check_bounce(tmp_path, capsys):
 
 
 def test_check_window_reasoning_decides_what_the_forward_tracker_leaves_open(tmp_path, capsys):
-    """A simulated crossing at 1.1 m/s: the forward tracker says unknown, the window passes certify the change."""
+    """A simulated crossing at 1.1 m/s: the tracker alone says unknown; the window anchored where it lost the
+    mode certifies the change (and the final pose in the new mode); with a horizon too short for it, the
+    window over the whole recording does."""
     rec = tmp_path / "slow.csv"
     assert main(["simulate", "--v-sing", "1.1", "--t-rest", "0.05", "-o", str(rec)]) == 0
     capsys.readouterr()
     reports = {}
-    for reasoning in ("forward", "window"):
-        assert main(["check", str(rec), "--initial-mode", "1", "--json", "--reasoning", reasoning]) == 0
-        reports[reasoning] = json.loads(capsys.readouterr().out)
+    for name, extra in (("forward", ["--reasoning", "forward"]), ("window", []), ("whole", ["--horizon", "2"])):
+        assert main(["check", str(rec), "--initial-mode", "1", "--json", *extra]) == 0
+        reports[name] = json.loads(capsys.readouterr().out)
     assert reports["forward"]["verdict"] == "unknown" and reports["forward"]["window"] is None
+    assert reports["forward"]["window_decisions"] == 0
     win = reports["window"]
-    assert win["forward_verdict"] == "unknown" and win["verdict"] == "mode-changed" and win["final_mode"] == -1
-    assert {h["final_mode"]: h["status"] for h in win["window"]["hypotheses"]} == {1: "refuted", -1: "consistent"}
-    assert main(["check", str(rec), "--initial-mode", "1", "--reasoning", "window"]) == 0
-    assert "window passes: mode-changed" in capsys.readouterr().out
+    assert win["online_verdict"] == win["verdict"] == "mode-changed" and win["final_mode"] == -1
+    assert win["window"] is None and win["window_decisions"] >= 1
+    lo, hi = np.array(win["final_pose_lo"]), np.array(win["final_pose_hi"])
+    assert np.all(hi - lo < 5e-3)  # the tracker runs from the new mode's boxes: tight again
+    whole = reports["whole"]
+    assert whole["online_verdict"] == "unknown" and whole["verdict"] == "mode-changed" and whole["final_mode"] == -1
+    assert {h["final_mode"]: h["status"] for h in whole["window"]["hypotheses"]} == {1: "refuted", -1: "consistent"}
+    assert np.all(np.array(whole["final_pose_lo"]) <= np.array(whole["final_pose_hi"]))
+    assert main(["check", str(rec), "--initial-mode", "1", "--horizon", "2"]) == 0
+    assert "window passes over the whole run: mode-changed" in capsys.readouterr().out
 
 
 GOOD_HEAD = "t,q1,q2\n0.000,2.0,1.1\n0.001,2.0,1.1\n0.002,2.0,1.1\n"

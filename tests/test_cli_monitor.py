@@ -43,19 +43,22 @@ def _monitor(monkeypatch, capsys, text, *args):
 
 
 def _events(name):
-    """The events ``track`` implies on a problem: (k, event, mode) whenever the certified mode changes, and the result."""
+    """The events ``track`` implies on a problem: (k, event, mode) whenever the certified mode changes, and the
+    result.  A mode certified again is ``mode-changed`` when it is not the last one certified (on these
+    problems the tracker decides alone: no window decides earlier)."""
     res = track(interval_model(), run_of(CATALOGUE[name]).q_meas, default_settings(t_s=0.001), initial_mode=1)
-    out, prev = [], 0
+    out, prev, last = [], 0, 0
     for k, m in enumerate(res.mode):
         if m != prev:
-            out.append((k, "mode-gained" if prev == 0 else "mode-lost" if m == 0 else "mode-changed", int(m)))
-        prev = m
+            out.append((k, "mode-lost" if m == 0 else "mode-gained" if last in (0, m) else "mode-changed", int(m)))
+        prev, last = m, m or last
     return out, res
 
 
 @pytest.mark.parametrize("name", ["crossing_1458", "bounce_1458"])
-def test_verdict_and_events_equal_track(monkeypatch, capsys, csv_text, name):
-    code, lines, _ = _monitor(monkeypatch, capsys, csv_text(name), "-", *FLAGS)
+def test_forward_verdict_and_events_equal_track(monkeypatch, capsys, csv_text, name):
+    """``--reasoning forward``: the tracker alone, its events and summary those of ``track``."""
+    code, lines, _ = _monitor(monkeypatch, capsys, csv_text(name), "-", *FLAGS, "--reasoning", "forward")
     run = run_of(CATALOGUE[name])
     expected, res = _events(name)
     *events, last = lines
@@ -81,7 +84,7 @@ def test_text_output_from_a_named_pipe(tmp_path, capsys, csv_text):
     writer.join()
     out = capsys.readouterr().out
     assert code == 0
-    assert "mode-gained, mode -1" in out and "verdict: mode-changed" in out and "update latency: mean" in out
+    assert "mode-changed, mode -1" in out and "verdict: mode-changed" in out and "update latency: mean" in out
 
 
 @pytest.mark.parametrize(
@@ -176,18 +179,25 @@ def test_latency_statistics_in_constant_memory():
     assert stats.max_us() == round(values.max() / 1e3, 1) and stats.bins.nbytes == size
 
 
-@pytest.mark.parametrize("name", ["crossing_1458", "bounce_1458"])
-def test_lagged_events_are_true_and_come_later(monkeypatch, capsys, csv_text, name):
-    """``--lag 20``: every event is about sample k - 20 when sample k is read, every certified mode is the
-    true one, and the stream's verdict is one the problem allows."""
-    code, lines, _ = _monitor(monkeypatch, capsys, csv_text(name), "-", *FLAGS, "--lag", "20")
+@pytest.mark.parametrize("name", ["crossing_1458", "bounce_1458", "crossing_1264", "bounce_0800"])
+def test_window_events_are_true(monkeypatch, capsys, csv_text, name):
+    """The default (the anchored window on its thread): the tracker's events until it first loses the mode,
+    then every certified mode the true one at its sample (a window's event known at or after it), the final
+    pose box holding the true pose in the final mode, and a verdict the problem allows."""
+    code, lines, _ = _monitor(monkeypatch, capsys, csv_text(name), "-", *FLAGS)
     run = run_of(CATALOGUE[name])
     *events, last = lines
-    assert code == 0 and last["lag"] == 20
-    assert events and all(e["known_at_k"] == e["k"] + 20 for e in events)
-    assert all(e["t"] == pytest.approx(run.t[e["k"]]) for e in events)
+    assert code == 0 and last["reasoning"] == "window"
+    tracker_events = _events(name)[0]
+    lost = next(i for i, e in enumerate(tracker_events) if e[1] == "mode-lost")
+    assert [(e["k"], e["event"], e["mode"]) for e in events[:lost + 1]] == tracker_events[:lost + 1]
     assert all(e["mode"] in (0, run.mode_true[e["k"]]) for e in events), events
+    assert all(e.get("known_at_k", e["k"]) >= e["k"] and e["t"] == pytest.approx(run.t[e["k"]]) for e in events)
     assert last["verdict"] in {v.value for v in CATALOGUE[name].expected}
+    if last["final_mode"]:
+        assert last["final_mode"] == run.mode_true[-1]
+    lo, hi = np.array(last["final_pose_lo"]), np.array(last["final_pose_hi"])
+    assert np.all(lo <= run.x_true[-1]) and np.all(run.x_true[-1] <= hi)
 
 
 def test_interrupted_stream_gives_no_verdict_on_the_whole(monkeypatch, capsys, csv_text):

@@ -112,10 +112,10 @@ def test_the_package_calls_no_kernel_from_python(crossing_csv, capsys):
     """The package's own paths reach the kernels through entry points only: a twin would compile the kernel
     and its callees once more on the first run.  Covered: ``check`` (the initial box's enumeration, the
     tracker, window passes with the compiled contraction), a threaded batch, the hypotheses spread over
-    threads, the fixed-lag window."""
+    threads, the online monitor's anchored window."""
     from crosscert.planner.cli import main
     from crosscert.verifier.tracker import Tracker, track_batch
-    from crosscert.verifier.window import FixedLagWindow
+    from crosscert.verifier.window import OnlineMonitor
 
     before = dict(Kernel.python_calls)
     assert main(["check", str(crossing_csv), "--initial-mode", "1", "--no-progress"]) == 0
@@ -128,7 +128,10 @@ def test_the_package_calls_no_kernel_from_python(crossing_csv, capsys):
     tracker = Tracker(model, s, x0, spread_hypotheses=True)
     for qk in run.q_meas[:10]:
         tracker.update(qk)
-    lag = FixedLagWindow(model, s, x0, lag=5)
-    for qk in run.q_meas[:20]:
-        lag.update(qk)
+    slow = simulate(1.0, False, 0)  # the tracker alone leaves it open: the anchored window decides it
+    x = slow.x_true[0]
+    with OnlineMonitor(model, s, (x - 1e-3, x + 1e-3), worker=False) as online:
+        for qk in slow.q_meas:
+            online.update(qk)
+    assert online.decisions >= 1
     assert dict(Kernel.python_calls) == before

@@ -306,59 +306,6 @@ def test_bad_arguments_are_refused(runs, settings):
             _window(sc, settings, goal=goal)
 
 
-def test_fixed_lag_modes_are_true(runs, settings):
-    """Online window reasoning with a lag of 20 samples on slow adversarial crossings and bounces: every
-    mode it certifies (now or 20 samples back) is the true one, and it certifies some the tracker did not."""
-    from crosscert.verifier.window import FixedLagWindow
-
-    gained = 0
-    for sc in runs[N_RUNS:N_RUNS + 6]:
-        x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
-        fl = FixedLagWindow(interval_model(), settings, x0, lag=20)
-        fwd = []
-        for k, q in enumerate(sc.q_meas):
-            r = fl.update(q)
-            fwd.append(int(fl.tracker.state.mode[0]))
-            assert r.consistent, sc.name
-            assert r.mode_now in (0, sc.mode[k]), (sc.name, k)
-            if r.lagged >= 0:
-                assert r.lagged_mode in (0, sc.mode[r.lagged]), (sc.name, r)
-                gained += r.lagged_mode != 0 and fwd[r.lagged] == 0
-    assert gained > 0
-
-
-def test_fixed_lag_answers_the_same_on_one_thread(runs, settings):
-    """The rows of a window call over the thread slots (``parallel``, the default) or on one thread: the same
-    answer at every sample."""
-    from crosscert.verifier.window import FixedLagWindow
-
-    sc = runs[N_RUNS + 1]
-    x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
-    a, b = (FixedLagWindow(interval_model(), settings, x0, lag=20, parallel=p) for p in (True, False))
-    assert a.cfg_b.parallel and not b.cfg_b.parallel
-    for q in sc.q_meas:
-        assert a.update(q) == b.update(q)
-
-
-def test_fixed_lag_runs_only_rows_that_can_change_the_answer(runs, settings, monkeypatch):
-    """The fixed-lag window runs its (hypothesis, geometry) rows a pair at a time and stops once no row left
-    can change the answer: the results must be those of running every row at once (on runs where the
-    window certifies lagged modes the tracker did not)."""
-    import crosscert.verifier.window.online as O
-
-    def results(sc):
-        x0 = initial_box_from_mode(interval_model(), sc.q_meas[0], int(sc.mode[0]), settings)
-        fl = O.FixedLagWindow(interval_model(), settings, x0, lag=20)
-        return [fl.update(q) for q in sc.q_meas]
-
-    for sc in (runs[3], runs[N_RUNS + 4], runs[N_RUNS + 9]):
-        lazy = results(sc)
-        monkeypatch.setattr(O, "_LAG_BATCH", 10 ** 6)  # every useful row in the first call: nothing skipped
-        full = results(sc)
-        monkeypatch.undo()
-        assert lazy == full, sc.name
-
-
 def test_halving_follows_the_pose_spread_and_covers_the_parent():
     """Sub-boxes are halved along the parameter that spreads the pose most (the joint offsets of the
     DexTAR's partition first: about 0.7 mm against 0.2-0.5 mm for the lengths at the benchmark's start),

@@ -7,7 +7,8 @@ What a user calls, by task (explicit re-exports, no star imports):
   :func:`track_batch` / the online :class:`Tracker`, answering a
   :class:`Verdict`; :class:`Backend` picks the compiled or NumPy kernels;
 * **reason over a window** — :func:`track_window` (whole run) and
-  :class:`FixedLagWindow` (online, with a lag), :class:`Reasoning`;
+  :class:`OnlineMonitor` (online: the tracker, and a window from the last
+  sample whose mode it knew), :class:`Reasoning`;
 * **the interval model** of a robot — :class:`IntervalModel`;
 * **recordings** — :class:`Trajectory`, :func:`read_trajectory`,
   :func:`write_trajectory`;
@@ -29,7 +30,7 @@ from .tracker import BatchResult, SampleStream, Tracker, TrackResult, initial_bo
 from .trajectory import Trajectory
 from .trajfile import read_trajectory, write_trajectory
 from .validation import validate
-from .window import FixedLagWindow, LagResult, Reasoning, WindowResult, track_window
+from .window import OnlineEvent, OnlineMonitor, OnlineResult, Reasoning, WindowResult, WindowState, track_window
 
 __all__ = [
     # track a recording
@@ -46,10 +47,12 @@ __all__ = [
     "Backend",
     # reason over a window
     "track_window",
-    "FixedLagWindow",
+    "OnlineMonitor",
+    "OnlineResult",
+    "OnlineEvent",
+    "WindowState",
     "Reasoning",
     "WindowResult",
-    "LagResult",
     # the interval model
     "IntervalModel",
     # recordings

@@ -69,8 +69,9 @@ MAX_SPEED = 20.0
 MIN_TOL = 1e-4
 #: Largest Monte Carlo confirmation, executions (memory: boxes of every sample).
 MAX_MONTE_CARLO = 100_000
-#: Largest ``monitor --lag``, samples: each sample near the locus costs about 0.2-0.4 ms per sample of lag.
-MAX_LAG = 1000
+#: Longest anchored window of ``check``/``monitor --horizon``, samples (the readings and pose boxes it keeps,
+#: and one attempt's work grow with it).
+MAX_HORIZON = 100_000
 #: Largest design study, cases (each is a certification of seconds to minutes).
 MAX_CASES = 10_000
 #: Largest local cluster of ``study --workers``, worker processes.
@@ -204,11 +205,9 @@ def check_command(a, entry) -> None:
         return
     if cmd in ("check", "monitor"):
         _tracker(a, robot)
-        if cmd == "check":
-            if a.plot is not None:
-                _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
-        elif a.lag:
-            _in("--lag", a.lag, 0, MAX_LAG, lo_open=False, unit=" samples")
+        _in("--horizon", a.horizon, 2, MAX_HORIZON, lo_open=False, unit=" samples")
+        if cmd == "check" and a.plot is not None:
+            _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
         return
     if cmd in ("simulate", "plan", "certify"):
         _in("--a-peak", a.a_peak, 0.0, 1e6, unit=" m/s^2")

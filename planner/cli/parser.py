@@ -12,7 +12,7 @@ from crosscert.verifier.step import Backend
 from crosscert.verifier.settings import VelocityModel
 from crosscert.verifier.trajfile import parse_number
 from crosscert.verifier.one_motion import ONE_MOTION_SAMPLES
-from crosscert.verifier.window import Reasoning
+from crosscert.verifier.window import ONLINE_HORIZON, Reasoning
 
 from ..execution import ExecutionKind
 from ..simulate.run import A_PEAK as SIM_A_PEAK
@@ -137,6 +137,9 @@ def _tracker_options(p, robot):
                    help="joint-data error model (paper = quantisation only, NOT sound)")
     p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,
                    help="tracker implementation: compiled kernels or the numpy reference (same results)")
+    p.add_argument("--horizon", type=count, default=ONLINE_HORIZON,
+                   help="longest anchored window, samples: a window from the last sample whose mode was known that "
+                        "reaches it undecided gives up (mode unknown until the tracker certifies one again)")
     p.add_argument("--certificate", metavar="JSON",
                    help="a certificate.json of crosscert certify: while the readings stay in its certified envelope "
                         "around the plan, its verdict holds for this execution from the sample its run decided")
@@ -179,9 +182,10 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
                     help="CSV stream t,q1..qn[,qd1..qdn]: '-' for stdin, a named pipe or a file")
     _tracker_options(mo, robot)
     mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
-    mo.add_argument("--lag", type=count, default=0,
-                    help="window reasoning with a fixed lag: the mode of sample k is reported once sample k + LAG is "
-                         "read (0: none; costs milliseconds per sample near the locus, see docs/tracker.md)")
+    mo.add_argument("--reasoning", choices=[r.value for r in Reasoning], default=Reasoning.WINDOW.value,
+                    help="'window': when the tracker loses the mode, reason over the readings from the last sample "
+                         "whose mode it knew, on a thread of its own, and track the decided mode's boxes from its "
+                         "decision on; 'forward': the tracker alone")
     mo.add_argument("--spread-hypotheses", action="store_true",
                     help="track the geometry hypotheses of each sample on several threads: lower latency on "
                          "dedicated cores, erratic on busy ones")

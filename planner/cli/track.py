@@ -12,12 +12,12 @@ import numpy as np
 
 from crosscert.robots.errors import CrosscertError, InputError, TrajectoryFileError
 from crosscert.verifier.plots import plot_run
-from crosscert.verifier.step import Backend, Event
+from crosscert.verifier.step import Backend
 from crosscert.verifier.tracker import Tracker
 from crosscert.verifier.settings import Verdict
-from crosscert.verifier.tracker import initial_box_from_mode, verdict_of
+from crosscert.verifier.tracker import initial_box_from_mode
 from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
-from crosscert.verifier.window import FixedLagWindow, Reasoning, VerdictReason, track_window
+from crosscert.verifier.window import HypothesisStatus, OnlineMonitor, Reasoning, VerdictReason, track_window
 
 from ..certify.envelope import CertifiedEnvelope, EnvelopeMonitor, EnvelopeState
 from ..progress import Phase, enter
@@ -77,9 +77,11 @@ def _tracked(a, robot, model, run, bar):
                 bar(1)
     if run.samples < 2:
         raise TrajectoryFileError(f"{name}: at least two samples are needed, got {run.samples}")
+    run.settle()
     out = {k: v for k, v in run.summary().items() if k not in _MONITOR_ONLY}
-    out["reasoning"] = a.reasoning
-    out["forward_verdict"] = out["verdict"]
+    run.close()
+    # the tracker with its anchored windows (what monitor says), before any window over the whole recording
+    out["online_verdict"] = out["verdict"]
     out["window"] = None
     if a.reasoning == Reasoning.WINDOW.value and out["verdict"] == Verdict.UNKNOWN.value:
         if readings is None:
@@ -99,6 +101,9 @@ def _tracked(a, robot, model, run, bar):
             if win.verdict in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
                 out["final_mode"] = (out["initial_mode"] if win.verdict is Verdict.MODE_UNCHANGED
                                      else -out["initial_mode"])
+                # the surviving hypothesis' tube at the last sample: inside that mode's poses of the last reading
+                h = next(h for h in win.hypotheses if h.status is not HypothesisStatus.REFUTED)
+                out["final_pose_lo"], out["final_pose_hi"] = h.x_lo[-1].tolist(), h.x_hi[-1].tolist()
     return out, name
 
 
@@ -116,7 +121,7 @@ def check(a) -> int:
     robot, model, make_settings, x0 = tracker_setup(a)
     envelope = _envelope(a, robot)
     t0 = time.perf_counter()
-    run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False, envelope=envelope)
+    run = Monitor(a, model, make_settings, x0, record=a.plot is not None, echo=False, worker=False, envelope=envelope)
     bar = phase_bar(not a.no_progress and not a.json, "check")
     try:
         out, name = _tracked(a, robot, model, run, bar)
@@ -133,7 +138,8 @@ def check(a) -> int:
         if out["window"] is not None:
             w = out["window"]
             hyps = ", ".join("final mode {:+d} {}".format(h["final_mode"], h["status"]) for h in w["hypotheses"])
-            print(f"forward tracker: {out['forward_verdict']}; window passes: {w['verdict']} ({hyps})")
+            print(f"online (the tracker and its anchored windows): {out['online_verdict']}; window passes over "
+                  f"the whole run: {w['verdict']} ({hyps})")
             if w["reason"] == VerdictReason.UNDECIDABLE.value:
                 print("window reason: undecidable: each final mode is explained by a verified admissible motion, "
                       "so no sound method can decide this recording (stopped early)")
@@ -195,10 +201,12 @@ class Monitor:
     """What ``crosscert monitor`` (or ``check``, reading a file) has decided so far.
 
     Samples wait in ``pending`` until the sampling period is known (at the
-    second sample, or the first with ``--t-s``); then the compiled
-    :class:`~verifier.tracker.Tracker` starts from ``--x0`` or from the first
-    sample's box of ``--initial-mode``, and every later sample is tracked as
-    soon as it is fed.
+    second sample, or the first with ``--t-s``); then the
+    :class:`~verifier.window.OnlineMonitor` starts from ``--x0`` or from the
+    first sample's box of ``--initial-mode``, and every later sample is
+    tracked as soon as it is fed.  ``monitor`` runs its anchored window on a
+    worker thread; ``check`` runs it inline, at fixed window lengths, so that
+    its answers do not depend on the machine's speed.
 
     Parameters
     ----------
@@ -212,84 +220,109 @@ class Monitor:
         Keep the boxes and mode of every sample (for a figure).
     echo : bool
         Print every event as it happens (``monitor``).
+    worker : bool
+        The anchored window on a thread (``monitor``) or inline (``check``).
+    envelope : planner.certify.envelope.EnvelopeMonitor, optional
+        ``--certificate``: the certified envelope the readings are checked against first.
     """
 
-    def __init__(self, a, model, make_settings, x0, *, record: bool = False, echo: bool = True, envelope=None):
+    def __init__(self, a, model, make_settings, x0, *, record: bool = False, echo: bool = True, worker: bool = True,
+                 envelope=None):
         self.a, self.model, self.make_settings, self.x0 = a, model, make_settings, x0
         self.envelope = envelope  # --certificate: planner.certify.envelope.EnvelopeMonitor
-        self.record, self.echo = record, echo
-        self.tracker = None
+        self.record, self.echo, self.worker = record, echo, worker
+        self.online = None  # the verifier's OnlineMonitor, once the sampling period is known
         self.x0_used = None  # the initial box the tracker started from
-        self.lagger = None  # --lag: the fixed-lag window reasoning around the tracker
-        self.mode_now = 0  # --lag: mode certified at the newest sample
-        self.times = []  # --lag: times of the last lag + 1 samples
-        self._lag_mode, self._lag_consistent = 0, True
         self.t_s = None
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
+        self.times = {}  # sample -> (t, line) of the samples a window's event may still be about
+        self.last = None  # the OnlineResult of the newest sample
         self.latency = LatencyStats()
         self.envelope_latency = LatencyStats()
         self.catch_up_latency = LatencyStats()  # --certificate: the held samples, tracked once the envelope is left
         self.backlog = []  # --certificate: (line, t, q) held while the certificate answers
         self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
 
+    @property
+    def tracker(self):
+        """The tracker of the newest sample (None before it starts)."""
+        return None if self.online is None else self.online.tracker
+
+    def _start(self, t_s: float) -> None:
+        settings = self.make_settings(t_s)
+        self.t_s = float(t_s)
+        if self.envelope is not None and abs(self.t_s - self.envelope.envelope.t_s) > 1e-9 * self.t_s:
+            raise InputError(f"--certificate: the recording's step is {self.t_s:g} s, the certified plan's "
+                             f"{self.envelope.envelope.t_s:g} s: the certificate covers executions sampled "
+                             "at its plan's period")
+        x0 = self.x0
+        if x0 is None:
+            x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
+                                       backend=self.a.backend)
+        self.x0_used = x0
+        self.online = OnlineMonitor(self.model, settings, x0, backend=self.a.backend, horizon=self.a.horizon,
+                                    worker=self.worker, window=self.a.reasoning == Reasoning.WINDOW.value,
+                                    spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
+
     def feed(self, line: int, t: float, q, t_s: float | None) -> None:
         """Track the sample read on ``line`` (time ``t`` s, readings ``q`` rad) and print its events."""
         self.samples += 1
         self.pending.append((line, float(t), q))
-        if self.tracker is None:
+        if self.online is None:
             if t_s is None:
                 return
-            settings = self.make_settings(t_s)
-            self.t_s = float(t_s)
-            if self.envelope is not None and abs(self.t_s - self.envelope.envelope.t_s) > 1e-9 * self.t_s:
-                raise InputError(f"--certificate: the recording's step is {self.t_s:g} s, the certified plan's "
-                                 f"{self.envelope.envelope.t_s:g} s: the certificate covers executions sampled "
-                                 "at its plan's period")
-            x0 = self.x0
-            if x0 is None:
-                x0 = initial_box_from_mode(self.model, self.pending[0][2], self.a.initial_mode, settings,
-                                           backend=self.a.backend)
-            self.x0_used = x0
-            if getattr(self.a, "lag", 0):
-                self.lagger = FixedLagWindow(self.model, settings, x0, lag=self.a.lag, backend=self.a.backend)
-                self.tracker = self.lagger.tracker
-            else:
-                self.tracker = Tracker(self.model, settings, x0, backend=self.a.backend,
-                                       spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
+            self._start(t_s)
         for line, t, q in self.pending:
             if self.envelope is not None:
                 self._feed_envelope(line, t, q)
-                if self.lagger is None and self.envelope.status.state in _HELD:
+                if self.envelope.status.state in _HELD:
                     # inside the certified envelope the certificate answers: the tracker catches up later
                     self.backlog.append((line, t, q))
                     continue
                 self.catch_up()
-            if self.lagger is not None:
-                self._feed_lagged(line, t, q)
-                continue
             self._track(line, t, q, self.latency)
         self.pending.clear()
 
     def _track(self, line: int, t: float, q, latency) -> None:
-        """One sample through the tracker: its latency, its boxes when recorded, its events when echoed."""
+        """One sample through the online monitor: its latency, its boxes when recorded, its events."""
         t0 = time.perf_counter_ns()
-        r = self.tracker.update(q)
+        r = self.online.update(q)
         latency.add(time.perf_counter_ns() - t0)
+        self.last = r
+        self.times[r.k] = (t, line)
         if self.record:
             for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
                 self.boxes[key].append(v)
-        if not self.echo:
-            return
-        for e in r.events:
-            ev = {"event": e.value, "k": r.k, "t": t, "line": line, "mode": r.mode}
-            text = f"sample {r.k} (t = {t:.9g} s): {e}" + (f", mode {r.mode:+d}" if r.mode else "")
+        self._events(r.events)
+        # a window's event is about a sample at most a horizon back
+        self.times.pop(r.k - self.online.horizon - 2, None)
+
+    def _events(self, events) -> None:
+        for e in events:
+            if self.record and e.by_window:
+                self._redraw(e)
+            if not self.echo:
+                continue
+            t, line = self.times.get(e.k, (math.nan, None))
+            ev = {"event": e.event.value, "k": e.k, "t": t, "line": line, "mode": e.mode}
+            text = f"sample {e.k} (t = {t:.9g} s): {e.event}" + (f", mode {e.mode:+d}" if e.mode else "")
+            if e.known_at != e.k:
+                ev["known_at_k"] = e.known_at
+                text += f" (known at sample {e.known_at}" + (", by window reasoning)" if e.by_window else ")")
             print(json.dumps(ev) if self.a.json else text, flush=True)
+
+    def _redraw(self, e) -> None:
+        """A figure shows the decided mode from a window's decision on: the samples tracked meanwhile are
+        drawn again from the re-seeded tracker's boxes as they come (this one keeps its box; the mode is the
+        decided one from ``e.k``)."""
+        if e.k < len(self.boxes["mode"]):
+            self.boxes["mode"][e.k] = e.mode
 
     def catch_up(self) -> None:
         """``--certificate``: the samples held while the readings were in the envelope, through the tracker now
         (when one leaves it, the plan ends, or the run's summary is asked); timed apart from the live samples."""
-        if not self.backlog or self.tracker is None:
+        if not self.backlog or self.online is None:
             return
         for line, t, q in self.backlog:
             self._track(line, t, q, self.catch_up_latency)
@@ -307,30 +340,16 @@ class Monitor:
         print(json.dumps(ev) if self.a.json else f"sample {st.k} (t = {t:.9g} s): {self.envelope.describe()}",
               flush=True)
 
-    def _feed_lagged(self, line: int, t: float, q) -> None:
-        """``--lag``: events of sample ``k - lag``, known once sample ``k`` is read."""
-        t0 = time.perf_counter_ns()
-        r = self.lagger.update(q)
-        self.latency.add(time.perf_counter_ns() - t0)
-        self.mode_now = r.mode_now
-        self.times.append(t)
-        if len(self.times) > self.lagger.lag + 1:
-            self.times.pop(0)
-        if r.lagged < 0 or not self.echo:
-            return
-        events = []
-        if not r.consistent and self._lag_consistent:
-            events.append(Event.INCONSISTENT)
-        elif r.consistent and r.lagged_mode != self._lag_mode:
-            events.append(Event.MODE_GAINED if self._lag_mode == 0 else
-                          Event.MODE_LOST if r.lagged_mode == 0 else Event.MODE_CHANGED)
-        self._lag_mode, self._lag_consistent = r.lagged_mode, r.consistent
-        tj = self.times[0]
-        for e in events:
-            ev = {"event": e.value, "k": r.lagged, "t": tj, "known_at_k": r.k, "mode": r.lagged_mode}
-            text = (f"sample {r.lagged} (t = {tj:.9g} s, known at sample {r.k}): {e}"
-                    + (f", mode {r.lagged_mode:+d}" if r.lagged_mode else ""))
-            print(json.dumps(ev) if self.a.json else text, flush=True)
+    def settle(self, timeout: float | None = None) -> None:
+        """The held samples tracked, and the anchored window's last attempt over every reading (its events
+        printed): before a summary of the whole input."""
+        self.catch_up()
+        if self.online is not None:
+            self._events(self.online.settle(timeout))
+
+    def close(self) -> None:
+        if self.online is not None:
+            self.online.close()
 
     def recorded(self) -> dict:
         """The kept boxes as arrays: ``x_lo, x_hi, xd_lo, xd_hi`` (K, n), m and m/s, and ``mode`` (K,)."""
@@ -338,27 +357,27 @@ class Monitor:
 
     def bounds_text(self) -> str:
         """The bounds the run assumed, for a figure: eps_q, a_max, t_s and the velocity model."""
-        s = self.tracker.config.settings
+        s = self.online.settings
         return (f"eps_q = {np.max(s.eps_q):.3g} rad, a_max = {np.max(s.a_max):.3g} m/s^2, t_s = {s.t_s:.3g} s, "
                 f"velocity model {s.velocity_model}")
 
     def summary(self, error: str | None = None) -> dict:
-        """The verdict, counts and latencies (us); the samples held by ``--certificate`` are tracked first.
+        """The verdict, counts, the final pose box and latencies (us).
 
-        ``verdict_so_far`` is the verdict on the samples read (rules of
-        :func:`verifier.tracker.verdict_of`); ``verdict`` is the same unless
-        the input was interrupted (``error``), when it is ``unknown``: a
-        prefix says nothing about the samples that never came.
+        ``verdict_so_far`` is the verdict on the samples read (the certified
+        modes at the first and newest sample, :meth:`OnlineMonitor.verdict`);
+        ``verdict`` is the same unless the input was interrupted (``error``),
+        when it is ``unknown``: a prefix says nothing about the samples that
+        never came.  Call :meth:`settle` first for the window's last word.
         """
-        self.catch_up()
-        st = None if self.tracker is None else self.tracker.state
-        bad = -1 if st is None else int(st.bad_at[0])
-        init = 0 if st is None else int(st.init_mode[0])
-        final = int(st.mode[0]) if st is not None and bad < 0 else 0
-        if self.lagger is not None and bad < 0:
-            final = int(self.mode_now)
-        so_far = verdict_of(init, final, bad >= 0).value
-        certificate, step = None, (int(st.streak[0]) if final else None)
+        mon = self.online
+        started = mon is not None and mon.k >= 0
+        so_far = Verdict.UNKNOWN.value if not started else mon.verdict().value
+        init = mon.initial_mode if started else 0
+        final = mon.mode if started else 0
+        step = mon.since if started and final else None
+        bad = mon.inconsistent_at if started and mon.inconsistent_at >= 0 else None
+        certificate = None
         if self.envelope is not None:
             env, status = self.envelope.envelope, self.envelope.status
             certificate = {**status.summary(), "decided_at_sample": env.decided_at, "describe": self.envelope.describe(),
@@ -373,6 +392,8 @@ class Monitor:
                     so_far = Verdict.INCONSISTENT.value
                 else:
                     so_far, init, final, step = env.verdict.value, env.initial_mode, env.final_mode, env.decided_at
+        last = self.last
+        final_box = last is not None and last.consistent
         return {
             "certificate": certificate,
             # a verdict is about the whole recording: an interrupted one has only a prefix's
@@ -381,13 +402,17 @@ class Monitor:
             "initial_mode": init,
             "final_mode": final,
             "certified_at_step": step,
-            "inconsistent_at_step": bad if bad >= 0 else None,
-            "steps": 0 if st is None else st.k,
-            "t_s": None if st is None else float(self.tracker.config.settings.t_s),
-            "max_width_pose_m": None if st is None else float(st.max_width_pose[0]),
-            "max_width_velocity_mps": None if st is None else float(st.max_width_velocity[0]),
+            "inconsistent_at_step": bad,
+            "steps": mon.k + 1 if started else 0,
+            "t_s": self.t_s,
+            # the pose box at the last sample (in the final mode when it is certified), m
+            "final_pose_lo": last.x[0].tolist() if final_box else None,
+            "final_pose_hi": last.x[1].tolist() if final_box else None,
+            "max_width_pose_m": mon.max_width_pose if started else None,
+            "max_width_velocity_mps": mon.max_width_velocity if started else None,
             "velocity_model": self.a.velocity_model,
-            "lag": int(getattr(self.a, "lag", 0) or 0),
+            "reasoning": self.a.reasoning,
+            "window_decisions": 0 if mon is None else mon.decisions,
             "latency_us_mean": self.latency.mean_us(),
             "latency_us_p99": self.latency.quantile_us(0.99),
             "latency_us_max": self.latency.max_us(),
@@ -398,6 +423,7 @@ class Monitor:
     def finish(self, error: str | None = None) -> int:
         """Print the summary (the last line of output) and return the exit code."""
         out = self.summary(error)
+        self.close()
         if self.a.json:
             print(json.dumps(out), flush=True)
         else:
@@ -473,6 +499,11 @@ def monitor(a) -> int:
         except BrokenPipeError:
             raise  # the reader of our output is gone: no summary to print, a quiet end (main)
         except (CrosscertError, OSError, KeyboardInterrupt) as exc:
+            mon.finish(error=str(exc) or type(exc).__name__)
+            raise
+        try:
+            mon.settle()  # the end of the input: the window's last attempt over every reading
+        except KeyboardInterrupt as exc:
             mon.finish(error=str(exc) or type(exc).__name__)
             raise
     return mon.finish()

@@ -52,15 +52,19 @@ reasoning").  Shapes: ``K`` samples, pose dimension ``n``; SI units.
 Modules: :mod:`.results` (what a window reports), :mod:`.explain` (the
 :class:`Explainer` protocol), :mod:`.passes` (one pass over the rows, the
 final boxes), :mod:`.hypotheses` (the rounds, halving and one-motion step of
-each hypothesis), :mod:`.offline` (:func:`track_window`) and :mod:`.online`
-(:class:`FixedLagWindow`).  Explicit re-exports (no star imports).
+each hypothesis), :mod:`.offline` (:func:`track_window`, which may start
+from a tracker's state, :class:`WindowStart`) and :mod:`.online`
+(:class:`OnlineMonitor`: the tracker, and a window anchored at the last
+sample whose mode it knew, while the robot moves).  Explicit re-exports (no
+star imports).
 """
 
 from .explain import Explainer, ExplainRequest, Explanation
-from .offline import WINDOW_MAX_GEOMETRIES, WINDOW_MAX_PASSES, track_window
-from .online import FixedLagWindow, LagResult
+from .offline import WINDOW_MAX_GEOMETRIES, WINDOW_MAX_PASSES, WindowStart, track_window
+from .online import ONLINE_HORIZON, OnlineEvent, OnlineMonitor, OnlineResult, WindowState
 from .results import HypothesisResult, HypothesisStatus, Reasoning, Refutation, VerdictReason, WindowResult
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
-           "FixedLagWindow", "LagResult", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "VerdictReason",
-           "Explanation", "ExplainRequest", "Explainer"]
+           "WindowStart", "OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON",
+           "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "VerdictReason", "Explanation", "ExplainRequest",
+           "Explainer"]

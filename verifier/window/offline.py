@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,12 +19,14 @@ from .hypotheses import Hypothesis, decide
 from .passes import FinalBoxes, Passes, run_pass, tube_hull
 from .results import HypothesisResult, HypothesisStatus, Refutation, VerdictReason, WindowResult
 
-__all__ = ["track_window", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "WINDOW_REL_TOL"]
+__all__ = ["track_window", "WindowStart", "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "WINDOW_REL_TOL"]
 
 #: Default pass budget of a round (backward and forward passes alternate).
 WINDOW_MAX_PASSES = 6
 #: Default budget of geometry sub-boxes per hypothesis (halving surviving ones between rounds).
 WINDOW_MAX_GEOMETRIES = 64
+#: Default resolution (m) of the enumeration of the last reading's poses (the hypotheses' final boxes).
+WINDOW_FK_TOL = 1e-5
 #: Passes stop once the summed tube widths shrink by less than this fraction in a pass.
 WINDOW_REL_TOL = 0.02
 
@@ -55,6 +57,57 @@ def _targets(hyps, m0, goal):
     return [h for h in hyps if (h.m == m0) == (goal is Verdict.MODE_CHANGED)]
 
 
+@dataclass(frozen=True, eq=False)
+class WindowStart:
+    """The rows a window starts from, with what is known at its first sample: a tracker's state there.
+
+    A window that starts in the middle of a motion (the online anchor,
+    :class:`~verifier.window.online.OnlineWindow`) starts from the tracker's
+    rows at that sample: each geometry sub-box with its own pose and velocity
+    box.  The tracker's boxes hold the truth under its assumptions, so the
+    window's first forward pass may start from them (its initial velocity is
+    this box, not the settings' ``xd0``).
+
+    Attributes
+    ----------
+    xi_lo, xi_hi : ndarray, shape (R, m)
+        Geometry sub-boxes of the rows.
+    x, xd : ndarray, shape (R, 2, n)
+        Pose (m) and velocity (m/s) boxes of each row at the first sample, lower bounds in ``[:, 0]``.
+    mode : int
+        Assembly mode known at the first sample (+1 / -1; a window's decision there), or 0: the mode the
+        boxes certify, if any.
+    """
+
+    xi_lo: np.ndarray = field(repr=False)
+    xi_hi: np.ndarray = field(repr=False)
+    x: np.ndarray = field(repr=False)
+    xd: np.ndarray = field(repr=False)
+    mode: int = 0
+
+    @classmethod
+    def of_state(cls, state) -> "WindowStart":
+        """The live rows of a one-scenario :class:`~verifier.step.TrackerState` (copies)."""
+        live = state.row_bad < 0
+        xi = state.xi[live]
+        return cls(np.ascontiguousarray(xi[:, 0]), np.ascontiguousarray(xi[:, 1]), state.x[live].copy(),
+                   state.xd[live].copy())
+
+    @property
+    def rows(self) -> int:
+        return int(self.xi_lo.shape[0])
+
+
+def _start_prior(start: WindowStart, K: int):
+    """Prior tubes ``(R, K, 2, n)`` holding the start's boxes at the first sample and nothing after."""
+    R, n = start.x.shape[0], start.x.shape[2]
+    x = np.empty((R, K, 2, n))
+    x[:, :, 0], x[:, :, 1] = -np.inf, np.inf
+    xd = x.copy()
+    x[:, 0], xd[:, 0] = start.x, start.xd
+    return x, xd
+
+
 def _combined_mode(modes, alive):
     """Mode common to every live row, 0 if they differ or none lives."""
     live = modes[alive]
@@ -67,7 +120,8 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                  max_passes: int = WINDOW_MAX_PASSES, rel_tol: float = WINDOW_REL_TOL,
                  max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
                  parallel: bool = True, goal: Verdict | None = None,
-                 one_motion: int = ONE_MOTION_SAMPLES, explainer: Explainer | None = None) -> WindowResult:
+                 one_motion: int = ONE_MOTION_SAMPLES, explainer: Explainer | None = None,
+                 start: WindowStart | None = None, final_search=None, fk_tol: float = WINDOW_FK_TOL) -> WindowResult:
     """Verdict of a whole recording by forward-backward window passes (:mod:`verifier.window`).
 
     Parameters
@@ -120,6 +174,15 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         asked about is explained the window stops: ``unknown``, reason
         :attr:`VerdictReason.UNDECIDABLE`.  ``None``: never asked (the
         passes, verdict and tubes do not depend on it otherwise).
+    start : WindowStart, optional
+        The rows and their boxes at the first sample (a tracker's state there),
+        instead of ``x0`` or ``initial_mode`` and ``xi_box``: a window that
+        starts while the robot moves.
+    final_search : (lo, hi), optional
+        A box ``(n,)`` known to hold the last pose (the tracker's box there), m: the final boxes of the
+        hypotheses are enumerated inside it rather than in the robot's ``x_bounds``.
+    fk_tol : float
+        Resolution (m) of that enumeration: coarser is faster, with wider final boxes.
 
     Returns
     -------
@@ -142,29 +205,53 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     if not (0.0 <= rel_tol < 1.0):
         raise InputError(f"rel_tol must be in [0, 1), got {rel_tol!r}")
     one_motion = V.count("one_motion", one_motion)
+    if not (fk_tol > 0 and np.isfinite(fk_tol)):
+        raise InputError(f"fk_tol must be a positive length, got {fk_tol!r}")
+    if final_search is not None:
+        final_search = tuple(np.asarray(v, dtype=np.float64).reshape(n) for v in final_search)
+        if not np.all(final_search[0] <= final_search[1]):
+            raise InputError("final_search must be a box with lo <= hi")
     goal = _goal(goal)
-    if (x0 is None) == (initial_mode is None):
-        raise InputError("give exactly one of x0 and initial_mode")
+    if sum(v is not None for v in (x0, initial_mode, start)) != 1:
+        raise InputError("give exactly one of x0, initial_mode and start")
     K = q.shape[0]
     XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
-    sub_lo, sub_hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
-    xi_rows = (np.ascontiguousarray(sub_lo[0]), np.ascontiguousarray(sub_hi[0]))
+    flat = replace(s, xi_splits=None)
+    first_prior = None
+    if start is not None:
+        if xi_box is not None:
+            raise InputError("a window start carries its geometry sub-boxes: give start or xi_box, not both")
+        if start.rows == 0 or start.x.shape[1:] != (2, n) or start.xi_lo.shape != (start.rows, model.m):
+            raise InputError(f"a window start needs at least one row of {model.m} parameters and (2, {n}) boxes")
+        xi_rows = (np.ascontiguousarray(start.xi_lo), np.ascontiguousarray(start.xi_hi))
+        x0 = (start.x[:, 0].copy(), start.x[:, 1].copy())
+        # the start's velocity box holds the initial velocity: the first pass takes it as a prior, and later
+        # forward passes from their tubes (which hold it), not from the settings' xd0
+        flat = replace(flat, xd0=None)
+        first_prior = _start_prior(start, K)
+    else:
+        sub_lo, sub_hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
+        xi_rows = (np.ascontiguousarray(sub_lo[0]), np.ascontiguousarray(sub_hi[0]))
     P = xi_rows[0].shape[0]
     if x0 is None:
         x0 = initial_box_from_mode(model, q[0], initial_mode, s, xi_box=XI, backend=str(Backend(backend)))
     x0 = tuple(np.broadcast_to(np.asarray(v, dtype=np.float64), (P, n)).copy() for v in x0)
-    flat = replace(s, xi_splits=None)
     cfg_f = configure(model, flat, backend, parallel=parallel)
     # the window's passes carry each row's calibration sub-box from sample to sample (keep_xi), and the
     # rows keep it from pass to pass: the true geometry satisfies every sample's loop closure
     cfg_wf = configure(model, replace(flat, keep_xi=True), backend, parallel=parallel)
     cfg_b = configure(model, replace(flat, xd0=None, keep_xi=True), backend, parallel=parallel)  # final velocity: from the tubes
 
-    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, q, x0, xi_rows, None)
+    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, q, x0, xi_rows, first_prior)
     # the rows' sub-boxes after the tracker (contracted only when the settings keep them, keep_xi)
     xi_rows = (np.maximum(xi_rows[0], fxi[0]), np.minimum(xi_rows[1], fxi[1]))
     f_alive = fbad < 0
+    if start is not None and start.mode:
+        # a row whose boxes certify the other mode than the one known at the start holds no true geometry
+        f_alive &= (fmode[:, 0] == 0) | (fmode[:, 0] == start.mode)
     m0 = _combined_mode(fmode[:, 0], f_alive)
+    if start is not None and start.mode and f_alive.any():
+        m0 = start.mode
     mf = _combined_mode(fmode[:, K - 1], f_alive)
     forward_verdict = verdict_of(m0, mf, not f_alive.any())
     tubes, results = [], []
@@ -181,7 +268,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         verdict, reason = forward_verdict, VerdictReason.CERTIFIED
         tubes = [(fx[f_alive], fxd[f_alive])]
     else:
-        finals = FinalBoxes(model, q[K - 1], s, str(Backend(backend)))
+        finals = FinalBoxes(model, q[K - 1], s, str(Backend(backend)), final_search, fk_tol)
         keep = np.nonzero(f_alive)[0]
         hyps = [Hypothesis(finals, xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep], m0, m)
                 for m in (m0, -m0)]
@@ -189,7 +276,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
             full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
             ask = None
             if explainer is not None:
-                x0_given = None if initial_mode is not None else (x0[0][0].copy(), x0[1][0].copy())
+                x0_given = None if initial_mode is not None else (x0[0].min(0), x0[1].max(0))
 
                 def ask(h):
                     return explainer(ExplainRequest(model, q, s, XI, x0_given, m0, h.m, h.xlo.copy(), h.xhi.copy(),

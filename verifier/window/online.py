@@ -1,71 +1,258 @@
-"""The online window: :class:`FixedLagWindow`, the mode of each sample certified with a fixed lag."""
+"""The online window: :class:`OnlineMonitor`, the assembly mode while the robot moves."""
 
 from __future__ import annotations
 
+import sys
+import threading
 from dataclasses import dataclass, replace
+from enum import Enum
 
 import numpy as np
 
 from crosscert.robots.errors import InputError
 
-from ..settings import TrackerSettings
-from ..step import Backend, configure, partition_xi
+from ..settings import TrackerSettings, Verdict
+from ..step import Backend, Event, pose_solution_arrays, reading_box
 from ..tracker import Tracker
-from .passes import hull_of_mode, reading_solutions, run_pass
+from .offline import WindowStart, track_window
+from .passes import hull_of_mode
+from .results import HypothesisStatus
 
-__all__ = ["FixedLagWindow", "LagResult"]
+__all__ = ["OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON"]
 
-#: Resolution (m) of the forward-kinematics enumeration of :class:`FixedLagWindow` (once per sample
-#: and hypothesis: coarser than the whole-recording passes' 1e-5 m, which splits the locus finely).
-_LAG_FK_TOL = 1e-4
-#: Rows (hypothesis, geometry sub-box) per kernel call of :class:`FixedLagWindow`: small, so that the
-#: rows left once the answer is settled are not run (the first call holds one row of each hypothesis).
-_LAG_BATCH = 2
+#: Longest anchored window (samples from the anchor to the newest reading) of :class:`OnlineMonitor`: past
+#: it the window gives up (``unknown``, :attr:`WindowState.GAVE_UP`) until the tracker certifies a mode again.
+#: Bounds the readings kept (``n`` floats and a pose box each) and the work of one attempt (which grows
+#: with the window's length).
+ONLINE_HORIZON = 2000
+#: Resolution (m) of the enumeration of the newest reading's poses in an attempt (coarser than the offline
+#: window's :data:`~verifier.window.offline.WINDOW_FK_TOL`: near the locus a finer one costs tens of ms).
+ONLINE_FK_TOL = 1e-4
+#: Thread switch interval (s) an :class:`OnlineMonitor` with a worker sets (Python's default is 5 ms).
+SWITCH_INTERVAL = 1e-4
+#: Resolution (m) and bisection widths (m) of the enumeration of the decided mode's poses a re-seeded tracker
+#: starts from (as :func:`~verifier.tracker.initial_box_from_mode`'s: the box of a first sample).
+RESEED_FK_TOL = 1e-5
+RESEED_SMALL = (5e-3, 2e-2, 8e-2)
+#: Budget of geometry sub-boxes per hypothesis of a full attempt (the offline window's is 64: on the
+#: adversarial runs of tests/test_online.py, 16 decided the same runs at half the cost or less).
+ONLINE_MAX_GEOMETRIES = 16
+#: Longest window of an inline monitor's full attempts, samples: decisions come within tens of samples of
+#: the crossing, and ``check`` runs the window over the whole recording after it when it is not decided.
+INLINE_FULL_MAX = 128
+#: Window length (samples from the anchor) of an inline :class:`OnlineMonitor`'s first attempt; the next
+#: ones double it, so the work of a window that never decides stays about twice that of its last attempt.
+FIRST_ATTEMPT = 8
+
+
+class WindowState(str, Enum):
+    """What the anchored window of an :class:`OnlineMonitor` is doing."""
+
+    IDLE = "idle"  #: the tracker certifies the mode at the newest sample (or never did): no window
+    OPEN = "open"  #: the mode was lost: the window from the anchor reasons over the readings as they arrive
+    GAVE_UP = "gave-up"  #: the window reached the horizon undecided: unknown until the tracker certifies a mode
+
+    def __str__(self) -> str:
+        return self.value
 
 
 @dataclass(frozen=True)
-class LagResult:
-    """What a :class:`FixedLagWindow` knows after reading sample ``k``.
+class OnlineEvent:
+    """A change of what is certified, as an :class:`OnlineMonitor` reports it.
+
+    Attributes
+    ----------
+    event : Event
+        ``MODE_GAINED`` (certified for the first time, or again in the mode it had before it was lost),
+        ``MODE_LOST``, ``MODE_CHANGED`` (certified in the other mode than the last certified one) or
+        ``INCONSISTENT`` (an assumption was violated).
+    k : int
+        Sample the event is about: from it on the new mode is certified.
+    known_at : int
+        Sample at whose reading it became known (``k`` for the tracker's events; later for a window's).
+    mode : int
+        Certified mode from ``k`` on (+1 / -1; 0 for ``MODE_LOST`` and ``INCONSISTENT``).
+    by_window : bool
+        Decided by the anchored window over the readings from the anchor to ``k``.
+    """
+
+    event: Event
+    k: int
+    known_at: int
+    mode: int
+    by_window: bool = False
+
+
+@dataclass(frozen=True)
+class OnlineResult:
+    """What an :class:`OnlineMonitor` knows after reading sample ``k``.
 
     Attributes
     ----------
     k : int
         Index of the reading just fed.
-    mode_now : int
-        Mode certified at sample ``k`` (+1 / -1, 0 not certified): the
-        tracker's, or the one left when the other final-mode hypothesis over
-        the last ``lag + 1`` samples is refuted.
-    lagged : int
-        Index ``k - lag`` of the sample whose mode ``lagged_mode`` is (-1
-        before ``lag`` samples were read).
-    lagged_mode : int
-        Mode certified at sample ``k - lag`` from the readings up to ``k``.
+    mode : int
+        Mode certified at sample ``k`` (+1 / -1; 0 not certified).
+    x, xd : (lo, hi) arrays (n,)
+        Pose (m) and velocity (m/s) boxes at sample ``k`` (from the decided mode's boxes once a window decided).
     consistent : bool
-        False once every geometry hypothesis of the tracker became empty.
+        False once every geometry hypothesis became empty (an assumption was violated).
+    events : tuple of OnlineEvent
+        What changed with this reading, a window's decision about an earlier sample included.
+    window : WindowState
     """
 
     k: int
-    mode_now: int
-    lagged: int
-    lagged_mode: int
+    mode: int
+    x: tuple
+    xd: tuple
     consistent: bool
+    events: tuple
+    window: WindowState
 
 
-class FixedLagWindow:
-    """Window reasoning online, with a fixed lag: the mode of sample ``k`` certified from the readings up to ``k + lag``.
+@dataclass
+class _Anchor:
+    """The last sample whose mode the tracker certified, its rows there, and the readings from it on."""
 
-    After each reading the forward tracker advances; when its mode at the
-    newest sample ``k`` or at ``k - lag`` is not certified, one backward pass
-    per final-mode hypothesis ("the pose at ``k`` is in mode ``m``") runs over
-    the last ``lag + 1`` samples, from the hull of that mode's
-    forward-kinematics solutions intersected with the tracker's box at ``k``
-    and inside the tracker's boxes (:func:`track_window`'s backward pass on a
-    window ending at ``k``).  A hypothesis whose geometry sub-boxes all die is
-    refuted: the mode at ``k`` is the other one.  The mode at ``k - lag`` is
-    the one every surviving sub-box of every surviving hypothesis certifies.
-    Rows (hypothesis, sub-box) run a pair at a time, and those that can no
-    longer change either answer are skipped (:meth:`_window`); the forward
-    kinematics of the newest reading is enumerated once per sub-box.
+    k: int
+    mode: int
+    start: WindowStart
+    q: list
+    x: list  # the tracker's pose box (2, n) at each of those samples: it holds the pose there
+    attempts: int = 0
+    tried: int = 0  # window length of the last attempt
+    tried_full: int = 0  # window length of the last full attempt
+
+
+#: What :meth:`OnlineMonitor._run` returns for a window that refuted both final modes.
+_CONTRADICTED = object()
+
+
+class _Lane:
+    """One tracker and what it certified: the mode, since when, the anchor of an open window.
+
+    A re-seeded lane starts at a window's decision (``offset``: the global index of its tracker's sample 0).
+    ``horizon``: longest window, samples (0: no window).
+    """
+
+    def __init__(self, tracker: Tracker, offset: int, mode: int, last_mode: int, horizon: int):
+        self.tracker, self.offset, self.horizon = tracker, offset, horizon
+        self.k = offset - 1
+        self.mode = mode  # certified at the newest sample
+        self.since = offset if mode else -1  # the sample from which it holds
+        self.last_mode = last_mode  # the last certified mode: events are about its changes
+        self.consistent = True
+        self.anchor = None
+        self.window = WindowState.IDLE
+        st = tracker.state
+        # the rows at the newest certified sample: the next anchor (copied in place: no allocation per sample)
+        self._snap = (st.x.copy(), st.xd.copy(), st.xi.copy(), st.row_bad.copy())
+        self._snap_k = -1
+        self._snap_mode = 0
+        self._prev_q = None
+        self._known = 0  # a re-seeded lane: the mode a window decided at its first sample
+
+    def step(self, q):
+        """Track the reading ``q``; returns the events it causes."""
+        if not self.consistent:  # an assumption was violated: nothing is certified any more
+            self.k += 1
+            return []
+        r = self.tracker.update(q)
+        k = self.k = self.offset + r.k
+        events = []
+        if self.anchor is not None:
+            self.anchor.q.append(q)
+            self.anchor.x.append(self.tracker.state.x_hull[0].copy())
+        if not r.consistent:
+            if self.consistent:
+                events.append(OnlineEvent(Event.INCONSISTENT, k, k, 0))
+            self.consistent, self.mode, self.since = False, 0, -1
+            self.anchor, self.window = None, WindowState.IDLE
+        elif r.mode != 0 or self._known:
+            mode = r.mode or self._known  # a window's decision holds at the sample it was made for
+            if self.anchor is not None or self.window is WindowState.GAVE_UP:
+                self.anchor, self.window = None, WindowState.IDLE  # decided by the tracker alone
+            if mode != self.mode:
+                events.append(self.certified(k, k, mode, False))
+            st = self.tracker.state
+            for buf, v in zip(self._snap, (st.x, st.xd, st.xi, st.row_bad)):
+                np.copyto(buf, v)
+            self._snap_k, self._snap_mode = k, mode
+        else:
+            if self.mode != 0:
+                events.append(OnlineEvent(Event.MODE_LOST, k, k, 0))
+                self.mode, self.since = 0, -1
+                if self.horizon and self._snap_k == k - 1 and self._prev_q is not None:
+                    self._open(q)
+            if self.anchor is not None and len(self.anchor.q) > self.horizon:
+                self.anchor, self.window = None, WindowState.GAVE_UP
+        self._prev_q, self._prev_x = q, self.tracker.state.x_hull[0].copy()
+        self._known = 0
+        return events
+
+    def certified(self, k, known_at, mode, by_window):
+        """The event of ``mode`` certified from sample ``k`` on."""
+        event = Event.MODE_GAINED if self.last_mode in (0, mode) else Event.MODE_CHANGED
+        self.mode, self.since, self.last_mode = mode, k, mode
+        return OnlineEvent(event, k, known_at, mode, by_window)
+
+    def _open(self, q):
+        x, xd, xi, bad = self._snap
+        live = bad < 0
+        start = WindowStart(np.ascontiguousarray(xi[live, 0]), np.ascontiguousarray(xi[live, 1]), x[live].copy(),
+                            xd[live].copy(), self._snap_mode)
+        self.anchor = _Anchor(self._snap_k, self.last_mode, start, [self._prev_q, q],
+                              [self._prev_x, self.tracker.state.x_hull[0].copy()])
+        self.window = WindowState.OPEN
+
+
+@dataclass(frozen=True)
+class _Attempt:
+    """What one window attempt needs, taken under the lock: the lane, its anchor and the readings so far."""
+
+    lane: _Lane
+    anchor: _Anchor
+    q: np.ndarray
+    last_box: np.ndarray  # (2, n): the tracker's pose box at the last reading
+    full: bool
+
+
+class OnlineMonitor:
+    """The assembly mode while the robot moves: the tracker, and an anchored window when it loses the mode.
+
+    Every reading goes through the forward :class:`~verifier.tracker.Tracker`
+    (:meth:`update`).  While the tracker certifies the mode, its rows are kept
+    as the *anchor*.  When it loses the mode, a window opens at the anchor: the
+    readings from it to the newest one, reasoned over under both final-mode
+    hypotheses (:func:`~verifier.window.track_window` started from the
+    tracker's rows at the anchor, :class:`~verifier.window.WindowStart`),
+    again as readings arrive.  When one hypothesis is refuted, the mode at the
+    newest sample that attempt read is known; the tracker then starts again
+    from that mode's boxes there (the surviving hypothesis' pose and velocity
+    tubes at that sample, which its passes intersected with the
+    forward-kinematics solutions of that mode, and the hull of its surviving
+    geometry sub-boxes) and runs over the readings that arrived meanwhile.
+    Its boxes are tight again, and the next crossing is tracked like the
+    first.
+
+    An attempt is *cheap* (the tracker's geometry sub-boxes, not halved, and
+    no one-motion step: tens of ms) or *full* (up to
+    :data:`ONLINE_MAX_GEOMETRIES` sub-boxes and the one-motion step: up to
+    seconds).  With ``worker=True`` the window runs on a thread of its own
+    (the kernels release the GIL) and :meth:`update` never waits for an
+    attempt: cheap attempts follow one another over all the readings there
+    are, with a full one each time the window has doubled since the last.
+    With ``worker=False`` the attempts run inside :meth:`update`, at window
+    lengths :data:`FIRST_ATTEMPT`, twice that, ... (cheap, then full up to
+    :data:`INLINE_FULL_MAX` samples): the answers do not depend on the
+    machine's speed (``crosscert check``).  :meth:`settle` runs a full
+    attempt over every reading.  Either way every answer holds under the
+    tracker's assumptions; only when it comes may differ.
+
+    Memory and work are bounded: a window that reaches ``horizon`` samples
+    undecided gives up (:attr:`WindowState.GAVE_UP`, mode not certified)
+    until the tracker certifies a mode by itself.
 
     Parameters
     ----------
@@ -73,110 +260,326 @@ class FixedLagWindow:
     settings : TrackerSettings
     x0 : (lo, hi)
         Initial pose box ``(n,)``, m.
-    lag : int
-        Samples of look-ahead (>= 1).
     xi_box : (lo, hi), optional
+        Calibration box ``(m,)``, the robot's by default.
     backend : {"compiled", "numpy"}
-    parallel : bool
-        Compiled backend: the rows of a window call over the thread slots (the
-        pair of each call, one per hypothesis, runs on two cores; the same
-        answers).
+    horizon : int
+        Longest window, samples (>= 2).
+    worker : bool
+        The window on a thread (online) or inside :meth:`update` (reproducible).
+    window : bool
+        False: the tracker alone (no window opens).
+    switch_interval : float or None
+        With a worker: lower the interpreter's thread switch interval (``sys.setswitchinterval``, process
+        wide, s) to this, so that :meth:`update` waits at most about this long for the GIL while the
+        window's Python code holds it; ``None`` leaves it.
+    spread_hypotheses : bool
+        See :class:`~verifier.tracker.Tracker`.
+
+    Examples
+    --------
+    >>> with OnlineMonitor(model, settings, x0) as mon:    # doctest: +SKIP
+    ...     for q in readings:                              # q: (n,) rad
+    ...         r = mon.update(q)
+    ...         for e in r.events:
+    ...             print(e.k, e.event, e.mode)
+    ...     mon.settle()                                    # the window's last attempt on every reading
     """
 
-    def __init__(self, model, settings: TrackerSettings, x0, *, lag: int, xi_box=None,
-                 backend: str | Backend = Backend.COMPILED, parallel: bool = True):
-        if isinstance(lag, bool) or int(lag) != lag or lag < 1:
-            raise InputError(f"lag must be a positive number of samples, got {lag!r}")
-        self.model, self.lag, self.backend = model, int(lag), str(Backend(backend))
-        s = settings.validated(model.n)
-        self.settings = s
-        self.tracker = Tracker(model, settings, x0, xi_box=xi_box, backend=backend)
-        XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
-        lo, hi = partition_xi((XI[0][None, :], XI[1][None, :]), s.xi_splits)
-        self.xi_rows = (np.ascontiguousarray(lo[0]), np.ascontiguousarray(hi[0]))
-        # keep_xi: within a window the sub-box is contracted by each sample's loop closure in turn
-        self.cfg_b = configure(model, replace(s, xi_splits=None, xd0=None, keep_xi=True), backend,
-                               parallel=parallel)
-        L, n = self.lag + 1, model.n
-        # the last L samples newest first, the order of the backward pass: readings (rad), the tracker's
-        # pose boxes (m) and its velocity boxes of the reversed motion ([-hi, -lo], m/s), its modes
-        self._q = np.zeros((L, n))
-        self._x = np.zeros((L, 2, n))
-        self._xd_rev = np.zeros((L, 2, n))
-        self._mode = np.zeros(L, np.int64)
+    def __init__(self, model, settings: TrackerSettings, x0, *, xi_box=None,
+                 backend: str | Backend = Backend.COMPILED, horizon: int = ONLINE_HORIZON, worker: bool = True,
+                 window: bool = True, spread_hypotheses: bool = False,
+                 switch_interval: float | None = SWITCH_INTERVAL):
+        if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 2:
+            raise InputError(f"horizon must be at least 2 samples, got {horizon!r}")
+        self.model, self.backend = model, str(Backend(backend))
+        self.settings = settings.validated(model.n)
+        self.horizon, self._spread = int(horizon), bool(spread_hypotheses)
+        tracker = Tracker(model, settings, x0, xi_box=xi_box, backend=backend, spread_hypotheses=spread_hypotheses)
+        self._lane = _Lane(tracker, 0, 0, 0, self.horizon if window else 0)
+        self.initial_mode = 0
+        self.decisions = 0  # windows that decided
+        self.inconsistent_at = -1  # the sample at which every geometry hypothesis became empty (-1: none)
+        self.max_width_pose = 0.0  # largest side of the pose (m) and velocity (m/s) boxes while consistent
+        self.max_width_velocity = 0.0
+        self._queued = []  # events of a decision the worker applied, for the next update to report
+        self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
+        self._idle = threading.Condition(self._lock)
+        self._busy = False
+        self._settling = False
+        self._error = None  # an exception of the worker, raised by the next update or settle
+        self._closed = False
+        self._thread = None
+        if worker and window:
+            if switch_interval is not None and sys.getswitchinterval() > switch_interval:
+                # the window's Python code holds the GIL between kernels: update waits at most this long for it
+                sys.setswitchinterval(switch_interval)
+            self._thread = threading.Thread(target=self._work, name="crosscert-window", daemon=True)
+            self._thread.start()
 
-    def update(self, q) -> LagResult:
-        """Feed the reading ``q`` ``(n,)``, rad."""
-        r = self.tracker.update(q)
-        k = r.k
-        for buf in (self._q, self._x, self._xd_rev, self._mode):
-            buf[1:] = buf[:-1]  # one slot older (numpy copies overlapping ranges correctly)
-        self._q[0] = np.asarray(q, dtype=np.float64)
-        self._x[0] = r.x
-        self._xd_rev[0, 0], self._xd_rev[0, 1] = -r.xd[1], -r.xd[0]  # negation is exact
-        self._mode[0] = r.mode
-        j = k - self.lag
-        if not r.consistent:
-            return LagResult(k, 0, j if j >= 0 else -1, 0, False)
-        if j < 0:
-            return LagResult(k, r.mode, -1, 0, True)
-        lagged_fwd = int(self._mode[-1])
-        if r.mode != 0 and lagged_fwd != 0:
-            return LagResult(k, r.mode, j, lagged_fwd, True)
-        alive_modes, lagged_modes = self._window(need_now=r.mode == 0, need_lagged=lagged_fwd == 0)
-        mode_now = r.mode if r.mode != 0 or len(alive_modes) != 1 else alive_modes[0]
-        lagged = lagged_fwd
-        if lagged == 0 and lagged_modes and all(v == lagged_modes[0] for v in lagged_modes):
-            lagged = int(lagged_modes[0])
-        return LagResult(k, int(mode_now), j, int(lagged), True)
+    # ------------------------------------------------------------------ the update path
+    def update(self, q) -> OnlineResult:
+        """Feed the reading ``q`` ``(n,)``, rad: the tracker's step, and what the window found meanwhile."""
+        q = np.array(q, dtype=np.float64).reshape(-1)
+        if q.shape != (self.model.n,) or not np.all(np.isfinite(q)):
+            raise InputError(f"a reading must be {self.model.n} finite joint values, got {q!r}")
+        with self._lock:
+            self._raise_worker_error()
+            if self._closed:
+                raise InputError("this OnlineMonitor is closed")
+            lane = self._lane
+            events, self._queued = self._queued, []
+            events += lane.step(q)
+            if lane.k == 0 and lane.mode:
+                self.initial_mode = lane.mode
+            if lane.anchor is not None:
+                if self._thread is None:
+                    events += self._inline(lane)
+                else:
+                    self._wake.notify()
+            lane = self._lane
+            st = lane.tracker.state
+            x, xd = st.x_hull[0], st.xd_hull[0]
+            self._note(events)
+            if lane.consistent:
+                self.max_width_pose = max(self.max_width_pose, float(np.max(x[1] - x[0])))
+                self.max_width_velocity = max(self.max_width_velocity, float(np.max(xd[1] - xd[0])))
+            return OnlineResult(lane.k, lane.mode, (x[0].copy(), x[1].copy()), (xd[0].copy(), xd[1].copy()),
+                                lane.consistent, tuple(events), lane.window)
 
-    def _window(self, need_now: bool, need_lagged: bool):
-        """Backward passes over the window, a few (hypothesis, geometry sub-box) rows per ``advance`` call,
-        only while a row can still change the answer: the final modes not refuted (``need_now``: the
-        tracker's mode at ``k`` is open) and the modes the surviving rows certify at ``k - lag``
-        (``need_lagged``).
+    @property
+    def k(self) -> int:
+        """Index of the newest sample read (-1 before the first)."""
+        return self._lane.k
 
-        A hypothesis is alive once one of its rows survives, and the lagged mode stays open once a surviving
-        row certifies none or two disagree; rows that cannot change either are never run.  The answer is
-        therefore the one all the rows give.  Returns the alive modes and the surviving rows' lagged modes.
+    @property
+    def mode(self) -> int:
+        """Mode certified at the newest sample (0: not certified)."""
+        return self._lane.mode
+
+    @property
+    def since(self) -> int:
+        """The sample from which the mode at the newest sample is certified (-1: not certified)."""
+        return self._lane.since
+
+    @property
+    def consistent(self) -> bool:
+        return self._lane.consistent
+
+    @property
+    def window(self) -> WindowState:
+        return self._lane.window
+
+    @property
+    def tracker(self) -> Tracker:
+        """The tracker of the newest sample (a new one after each window decision)."""
+        return self._lane.tracker
+
+    def verdict(self) -> Verdict:
+        """The verdict on the readings so far: the certified modes at the first and newest sample compared."""
+        lane = self._lane
+        if not lane.consistent:
+            return Verdict.INCONSISTENT
+        if self.initial_mode == 0 or lane.mode == 0:
+            return Verdict.UNKNOWN
+        return Verdict.MODE_UNCHANGED if lane.mode == self.initial_mode else Verdict.MODE_CHANGED
+
+    def settle(self, timeout: float | None = None) -> list:
+        """Let the window finish with the readings read so far: a full attempt over all of them, unless one
+        decided first.  Returns the events that caused (not reported again by :meth:`update`).
+
+        ``timeout`` (s) bounds the wait for the worker; ``None`` waits as long as it takes.
         """
-        search = (self._x[0, 0], self._x[0, 1])
-        P = self.xi_rows[0].shape[0]
-        sols = {}
-        alive, lagged_modes = [], []
+        with self._lock:
+            if self._thread is None:
+                lane = self._lane
+                events = []
+                if lane.anchor is not None and lane.anchor.tried_full < len(lane.anchor.q):
+                    events = self._decide(lane, self._attempt(lane, full=True))
+                self._note(events)
+                return events
+            self._settling = True
+            self._wake.notify()
+            try:
+                self._idle.wait_for(lambda: self._closed or (not self._busy and not self._pending_work(self._lane)),
+                                    timeout)
+            finally:
+                self._settling = False
+            self._raise_worker_error()
+            events, self._queued = self._queued, []
+            self._note(events)
+            return events
 
-        def useful(m):
-            open_lag = need_lagged and not (0 in lagged_modes or len(set(lagged_modes)) > 1)
-            return (need_now and m not in alive) or open_lag
+    def _note(self, events) -> None:
+        for e in events:
+            if e.event is Event.INCONSISTENT and self.inconsistent_at < 0:
+                self.inconsistent_at = e.k
 
-        # rows interleaved by hypothesis, so that the first call can show both alive
-        todo = [(m, p) for p in range(P) for m in (1, -1)]
-        while todo:
-            batch, rest = [], []
-            for m, p in todo:
-                if not useful(m):
-                    continue
-                if len(batch) == _LAG_BATCH:
-                    rest.append((m, p))
-                    continue
-                if p not in sols:  # one enumeration of the newest reading's poses serves both hypotheses
-                    sols[p] = reading_solutions(self.model, self._q[0], self.settings,
-                                         (self.xi_rows[0][p], self.xi_rows[1][p]), self.backend, search, _LAG_FK_TOL)
-                box = hull_of_mode(sols[p], m, search)
-                if box is not None:
-                    batch.append((m, p, np.maximum(box[0], search[0]), np.minimum(box[1], search[1])))
-            todo = rest
-            if not batch:
+    def _raise_worker_error(self):
+        if self._error is not None:
+            raise self._error
+
+    def close(self) -> None:
+        """Stop the worker (an attempt running ends first); further updates are refused."""
+        with self._lock:
+            self._closed = True
+            self._wake.notify_all()
+        if self._thread is not None:
+            self._thread.join()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # ------------------------------------------------------------------ the window
+    def _attempt(self, lane: _Lane, full: bool) -> _Attempt:
+        a = lane.anchor
+        a.attempts += 1
+        a.tried = len(a.q)
+        if full:
+            a.tried_full = a.tried
+        return _Attempt(lane, a, np.array(a.q), a.x[len(a.q) - 1].copy(), full)
+
+    def _run(self, at: _Attempt):
+        """One window over the attempt's readings (no lock held): the surviving hypothesis of a decided
+        window, :data:`_CONTRADICTED` when the window refuted both (an assumption was violated), or None."""
+        rows = at.anchor.start.rows
+        opts = ({"max_geometries": max(rows, ONLINE_MAX_GEOMETRIES)} if at.full
+                else {"max_geometries": rows, "one_motion": 0})
+        w = track_window(self.model, at.q, self.settings, start=at.anchor.start, backend=self.backend,
+                         parallel=False, final_search=(at.last_box[0], at.last_box[1]), fk_tol=ONLINE_FK_TOL, **opts)
+        if w.verdict is Verdict.INCONSISTENT:
+            return _CONTRADICTED
+        if w.verdict not in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
+            return None
+        return next(h for h in w.hypotheses if h.status is not HypothesisStatus.REFUTED)
+
+    def _apply(self, lane: _Lane, at: _Attempt, h, backlog) -> tuple:
+        """The lane after an attempt's answer ``h`` (not None), with its first event and the events of
+        ``backlog`` (the readings from the attempt's last one on) through it."""
+        if h is _CONTRADICTED:
+            # the readings from the anchor on fit no motion under the assumptions: nothing more is certified
+            j = at.anchor.k + len(at.q) - 1
+            new = _Lane(lane.tracker, lane.offset, 0, lane.last_mode, 0)
+            new.consistent = False  # its tracker is the lane's, never stepped again
+            return new, OnlineEvent(Event.INCONSISTENT, j, -1, 0, True), []
+        new, first = self._reseeded(at, h)
+        return new, first, self._catch_up(new, backlog)
+
+    def _reseeded(self, at: _Attempt, h):
+        """A lane whose tracker starts at the attempt's last sample from hypothesis ``h``'s boxes there."""
+        j = at.anchor.k + len(at.q) - 1
+        xi = (h.xi_lo.min(axis=0), h.xi_hi.max(axis=0))
+        x0 = self._decided_box(at.q[-1], h.final_mode, xi, (h.x_lo[-1], h.x_hi[-1]))
+        # its velocity box comes from the window (set below), not from the settings' bound at rest
+        tracker = Tracker(self.model, replace(self.settings, xd0=None), x0, xi_box=xi, backend=self.backend,
+                          spread_hypotheses=self._spread)
+        tracker.state.xd[:, 0], tracker.state.xd[:, 1] = h.xd_lo[-1], h.xd_hi[-1]
+        lane = _Lane(tracker, j, 0, at.anchor.mode, self.horizon)
+        # the decided mode holds at j before the new tracker reads q_j (it may then fail to certify it: lost)
+        first = lane.certified(j, -1, h.final_mode, True)
+        lane._known = h.final_mode
+        return lane, first
+
+    def _decided_box(self, q, mode, xi, tube):
+        """The pose box of ``mode`` for the reading ``q`` and geometries ``xi`` inside the window's ``tube``
+        box there: the hull of that mode's forward-kinematics solutions (undecided ones included) within the
+        tube, enumerated finer than the attempt did; the tube itself when the enumeration gives up."""
+        search = (np.asarray(tube[0], dtype=np.float64), np.asarray(tube[1], dtype=np.float64))
+        Q = reading_box(q, self.settings.eps_q)
+        for small in RESEED_SMALL:
+            sols = pose_solution_arrays(self.model, Q, xi, search, tol=RESEED_FK_TOL, small=small,
+                                        backend=self.backend)
+            if sols is not None:
+                break
+        box = hull_of_mode(sols, mode, search)
+        if box is None:  # no pose of that mode in the tube: the tracker will find the assumptions violated
+            return search[0].copy(), search[1].copy()
+        return np.maximum(box[0], search[0]), np.minimum(box[1], search[1])
+
+    def _inline(self, lane: _Lane) -> list:
+        """``worker=False``: the attempts due at this window length (lock held)."""
+        a = lane.anchor
+        L = len(a.q)
+        if L < FIRST_ATTEMPT or L & (L - 1):  # lengths 8, 16, 32, ...
+            return []
+        events = self._decide(lane, self._attempt(lane, full=False))
+        if self._lane is lane and lane.anchor is a and L <= INLINE_FULL_MAX:
+            events += self._decide(lane, self._attempt(lane, full=True))
+        return events
+
+    def _decide(self, lane: _Lane, at: _Attempt) -> list:
+        """Run an attempt inline and apply its answer (lock held)."""
+        h = self._run(at)
+        if h is None:
+            return []
+        new, first, events = self._apply(lane, at, h, at.anchor.q[len(at.q) - 1:])
+        return self._swap(new, first, events, known_at=lane.k)
+
+    @staticmethod
+    def _catch_up(new: _Lane, readings) -> list:
+        events = []
+        for q in readings:
+            events += new.step(q)
+        return events
+
+    def _swap(self, new: _Lane, first: OnlineEvent, events: list, known_at: int) -> list:
+        """Make ``new`` the lane (lock held); the window's event first, known at sample ``known_at``."""
+        if not new.consistent:
+            new.k = self._lane.k
+        self._lane = new
+        self.decisions += 1
+        return [replace(first, known_at=known_at), *events]
+
+    def _pending_work(self, lane: _Lane) -> bool:
+        """An attempt is due: readings no attempt read, or a full attempt over them all when settling."""
+        a = lane.anchor
+        if a is None:
+            return False
+        return a.tried < len(a.q) or (self._settling and a.tried_full < len(a.q))
+
+    def _work(self):
+        """The worker thread: attempts over the open window (see the class) until closed."""
+        while True:
+            with self._lock:
+                self._busy = False
+                self._idle.notify_all()
+                self._wake.wait_for(lambda: self._closed or self._pending_work(self._lane))
+                if self._closed:
+                    return
+                lane = self._lane
+                a = lane.anchor
+                L = len(a.q)
+                # cheap ones back to back; a full one once the window doubled since the last, or when settling
+                full = (L >= FIRST_ATTEMPT and L >= 2 * a.tried_full) or (self._settling and L == a.tried)
+                at = self._attempt(lane, full=full)
+                self._busy = True
+            try:
+                h = self._run(at)
+            except Exception as exc:  # noqa: BLE001 - kept for the update path to raise, not lost in the thread
+                with self._lock:
+                    self._error = exc
+                    self._closed = True
+                    self._idle.notify_all()
+                return
+            if h is None:
                 continue
-            hyp = np.array([b[0] for b in batch])
-            rows = np.array([b[1] for b in batch])
-            shape = (len(batch),) + self._x.shape
-            prior = (np.broadcast_to(self._x, shape), np.broadcast_to(self._xd_rev, shape))
-            _, _, md, bad, _ = run_pass(self.cfg_b, self._q, (np.stack([b[2] for b in batch]), np.stack([b[3] for b in batch])),
-                                 (self.xi_rows[0][rows], self.xi_rows[1][rows]), prior)
-            live = (bad < 0) & ~((md[:, 0] != 0) & (md[:, 0] != hyp))
-            for m in (1, -1):
-                if m not in alive and np.any(live & (hyp == m)):
-                    alive.append(m)
-            lagged_modes.extend(md[live, -1].tolist())
-        return alive, lagged_modes
+
+            def valid():
+                return self._lane is lane and lane.anchor is at.anchor
+            # the readings from the attempt's last one on, through the new tracker: outside the lock as far as
+            # they go, the few that came meanwhile under it, then the swap
+            with self._lock:
+                if not valid():
+                    continue  # the tracker decided by itself (or gave up) meanwhile: the answer is moot
+                done = len(at.q) - 1
+                readings = list(at.anchor.q[done:])
+            new, first, events = self._apply(lane, at, h, readings)
+            with self._lock:
+                if not valid():
+                    continue
+                events += self._catch_up(new, at.anchor.q[done + len(readings):])
+                self._queued += self._swap(new, first, events, known_at=lane.k)

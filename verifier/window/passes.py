@@ -78,11 +78,13 @@ def _final_box(model, q_last, mode, s, xi_row, backend, search=None, tol=1e-5):
 
 class FinalBoxes:
     """Final boxes of geometry sub-boxes, enumerated once per sub-box and shared by both hypotheses
-    (they start from the same sub-boxes, and a halved sub-box is often alive under both)."""
+    (they start from the same sub-boxes, and a halved sub-box is often alive under both): inside
+    ``search`` (a box known to hold the last pose; the robot's ``x_bounds`` by default), to the
+    resolution ``tol`` (m)."""
 
-    def __init__(self, model, q_last, s, backend):
-        self.model, self.q_last, self.s, self.backend = model, q_last, s, backend
-        self.search = _search_box(model, None)
+    def __init__(self, model, q_last, s, backend, search=None, tol=1e-5):
+        self.model, self.q_last, self.s, self.backend, self.tol = model, q_last, s, backend, tol
+        self.search = _search_box(model, search)
         self.cache = {}
 
     def of(self, xlo, xhi, mode):
@@ -92,7 +94,7 @@ class FinalBoxes:
             key = lo.tobytes() + hi.tobytes()
             if key not in self.cache:
                 self.cache[key] = reading_solutions(self.model, self.q_last, self.s, (lo, hi), self.backend,
-                                                    self.search, 1e-5)
+                                                    self.search, self.tol)
             box = hull_of_mode(self.cache[key], mode, self.search)
             if box is not None:
                 ok[i] = True

@@ -1,0 +1,180 @@
+"""The online monitor (``crosscert monitor``, ``verifier.window.OnlineMonitor``) against ``check``.
+
+Prints the table of the online-certification targets (docs/tracker.md, "Online: the anchored window"):
+
+1. simulated DexTAR crossings at 1.0 / 1.1 / 1.2 m/s (``--geometries`` true geometries each, the centre and
+   seeded draws in the calibration box, 0.5 s at rest after): the verdict of the monitor (the window on its
+   thread, the readings fed at the robot's rate, 1 kHz) against ``check``'s (the same monitor inline, then
+   the window over the whole recording), runs where they differ, and wrong verdicts (must be 0);
+2. the decision delay at 1.1 m/s: the sample at which the change is known online minus the true singular
+   instant, ms (median, max);
+3. ``update`` latency while a window is open (mean, max, µs) and over the whole run;
+4. the width of the pose box 0.2 s after the decision against a run at rest at the same pose that never
+   crossed (ratio, worst case; the truth inside);
+5. there-and-back at 1.1 m/s: the changes reported online (two expected) and the final verdict;
+6. bounces turning back 15 mm before the locus at 1.0 m/s: never ``mode-changed``; ``mode-unchanged``
+   online wherever ``check`` says so.
+
+Run: ``python benchmarks/bench_online.py [--geometries N] [--speeds 1.0,1.1,1.2]`` (about 2 minutes per
+geometry and speed on 2 cores, most of it the real-time feeding).  The CPU is named on the first line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
+from crosscert.planner.sweep import cruise_for  # noqa: E402
+from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
+from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
+from crosscert.verifier.model import IntervalModel  # noqa: E402
+from crosscert.verifier.settings import TrackerSettings, Verdict  # noqa: E402
+from crosscert.verifier.step import Event  # noqa: E402
+from crosscert.verifier.tracker import Tracker, initial_box_from_mode  # noqa: E402
+from crosscert.verifier.window import OnlineMonitor, WindowState, track_window  # noqa: E402
+
+REST_AFTER = 0.5  # s at rest after the motion
+
+
+def _cpu() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown CPU"
+
+
+def _geometry(seed: int):
+    return None if seed == 0 else random_geometry(DEXTAR, np.random.default_rng(seed), corners=seed % 2 == 0)
+
+
+def _crossing(kin, v, seed):
+    b = benchmark_crossing()
+    return simulate_crossing(kin, b.point, b.direction, v, xi_true=_geometry(seed), t_rest=0.05,
+                             t_rest_end=REST_AFTER, working_guess=b.q_point, seed=seed, cruise=cruise_for(v))
+
+
+def _bounce(kin, v, seed, before):
+    """A bounce turning back ``before`` m ahead of the nominal locus."""
+    b = benchmark_crossing()
+    d = np.asarray(b.direction, float) / np.linalg.norm(b.direction)
+    return simulate_bounce(kin, np.asarray(b.point) - before * d, d, v, xi_true=_geometry(seed), t_rest=0.05,
+                           t_rest_end=REST_AFTER, working_guess=b.q_point, seed=seed, cruise=cruise_for(v))
+
+
+def online(model, s, q, mode0, paced=True):
+    """The monitor with its worker, readings fed every ``t_s`` (busy-waiting), then settled: (monitor,
+    results, events, latencies in ns, window-open flags)."""
+    mon = OnlineMonitor(model, s, initial_box_from_mode(model, q[0], mode0, s))
+    res, events, lat, open_ = [], [], [], []
+    t0 = time.perf_counter()
+    for k, qk in enumerate(q):
+        if paced:
+            while time.perf_counter() - t0 < k * s.t_s:
+                pass
+        a = time.perf_counter_ns()
+        r = mon.update(qk)
+        lat.append(time.perf_counter_ns() - a)
+        open_.append(r.window is WindowState.OPEN)
+        res.append(r)
+        events += r.events
+    events += mon.settle()
+    mon.close()
+    return mon, res, events, np.array(lat), np.array(open_)
+
+
+def check(model, s, q, mode0):
+    """``check``'s verdict: the inline monitor, then the window over the whole recording when it is open."""
+    x0 = initial_box_from_mode(model, q[0], mode0, s)
+    with OnlineMonitor(model, s, x0, worker=False) as mon:
+        for qk in q:
+            mon.update(qk)
+        v = mon.verdict()
+    if v is Verdict.UNKNOWN:
+        v = track_window(model, q, s, x0=x0).verdict
+    return v
+
+
+def _contains(box, x):
+    return bool(np.all(box[0] <= x) and np.all(x <= box[1]))
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--geometries", type=int, default=20)
+    p.add_argument("--speeds", default="1.0,1.1,1.2")
+    a = p.parse_args()
+    speeds = [float(v) for v in a.speeds.split(",")]
+    kin, model = KinematicModel(DEXTAR), IntervalModel(DEXTAR)
+    s = TrackerSettings.for_robot(DEXTAR)
+    print(f"CPU: {_cpu()}; {a.geometries} geometries per speed; the monitor fed at 1 kHz", flush=True)
+    warm = _crossing(kin, 1.1, 1)
+    online(model, s, warm.q_meas, int(warm.mode_true[0]), paced=False)  # kernels loaded, caches warm
+    delays, lat_open, lat_all, ratios, outside = [], [], [], [], 0
+    print("[1] v (m/s) | check certifies | online certifies | differ | wrong verdicts")
+    for v in speeds:
+        n_check = n_online = differ = wrong = 0
+        for g in range(a.geometries):
+            run = _crossing(kin, v, g)
+            m0 = int(run.mode_true[0])
+            vc = check(model, s, run.q_meas, m0)
+            mon, res, events, lat, open_ = online(model, s, run.q_meas, m0)
+            vo = mon.verdict()
+            n_check += vc is Verdict.MODE_CHANGED
+            n_online += vo is Verdict.MODE_CHANGED
+            differ += vc is Verdict.MODE_CHANGED and vo is not Verdict.MODE_CHANGED
+            wrong += Verdict.MODE_UNCHANGED in (vc, vo)
+            lat_all.append(lat)
+            lat_open.append(lat[open_])
+            changed = [e for e in events if e.event is Event.MODE_CHANGED]
+            if v == 1.1 and changed:
+                delays.append((changed[0].known_at - run.k_sing) * s.t_s * 1e3)
+            outside += sum(not _contains(r.x, run.x_true[k]) for k, r in enumerate(res))
+            if changed and changed[0].known_at + 200 < len(res):
+                k = changed[0].known_at + 200
+                still = Tracker(model, s, initial_box_from_mode(model, run.q_meas[k], int(run.mode_true[-1]), s))
+                for _ in range(201):
+                    r0 = still.update(run.q_meas[k])
+                ratios.append(float(np.max((res[k].x[1] - res[k].x[0]) / (r0.x[1] - r0.x[0]))))
+        print(f"    {v:.1f}     | {n_check:2d}/{a.geometries}           | {n_online:2d}/{a.geometries}            "
+              f"| {differ:6d} | {wrong}", flush=True)
+    if delays:
+        print(f"[2] decision delay at 1.1 m/s: median {statistics.median(delays):.0f} ms, max {max(delays):.0f} ms "
+              f"({len(delays)} runs decided online)")
+    lo, la = np.concatenate(lat_open) / 1e3, np.concatenate(lat_all) / 1e3
+    print(f"[3] update latency while a window is open: mean {lo.mean():.1f} us, max {lo.max():.0f} us "
+          f"({lo.size} samples); whole runs: mean {la.mean():.1f} us, max {la.max():.0f} us")
+    if ratios:
+        print(f"[4] pose box 0.2 s after the decision / never crossed: median {statistics.median(ratios):.2f}, "
+              f"worst {max(ratios):.2f}; samples with the truth outside a box: {outside}")
+    back = _crossing(kin, 1.1, 3)
+    q = np.concatenate([back.q_meas, back.q_meas[-2::-1]])
+    mon, res, events, _, _ = online(model, s, q, int(back.mode_true[0]))
+    changes = [(e.k, e.mode) for e in events if e.event is Event.MODE_CHANGED]
+    print(f"[5] there-and-back at 1.1 m/s: changes reported online {changes}; final verdict {mon.verdict().value} "
+          "(expected mode-unchanged)")
+    n_changed = n_check_unchanged = n_online_unchanged = 0
+    for g in range(a.geometries):
+        run = _bounce(kin, 1.0, g, 0.015)
+        m0 = int(run.mode_true[0])
+        vc = check(model, s, run.q_meas, m0)
+        vo = online(model, s, run.q_meas, m0)[0].verdict()
+        n_changed += Verdict.MODE_CHANGED in (vc, vo)
+        n_check_unchanged += vc is Verdict.MODE_UNCHANGED
+        n_online_unchanged += vo is Verdict.MODE_UNCHANGED and vc is Verdict.MODE_UNCHANGED
+    print(f"[6] bounces 15 mm before the locus at 1.0 m/s: mode-changed {n_changed} (must be 0); check "
+          f"mode-unchanged {n_check_unchanged}/{a.geometries}, online too on {n_online_unchanged} of them")
+
+
+if __name__ == "__main__":
+    main()
