@@ -189,3 +189,49 @@ def test_bad_use_is_refused(settings):
     mon.close()
     with pytest.raises(InputError, match="closed"):
         mon.update(run.q_meas[0])
+
+
+def test_decided_box_keeps_a_pose_on_the_locus(settings):
+    """The re-seeded pose box keeps the undecided forward-kinematics boxes: a pose on the singular locus (the
+    benchmark's nominal singular point, read exactly) is the limit of both modes and stays in the box of
+    either (keeping the decided mode's certified boxes only drops it)."""
+    bench = benchmark_crossing()
+    model = interval_model()
+    mon = OnlineMonitor(model, settings, (bench.point - 1e-3, bench.point + 1e-3), worker=False)
+    lo, hi = (np.asarray(v, dtype=float) for v in model.robot.x_bounds)
+    for mode in (1, -1):
+        box = mon._decided_box(np.asarray(bench.q_point, dtype=float), mode, model.xi_box(), (lo, hi))
+        assert np.all(box[0] <= bench.point) and np.all(bench.point <= box[1]), (mode, box)
+    mon.close()
+
+
+def test_reseeded_tracker_finds_the_pose_in_a_tube_of_both_modes(settings):
+    """A decision whose tube at its last sample spans both modes (the attempt's enumeration gave up, as it
+    does in a wide tracker box): the re-seeded tracker starts from the decided mode's forward-kinematics
+    solutions inside it, so it certifies that mode at once with a box of millimetres around the truth
+    (starting from the tube itself it would keep both modes)."""
+    from crosscert.verifier.window.offline import WindowStart
+    from crosscert.verifier.window.results import HypothesisResult, HypothesisStatus, Refutation
+
+    run = _simulated(1.1, 1)
+    model, j = interval_model(), run.k_sing + 40
+    mode = int(run.mode_true[j])
+    lo, hi = (np.asarray(v, dtype=float) for v in model.robot.x_bounds)
+    XI = model.xi_box()
+    tube = lambda a, b: np.stack([a, b])[None].repeat(2, axis=0)  # noqa: E731 - (K = 2, n) per bound
+    h = HypothesisResult(mode, HypothesisStatus.CONSISTENT, Refutation.NONE, 1, 1, True,
+                         tube(lo, lo)[:, 0], tube(hi, hi)[:, 0], np.full((2, 2), -3.0), np.full((2, 2), 3.0),
+                         XI[0][None], XI[1][None])
+    mon = OnlineMonitor(model, settings, _x0(run, settings), worker=False)
+    start = WindowStart(XI[0][None], XI[1][None], np.stack([lo, hi])[None], np.full((1, 2, 2), 3.0) * [[-1], [1]])
+    anchor = O._Anchor(j - 1, -mode, start, [run.q_meas[j - 1], run.q_meas[j]], [np.stack([lo, hi])] * 2)
+    at = O._Attempt(mon._lane, anchor, np.array(anchor.q), np.stack([lo, hi]), True)
+    lane, first = mon._reseeded(at, h)
+    assert first.event is Event.MODE_CHANGED and first.k == j and first.mode == mode
+    lane.step(run.q_meas[j])
+    r = lane.tracker.state
+    box = r.x_hull[0]
+    assert lane.mode == mode and int(r.mode[0]) == mode
+    assert np.all(box[0] <= run.x_true[j]) and np.all(run.x_true[j] <= box[1])
+    assert np.all(box[1] - box[0] < 5e-3), box
+    mon.close()
