@@ -294,6 +294,8 @@ def test_certify_names_the_gap_and_times_the_bounce(tmp_path, capsys, monkeypatc
         assert name == "plot_certificate" and "certified by window reasoning" in kwargs["title"]
         assert {h.final_mode for h in args[3].hypotheses} == {1, -1}
         assert any(h.status.value == "refuted" for h in args[3].hypotheses)
+        # the run drawn as the online monitor reports it: the decided mode's boxes to the end, not both modes
+        assert kwargs["forward_label"].startswith("online") and np.all(args[2]["x_hi"][-1] - args[2]["x_lo"][-1] < 5e-3)
     else:
         assert name == "plot_run" and "certified by the forward pass" in kwargs["title"]
     out = capsys.readouterr().out

@@ -132,7 +132,8 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
 _HYPOTHESIS_COLOR = {1: "tab:blue", -1: "tab:red"}
 
 
-def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_sing=None, title="", bounds=""):
+def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_sing=None, title="", bounds="",
+                     forward_label="forward pass"):
     """Write the figure of a certified run: what certified it, drawn as such.
 
     The window passes' tubes of each final-mode hypothesis that survived
@@ -156,6 +157,8 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
         Sample of the singular instant.
     title, bounds : str
         Figure title and the bounds the run assumed (printed under it).
+    forward_label : str
+        What ``forward`` is (e.g. the online monitor's boxes: the tracker, re-seeded in the decided mode).
     """
     import matplotlib
 
@@ -165,14 +168,16 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     fl, fh, fvl, fvh = (np.asarray(forward[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = fl.shape
     t = np.arange(K) * t_s
-    alive = [h for h in window.hypotheses if h.x_lo is not None]
+    # a surviving hypothesis that ran no pass has the forward pass's tubes (both modes after the locus): it is
+    # not drawn as a window tube; ``forward`` shows the run (e.g. the decided mode's boxes after a decision)
+    alive = [h for h in window.hypotheses if h.x_lo is not None and h.passes > 0]
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
     step = max(1, K // 300)
     # pose: the forward pass in grey, each surviving hypothesis' tube in its colour
     a = ax[0, 0]
     # the forward pass last, dotted, so that it shows where a tube coincides with it
     layers = [(f"window tube, final mode {h.final_mode:+d}", _HYPOTHESIS_COLOR.get(h.final_mode, "k"), "-", h.x_lo, h.x_hi)
-              for h in alive] + [("forward pass", "0.35", ":", fl, fh)]
+              for h in alive] + [(forward_label, "0.35", ":" if alive else "-", fl, fh)]
     for label, color, ls, lo, hi in layers:
         _pose_boxes(a, lo, hi, step, lambda k, c=color: c, ls)
         a.plot([], [], color=color, lw=1, ls=ls, label=label)
@@ -198,7 +203,7 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
                        label=f"window tube, final mode {h.final_mode:+d}")
     lo, hi, c = _clip(fvl[:, -1], fvh[:, -1], VELOCITY_CLIP)
     cut |= c
-    a.plot(t, lo, color="0.35", ls=":", lw=1, label="forward pass")
+    a.plot(t, lo, color="0.35", ls=":", lw=1, label=forward_label)
     a.plot(t, hi, color="0.35", ls=":", lw=1)
     if xd_plan is not None:
         a.plot(t, xd_plan[:, -1], "k-", lw=0.8, label="planned velocity")
@@ -207,8 +212,9 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     a.set_title(f"velocity (clipped at ±{VELOCITY_CLIP:g} m/s)" if cut else "velocity")
     # widths: what each reasoning leaves
     a = ax[1, 0]
-    a.semilogy(t, np.maximum((fh - fl).max(axis=1), 1e-9) * 1e3, color="0.6", label="pose, forward pass")
-    a.semilogy(t, np.maximum((fvh - fvl).max(axis=1), 1e-9), color="0.6", ls="--", label="velocity, forward pass")
+    a.semilogy(t, np.maximum((fh - fl).max(axis=1), 1e-9) * 1e3, color="0.6", label=f"pose, {forward_label}")
+    a.semilogy(t, np.maximum((fvh - fvl).max(axis=1), 1e-9), color="0.6", ls="--",
+               label=f"velocity, {forward_label}")
     for h in alive:
         color = _HYPOTHESIS_COLOR.get(h.final_mode, "k")
         a.semilogy(t, np.maximum((h.x_hi - h.x_lo).max(axis=1), 1e-9) * 1e3, color=color,

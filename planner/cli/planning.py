@@ -13,6 +13,7 @@ from crosscert.verifier.files import atomic_write
 from crosscert.verifier.settings import Verdict
 from crosscert.verifier.plots import plot_certificate, plot_run
 from crosscert.verifier.trajfile import write_trajectory
+from crosscert.verifier.window import online_boxes
 
 from ..assumption_cost import ComparisonOutcome, certify_at_robot_a_max, compares
 from ..certify.crossing import certify_crossing
@@ -20,7 +21,7 @@ from ..certify.trajectory import PlanSource, certify_path, certify_trajectory
 from ..execution_proof import describe as describe_execution
 from ..worker import SubprocessExecutor
 from ..plan import plan_crossing
-from ..models import kinematic_model
+from ..models import interval_model, kinematic_model
 from ..progress import suffixed
 from ..refute import SearchCompleteness
 from ..task import ExecutionKind, Method, PlanningBounds
@@ -321,14 +322,21 @@ def _figure(cert, bounds, out: Path, joint_unit: str):
         return f"{subject} {done} by {by}" if done == "certified" else f"{subject}: {done} {by}"
 
     forward = {"x_lo": e.x_lo, "x_hi": e.x_hi, "xd_lo": e.xd_lo, "xd_hi": e.xd_hi, "mode": e.mode}
+    if cert.window is not None:
+        # the certified run as the online monitor reports it: after its window's decision, the decided mode's
+        # boxes (the forward pass alone keeps both modes to the end); from the forward run's box at sample 0
+        model = interval_model(get_entry(name).robot)
+        forward = online_boxes(model, p.q, e.settings, (e.x_lo[0], e.x_hi[0]),
+                               xi_box=None if cert.execution is None else cert.execution.xi_box)
     text = (f"{'given' if given else bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
             f"({', '.join(f'{x.value:.4g} {x.unit}' for x in cert.a_max_used.axes)}), "
             f"t_s = {cert.bounds.t_s:.3g} s, "
             f"{cert.execution.kind.value} executions")
     if cert.window is not None:  # the window passes certified: draw them, the forward pass only beside them
-        call = (plot_certificate, png, p.t_s, forward, cert.window, p.x, p.xd, p.k_sing,
-                {"title": f"{name}: {what('window reasoning')}",
-                 "bounds": text})
+        call = (plot_certificate, png, p.t_s, {k: forward[k] for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "mode")},
+                cert.window, p.x, p.xd, p.k_sing,
+                {"title": f"{name}: {what('window reasoning')}", "bounds": text,
+                 "forward_label": "online (tracker, then the decided mode)"})
     else:
         call = (plot_run, png, p.t_s, forward, p.x, p.xd, p.k_sing,
                 {"title": f"{name}: {what('the forward pass')}",

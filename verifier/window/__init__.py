@@ -61,10 +61,10 @@ star imports).
 
 from .explain import Explainer, ExplainRequest, Explanation
 from .offline import WINDOW_MAX_GEOMETRIES, WINDOW_MAX_PASSES, WindowStart, track_window
-from .online import ONLINE_HORIZON, OnlineEvent, OnlineMonitor, OnlineResult, WindowState
+from .online import ONLINE_HORIZON, OnlineEvent, OnlineMonitor, OnlineResult, WindowState, online_boxes
 from .results import HypothesisResult, HypothesisStatus, Reasoning, Refutation, VerdictReason, WindowResult
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
-           "WindowStart", "OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON",
+           "WindowStart", "OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON", "online_boxes",
            "WINDOW_MAX_PASSES", "WINDOW_MAX_GEOMETRIES", "VerdictReason", "Explanation", "ExplainRequest",
            "Explainer"]

@@ -18,7 +18,7 @@ from .offline import WindowStart, track_window
 from .passes import hull_of_mode
 from .results import HypothesisStatus
 
-__all__ = ["OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON"]
+__all__ = ["OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON", "online_boxes"]
 
 #: Longest anchored window (samples from the anchor to the newest reading) of :class:`OnlineMonitor`: past
 #: it the window gives up (``unknown``, :attr:`WindowState.GAVE_UP`) until the tracker certifies a mode again.
@@ -583,3 +583,19 @@ class OnlineMonitor:
                     continue
                 events += self._catch_up(new, at.anchor.q[done + len(readings):])
                 self._queued += self._swap(new, first, events, known_at=lane.k)
+
+
+def online_boxes(model, q, settings: TrackerSettings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
+                 horizon: int = ONLINE_HORIZON) -> dict:
+    """The boxes an inline :class:`OnlineMonitor` reports at every sample of the readings ``q`` ``(K, n)``
+    (rad): ``x_lo, x_hi, xd_lo, xd_hi`` ``(K, n)`` (m, m/s), ``mode`` ``(K,)`` (from a window's decision on,
+    the decided mode's boxes), and ``decided`` (the samples its windows decided), for a figure."""
+    rows, decided = [], []
+    with OnlineMonitor(model, settings, x0, xi_box=xi_box, backend=backend, horizon=horizon, worker=False) as mon:
+        for qk in np.asarray(q, dtype=np.float64):
+            r = mon.update(qk)
+            rows.append((r.x[0], r.x[1], r.xd[0], r.xd[1], r.mode))
+            decided += [e.k for e in r.events if e.by_window and e.mode]
+    out = {key: np.array([row[i] for row in rows]) for i, key in enumerate(("x_lo", "x_hi", "xd_lo", "xd_hi", "mode"))}
+    out["decided"] = decided
+    return out
