@@ -237,7 +237,6 @@ class Monitor:
         self.pending = []  # (line, t, q) read before the tracker could start
         self.samples = 0
         self.times = {}  # sample -> (t, line) of the samples a window's event may still be about
-        self.last = None  # the OnlineResult of the newest sample
         self.latency = LatencyStats()
         self.envelope_latency = LatencyStats()
         self.catch_up_latency = LatencyStats()  # --certificate: the held samples, tracked once the envelope is left
@@ -289,7 +288,6 @@ class Monitor:
         t0 = time.perf_counter_ns()
         r = self.online.update(q)
         latency.add(time.perf_counter_ns() - t0)
-        self.last = r
         self.times[r.k] = (t, line)
         if self.record:
             for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
@@ -347,9 +345,10 @@ class Monitor:
         if self.online is not None:
             self._events(self.online.settle(timeout))
 
-    def close(self) -> None:
+    def close(self, wait: bool = True) -> None:
+        """Stop the window's worker: after its running attempt, or at once for an interrupted run."""
         if self.online is not None:
-            self.online.close()
+            self.online.close(None if wait else 0.0)
 
     def recorded(self) -> dict:
         """The kept boxes as arrays: ``x_lo, x_hi, xd_lo, xd_hi`` (K, n), m and m/s, and ``mode`` (K,)."""
@@ -392,8 +391,8 @@ class Monitor:
                     so_far = Verdict.INCONSISTENT.value
                 else:
                     so_far, init, final, step = env.verdict.value, env.initial_mode, env.final_mode, env.decided_at
-        last = self.last
-        final_box = last is not None and last.consistent
+        final_box = started and mon.consistent
+        x_final = mon.boxes[0] if final_box else None
         return {
             "certificate": certificate,
             # a verdict is about the whole recording: an interrupted one has only a prefix's
@@ -406,8 +405,8 @@ class Monitor:
             "steps": mon.k + 1 if started else 0,
             "t_s": self.t_s,
             # the pose box at the last sample (in the final mode when it is certified), m
-            "final_pose_lo": last.x[0].tolist() if final_box else None,
-            "final_pose_hi": last.x[1].tolist() if final_box else None,
+            "final_pose_lo": x_final[0].tolist() if final_box else None,
+            "final_pose_hi": x_final[1].tolist() if final_box else None,
             "max_width_pose_m": mon.max_width_pose if started else None,
             "max_width_velocity_mps": mon.max_width_velocity if started else None,
             "velocity_model": self.a.velocity_model,
@@ -423,7 +422,7 @@ class Monitor:
     def finish(self, error: str | None = None) -> int:
         """Print the summary (the last line of output) and return the exit code."""
         out = self.summary(error)
-        self.close()
+        self.close(wait=error is None)
         if self.a.json:
             print(json.dumps(out), flush=True)
         else:

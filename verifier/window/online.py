@@ -372,6 +372,15 @@ class OnlineMonitor:
         return self._lane.window
 
     @property
+    def boxes(self) -> tuple:
+        """``(x, xd)``: the pose (m) and velocity (m/s) boxes ``(lo, hi)`` at the newest sample, from the
+        decided mode's boxes once a window decided (also after :meth:`settle`)."""
+        with self._lock:
+            st = self._lane.tracker.state
+            x, xd = st.x_hull[0], st.xd_hull[0]
+            return (x[0].copy(), x[1].copy()), (xd[0].copy(), xd[1].copy())
+
+    @property
     def tracker(self) -> Tracker:
         """The tracker of the newest sample (a new one after each window decision)."""
         return self._lane.tracker
@@ -420,13 +429,14 @@ class OnlineMonitor:
         if self._error is not None:
             raise self._error
 
-    def close(self) -> None:
-        """Stop the worker (an attempt running ends first); further updates are refused."""
+    def close(self, timeout: float | None = None) -> None:
+        """Stop the worker; further updates are refused.  An attempt running ends first: ``timeout`` (s)
+        bounds the wait for it (the thread is a daemon: an interrupted program need not wait)."""
         with self._lock:
             self._closed = True
             self._wake.notify_all()
         if self._thread is not None:
-            self._thread.join()
+            self._thread.join(timeout)
 
     def __enter__(self):
         return self
