@@ -37,9 +37,11 @@ RESEED_SMALL = (5e-3, 2e-2, 8e-2)
 #: Budget of geometry sub-boxes per hypothesis of a full attempt (the offline window's is 64: on the
 #: adversarial runs of tests/test_online.py, 16 decided the same runs at half the cost or less).
 ONLINE_MAX_GEOMETRIES = 16
-#: Longest window of an inline monitor's full attempts, samples: decisions come within tens of samples of
-#: the crossing, and ``check`` runs the window over the whole recording after it when it is not decided.
-INLINE_FULL_MAX = 128
+#: Window lengths (samples) at which an inline monitor makes a full attempt after its cheap one: a crossing
+#: the tracker alone decides a few samples after losing the mode pays cheap attempts only, decisions come
+#: within tens of samples of the crossing, and ``check`` runs the window over the whole recording after the
+#: monitor when it is still undecided.
+INLINE_FULL = (32, 128)
 #: Window length (samples from the anchor) of an inline :class:`OnlineMonitor`'s first attempt; the next
 #: ones double it, so the work of a window that never decides stays about twice that of its last attempt.
 FIRST_ATTEMPT = 8
@@ -244,8 +246,8 @@ class OnlineMonitor:
     attempt: cheap attempts follow one another over all the readings there
     are, with a full one each time the window has doubled since the last.
     With ``worker=False`` the attempts run inside :meth:`update`, at window
-    lengths :data:`FIRST_ATTEMPT`, twice that, ... (cheap, then full up to
-    :data:`INLINE_FULL_MAX` samples): the answers do not depend on the
+    lengths :data:`FIRST_ATTEMPT`, twice that, ... (cheap; full too at
+    :data:`INLINE_FULL`): the answers do not depend on the
     machine's speed (``crosscert check``).  :meth:`settle` runs a full
     attempt over every reading.  Either way every answer holds under the
     tracker's assumptions; only when it comes may differ.
@@ -517,7 +519,7 @@ class OnlineMonitor:
         if L < FIRST_ATTEMPT or L & (L - 1):  # lengths 8, 16, 32, ...
             return []
         events = self._decide(lane, self._attempt(lane, full=False))
-        if self._lane is lane and lane.anchor is a and L <= INLINE_FULL_MAX:
+        if self._lane is lane and lane.anchor is a and L in INLINE_FULL:
             events += self._decide(lane, self._attempt(lane, full=True))
         return events
 
