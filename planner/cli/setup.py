@@ -8,16 +8,20 @@ import threading
 import numpy as np
 
 from crosscert.robots import KinematicModel
-from crosscert.robots.errors import InputError
-from crosscert.robots.registry import get_entry
+from crosscert.robots.errors import InputError, ModelError
+from crosscert.robots.registry import RobotEntry, RobotSource, get_entry, robot_origin
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.settings import TrackerSettings
 from crosscert.verifier.trajfile import parse_number
+from crosscert.verifier.validation import validate
 
 from ..simulate import random_geometry
+from ..simulate.run import CRUISE
+from ..sweep import cruise_for
 from ..task import CrossingTask, benchmark_task
 
-__all__ = ["floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
+__all__ = ["checked_entry", "simulation_cruise",
+           "floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
            "phase_bar", "COMPILING", "compile_ahead"]
 
 
@@ -30,6 +34,31 @@ def floats_option(text: str, count: int | None, what: str) -> list[float]:
     if count is not None and len(vals) != count:
         raise InputError(f"{what}: expected {count} comma-separated numbers, got {len(vals)}")
     return vals
+
+
+#: Robots from a file or an entry point that passed every check of ``crosscert.validate`` in this process.
+_VALIDATED: set[str] = set()
+
+
+def checked_entry(name: str) -> RobotEntry:
+    """The registry entry of robot ``name``; a robot from a file or an entry point is validated first (every
+    check of :func:`crosscert.validate`, about 0.3 s, once per process), the built-in ones are tested.
+
+    Raises
+    ------
+    ModelError
+        One line naming the failed checks and the command that prints the report.
+    """
+    entry = get_entry(name)
+    origin = robot_origin(name)
+    if origin.source is not RobotSource.BUILT_IN and name not in _VALIDATED:
+        report = validate(entry.robot)
+        if not report.ok:
+            failed = "; ".join(f"{c.name}: {c.message}" for c in report.failures)
+            raise ModelError(f"robot {entry.robot.name!r} ({origin}) fails validation ({' '.join(failed.split())}); "
+                             f"'crosscert robots --validate {name}' prints every check")
+        _VALIDATED.add(name)
+    return entry
 
 
 def tracker_setup(a):
@@ -79,6 +108,15 @@ def true_geometry(robot, seed: int):
     if seed == 0:
         return None
     return random_geometry(robot, np.random.default_rng(seed))
+
+
+def simulation_cruise(a) -> float:
+    """Half-length (m) of ``simulate``'s constant-speed zone around the crossing: the default, or long enough
+    that the start lies ``--start-distance`` before the crossing point (a crossing starts its ramp plus this
+    zone before it; a bounce twice that before its turning point)."""
+    if a.start_distance is None:
+        return CRUISE
+    return cruise_for(a.v_sing, a.a_peak, a.start_distance / 2 if a.bounce else a.start_distance, CRUISE)
 
 
 def progress_bar(total, enabled: bool, desc: str):
