@@ -162,3 +162,14 @@ def test_a_bounce_starts_the_distance_before_its_turning_point(tmp_path, capsys)
     assert main(["simulate", "--v-sing", "1", "--bounce", "--start-distance", "0.08", "-o", str(tmp_path / "b.csv")]) == 0
     out = capsys.readouterr().out
     assert "samples of a bounce" in out and "start 80.0 mm before the locus" in out
+
+
+# ------------------------------------------------------------------ sweep on a cold numba cache
+@pytest.mark.parametrize("cold", [True, False])
+def test_sweep_says_when_the_kernels_compile(cold, tmp_path, monkeypatch, capsys):
+    from crosscert.verifier.compiled import warm
+
+    monkeypatch.setattr(warm, "cached", lambda code: not cold)  # the cache as after an install, or as after a run
+    assert main(["sweep", "--speeds", "1.458", "--out", str(tmp_path / "s"), "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert err == ("crosscert: compiling the kernels (first run only, about 20 s)\n" if cold else "")

@@ -22,7 +22,7 @@ from ..task import CrossingTask, benchmark_task
 
 __all__ = ["checked_entry", "simulation_cruise",
            "floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
-           "phase_bar", "COMPILING", "compile_ahead"]
+           "phase_bar", "COMPILING", "compile_ahead", "compile_note", "FIRST_COMPILE_S"]
 
 
 def floats_option(text: str, count: int | None, what: str) -> list[float]:
@@ -82,6 +82,24 @@ def compile_ahead(velocity_model: str = "sound") -> None:
     from crosscert.verifier.compiled import warm
 
     warm.start(velocity_model)
+
+
+#: Wall time of the kernels' first compilation, s: ``crosscert sweep``'s first run after an install took about
+#: 20 s more than the next ones on 2 shared cores (benchmarks/README.md#timings).
+FIRST_COMPILE_S = 20
+
+
+def compile_note(*velocity_models) -> bool:
+    """Say on stderr, in one line, that the kernels compile now when the driver of one of ``velocity_models``
+    (names or :class:`verifier.settings.VelocityModel`) is not in numba's disk cache yet: the first run after
+    an install waits for it without a terminal's progress bar.  Returns whether it said so."""
+    from crosscert.verifier.compiled import warm
+    from crosscert.verifier.constants import velocity_model_code
+
+    if all(warm.cached(velocity_model_code(vm)) for vm in velocity_models):
+        return False
+    print(f"crosscert: compiling the kernels (first run only, about {FIRST_COMPILE_S} s)", file=sys.stderr)
+    return True
 
 
 def benchmark_setup(name: str):

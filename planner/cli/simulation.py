@@ -14,7 +14,7 @@ from crosscert.verifier.trajfile import write_trajectory
 
 from ..simulate import simulate_bounce, simulate_crossing, simulate_motion
 from ..sweep import sweep as run_sweep
-from .setup import benchmark_setup, progress_bar, simulation_cruise, true_geometry
+from .setup import benchmark_setup, compile_note, progress_bar, simulation_cruise, true_geometry
 
 __all__ = ["simulate", "sweep"]
 
@@ -52,6 +52,7 @@ def sweep(a) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     models = (VelocityModel.PAPER, VelocityModel.SOUND)
+    compile_note(*models)
     bar, cb = progress_bar(None, not a.no_progress, "sweep")
     try:
         rows, figs = run_sweep(robot, kin, bench, speeds, models, xi_true=true_geometry(robot, a.seed), seed=a.seed,
