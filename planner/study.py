@@ -38,7 +38,7 @@ import numpy as np
 
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, ModelError
-from crosscert.robots.registry import DEFAULT_ROBOT, get_entry
+from crosscert.robots.registry import DEFAULT_ROBOT, get_entry, robot_key
 
 from .certify.crossing import certify_crossing, package_versions
 from .task import Method, PlanningBounds, benchmark_task, parse_option
@@ -105,8 +105,8 @@ def study_cases(grid: dict) -> list[StudyCase]:
 def _value(key: str, v):
     if key == "method":
         return parse_option(Method, "method", v).value
-    if key == "robot":
-        return get_entry(v).name
+    if key == "robot":  # a robot file by its absolute path, so that every worker finds it
+        return robot_key(v)
     if key == "crossing_offset":
         return V.number(key, v)
     return V.positive(key, v)

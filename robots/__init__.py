@@ -16,11 +16,13 @@ from .assumptions import Assumptions
 from .base import BenchmarkCrossing, LoopClosure, ReferenceMotion, Robot
 from .dextar import DEXTAR
 from .dynamics import LumpedDynamics
-from .errors import CrosscertError, InputError, ModelError, SimulationError, TrajectoryFileError, UnknownRobotError
+from .errors import (CrosscertError, InputError, ModelError, RobotSourceError, SimulationError, TrajectoryFileError,
+                     UnknownRobotError)
 from .gough_stewart import GOUGH_STEWART
 from .kinematics import KinematicModel
 from .mass_model import LumpedMassModel
-from .registry import DEFAULT_ROBOT, ROBOTS, RobotEntry, available_robots, get_entry, get_robot
+from .registry import (DEFAULT_ROBOT, ENTRY_POINT_GROUP, ROBOTS, RobotEntry, RobotOrigin, RobotSource, available_robots,
+                       get_entry, get_robot, robot_origin)
 from .rpr3 import RPR3
 from .units import PoseUnit
 from .validation import CheckOutcome, CheckResult, ValidationReport, validate
@@ -36,6 +38,10 @@ __all__ = [
     "get_robot",
     "get_entry",
     "available_robots",
+    "robot_origin",
+    "RobotOrigin",
+    "RobotSource",
+    "ENTRY_POINT_GROUP",
     # describing a robot
     "Robot",
     "LoopClosure",
@@ -58,6 +64,7 @@ __all__ = [
     "InputError",
     "ModelError",
     "SimulationError",
+    "RobotSourceError",
     "TrajectoryFileError",
     "UnknownRobotError",
 ]

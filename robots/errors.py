@@ -12,6 +12,7 @@ __all__ = [
     "InputError",
     "TrajectoryFileError",
     "UnknownRobotError",
+    "RobotSourceError",
     "ModelError",
     "SimulationError",
 ]
@@ -42,3 +43,7 @@ class ModelError(CrosscertError):
 
 class SimulationError(CrosscertError):
     """A simulated motion cannot be produced (unreachable pose, IK failure, limits)."""
+
+
+class RobotSourceError(InputError):
+    """A robot file or an installed entry point cannot be loaded, or does not hold a robot entry."""

@@ -177,7 +177,9 @@ def initial_box_from_mode(model, q0, mode: int, settings: TrackerSettings, xi_bo
         if sols is not None:
             break
     if sols is None:
-        raise InputError("could not isolate the forward-kinematics solutions of the first sample; give --x0 instead")
+        raise InputError("could not isolate the forward-kinematics solutions of the first sample: it is likely too close "
+                         "to the Type 2 locus for the calibration box (docs/your-robot.md); start the recording "
+                         "farther from the locus, or give --x0")
     if not sols:
         raise InputError("the first joint sample has no forward-kinematics solution with the calibration box: check the robot and the data")
     if any(m == 0 for _, m in sols):

@@ -6,7 +6,7 @@ no traceback), 3 the data contradict the assumptions (inconsistent), 130
 interrupted (Ctrl-C), 141 the reader of the standard output went away (a
 closed pipe, as in ``crosscert monitor ... | head -1``: a quiet end, as
 ``cat`` under ``set -o pipefail``).  Robots come from :mod:`robots.registry`;
-every command takes ``--robot``.
+every command takes ``--robot`` (a name, or a robot file ``path.py:NAME``).
 """
 
 from __future__ import annotations
@@ -18,12 +18,13 @@ import sys
 import threading
 
 from crosscert.robots.errors import CrosscertError
-from crosscert.robots.registry import get_entry
+from crosscert.robots.registry import robot_key
 
 from .checks import check_command
 from .parser import UsageError, build_parser, robot_of
 from .planning import certify, plan
 from .robots import robots
+from .setup import checked_entry
 from .simulation import simulate, sweep
 from .study import study
 from .track import check, monitor
@@ -144,7 +145,8 @@ def _main(argv) -> int:
         argv = sys.argv[1:] if argv is None else list(argv)
         a = build_parser(robot_of(argv)).parse_args(argv)
         a.argv = argv
-        check_command(a, get_entry(a.robot))  # every option, before any work
+        a.robot = robot_key(a.robot)  # a robot file by its absolute path: every later lookup finds the same one
+        check_command(a, checked_entry(a.robot))  # every option, before any work
         return _COMMANDS[a.command](a)
     except UsageError as exc:
         print(str(exc), file=sys.stderr)

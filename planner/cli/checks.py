@@ -25,19 +25,19 @@ from pathlib import Path
 import numpy as np
 
 from crosscert.robots.errors import InputError
-from crosscert.robots.registry import get_entry
+from crosscert.robots.registry import get_entry, robot_key
 from crosscert.verifier.files import check_output_path
 
 from crosscert.robots.assumptions import check_bound
 
 from ..certify.crossing import V_LOW
 from ..simulate import ramp_length
-from ..simulate.run import A_PEAK as SIM_A_PEAK, CRUISE, REST_END
+from ..simulate.run import A_PEAK as SIM_A_PEAK, REST_END
 from ..study import COLUMNS, GRID_KEYS, read_results, study_cases
 from ..sweep import T_REST as SWEEP_T_REST
 from ..task import Method, PlanningBounds, benchmark_task
 from .parser import TABLE2_SPEEDS
-from .setup import floats_option
+from .setup import floats_option, simulation_cruise
 from .study import read_grid
 
 __all__ = ["MEMORY_LIMIT", "TIME_LIMIT", "MAX_CASES", "MAX_WORKERS", "check_command"]
@@ -76,6 +76,8 @@ MAX_HORIZON = 100_000
 MAX_CASES = 10_000
 #: Largest local cluster of ``study --workers``, worker processes.
 MAX_WORKERS = 256
+#: Largest ``simulate --start-distance``, m: a typo guard (no robot's workspace is that large).
+MAX_START_DISTANCE = 10.0
 #: Largest ``width_scale`` of a study: a calibration box 100 times the robot's is far beyond any calibration.
 MAX_WIDTH_SCALE = 100.0
 #: Schemes of the Dask scheduler addresses ``study --scheduler`` takes with a HOST:PORT.
@@ -219,13 +221,19 @@ def check_command(a, entry) -> None:
             if a.bounce:
                 raise InputError(f"robot {entry.name!r} ships no crossing, so there is no bounce to simulate; "
                                  "drop --bounce to simulate its reference motion")
+            if a.start_distance is not None:
+                raise InputError(f"robot {entry.name!r} ships no crossing, so there is no locus to start away from; "
+                                 "drop --start-distance to simulate its reference motion")
             m = entry.reference_motion()
             direction = m.goal - m.start
         else:
             direction = entry.benchmark_crossing().direction
+        if a.start_distance is not None:
+            _in("--start-distance", a.start_distance, 0.0, MAX_START_DISTANCE, unit=" m")
         _a_peak_within_robot(a.a_peak, direction, robot)
         T = ramp_length(a.v_sing, a.a_peak)[0]
-        duration = a.t_rest + 2 * T + 2 * CRUISE / a.v_sing + REST_END
+        # a bounce runs its ramps and cruise twice (there and back)
+        duration = a.t_rest + (2 if a.bounce else 1) * (2 * T + 2 * simulation_cruise(a) / a.v_sing) + REST_END
         _budget(f"simulate at --v-sing {a.v_sing:g} m/s, --a-peak {a.a_peak:g} m/s^2, --t-rest {a.t_rest:g} s",
                 duration / robot.t_s, robot.n)
         _output_file(a.output, "--output", (".csv",))
@@ -334,7 +342,7 @@ def _study(a) -> None:
     _output_file(a.plot, "--plot", (".png",))
     spec = read_grid(a.grid)
     if spec["robot"] is not None:
-        a.robot = get_entry(spec["robot"]).name  # the grid file's robot wins over --robot
+        a.robot = robot_key(spec["robot"])  # the grid file's robot wins over --robot
     grid, bounds, cert = spec["grid"], spec["bounds"], spec["certify"]
     cases = study_cases(grid)
     if len(cases) > MAX_CASES:

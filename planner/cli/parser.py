@@ -7,7 +7,8 @@ import importlib.metadata as md
 
 import numpy as np
 
-from crosscert.robots.registry import DEFAULT_ROBOT, ROBOTS, available_robots
+from crosscert.robots.errors import CrosscertError
+from crosscert.robots.registry import DEFAULT_ROBOT, available_robots, get_entry, robot_key
 from crosscert.verifier.step import Backend
 from crosscert.verifier.settings import VelocityModel
 from crosscert.verifier.trajfile import parse_number
@@ -84,13 +85,17 @@ def _version() -> str:
 
 
 def robot_of(argv) -> str:
-    """The robot ``argv`` names with ``--robot`` (a registered one), else the default: its values show in ``--help``."""
+    """The robot ``argv`` names with ``--robot`` (one that loads), else the default: its values show in ``--help``.
+    A name that does not load is reported after parsing, as one line."""
     argv = list(argv)
     for i, arg in enumerate(argv):
         name = arg.split("=", 1)[1] if arg.startswith("--robot=") else (
             argv[i + 1] if arg == "--robot" and i + 1 < len(argv) else None)
-        if name in ROBOTS:
-            return name
+        if name is not None:
+            try:
+                return robot_key(name)
+            except CrosscertError:
+                continue
     return DEFAULT_ROBOT
 
 
@@ -102,7 +107,7 @@ def _values(v) -> str:
 
 def _robot_default(robot: str, attr: str) -> str:
     """``help`` text of a default the robot supplies: its value and unit for ``robot`` (from its assumptions)."""
-    a = ROBOTS[robot].robot.assumptions
+    a = get_entry(robot).robot.assumptions
     value = a.t_s if attr == "t_s" else getattr(a, attr)
     if np.ndim(value) and np.all(value == value[0]):
         value = value[0]
@@ -111,11 +116,13 @@ def _robot_default(robot: str, attr: str) -> str:
 
 def _unit(robot: str, attr: str) -> str:
     """Unit of assumption ``attr`` for ``robot``, for ``help`` (one per coordinate when they differ)."""
-    return ROBOTS[robot].robot.assumptions.unit(attr)
+    return get_entry(robot).robot.assumptions.unit(attr)
 
 
 def _robot_option(p):
-    p.add_argument("--robot", default=DEFAULT_ROBOT, help=f"robot: one of {', '.join(available_robots())}")
+    p.add_argument("--robot", default=DEFAULT_ROBOT,
+                   help=f"robot: one of {', '.join(available_robots())}, or a file of yours, path/to/robot.py:NAME "
+                        "(NAME a RobotEntry it defines; docs/your-robot.md)")
 
 
 def _tracker_options(p, robot):
@@ -198,6 +205,10 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
                    help="seed of the true geometry drawn in the calibration box (0: its centre)")
     s.add_argument("--t-rest", type=number, default=0.3, help="rest before the motion, s")
     s.add_argument("--a-peak", type=number, default=SIM_A_PEAK, help="peak acceleration of the ramps, m/s^2")
+    s.add_argument("--start-distance", type=number, metavar="D",
+                   help="start at least D m before the crossing point along the path (a bounce: D before its turning "
+                        "point), by lengthening the constant-speed zone; a start too close to the locus for the "
+                        "calibration box cannot be told apart from the other mode (default: the ramp plus 5 mm)")
     s.add_argument("-o", "--output", required=True, help="CSV file to write")
 
     ce = command("certify", "minimal certified crossing speed of a task, with its proof and refutation bound; "
@@ -265,8 +276,12 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
     w.add_argument("--out", default="crosscert-sweep", help="folder for the PNG figures")
     w.add_argument("--no-progress", action="store_true", help="no progress bar")
 
-    ro = command("robots", "list the shipped robots (n, m, defaults), or check one definition with --validate")
-    ro.add_argument("--validate", metavar="NAME", help=f"run robots.validate on robot NAME ({', '.join(available_robots())})")
+    ro = command("robots", "list the robots (n, m, defaults, where each comes from: built-in, an installed entry point "
+                           "or a file), or check one definition with --validate")
+    ro.add_argument("--validate", metavar="NAME", help=f"run robots.validate on robot NAME ({', '.join(available_robots())}, "
+                                                       "or path/to/robot.py:NAME)")
+    ro.add_argument("--robot", dest="files", action="append", default=[], metavar="FILE.py:NAME",
+                    help="list the robot of this file too (repeatable)")
     ro.add_argument("--seed", type=count, default=0, help="seed of the random configurations checked")
     ro.set_defaults(robot=DEFAULT_ROBOT)
 

@@ -8,17 +8,21 @@ import threading
 import numpy as np
 
 from crosscert.robots import KinematicModel
-from crosscert.robots.errors import InputError
-from crosscert.robots.registry import get_entry
+from crosscert.robots.errors import InputError, ModelError
+from crosscert.robots.registry import RobotEntry, RobotSource, get_entry, robot_origin
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.settings import TrackerSettings
 from crosscert.verifier.trajfile import parse_number
+from crosscert.verifier.validation import validate
 
 from ..simulate import random_geometry
+from ..simulate.run import CRUISE
+from ..sweep import cruise_for
 from ..task import CrossingTask, benchmark_task
 
-__all__ = ["floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
-           "phase_bar", "COMPILING", "compile_ahead"]
+__all__ = ["checked_entry", "simulation_cruise",
+           "floats_option", "tracker_setup", "task_setup", "benchmark_setup", "true_geometry", "progress_bar", "PhaseBar",
+           "phase_bar", "COMPILING", "compile_ahead", "compile_note", "FIRST_COMPILE_S"]
 
 
 def floats_option(text: str, count: int | None, what: str) -> list[float]:
@@ -30,6 +34,31 @@ def floats_option(text: str, count: int | None, what: str) -> list[float]:
     if count is not None and len(vals) != count:
         raise InputError(f"{what}: expected {count} comma-separated numbers, got {len(vals)}")
     return vals
+
+
+#: Robots from a file or an entry point that passed every check of ``crosscert.validate`` in this process.
+_VALIDATED: set[str] = set()
+
+
+def checked_entry(name: str) -> RobotEntry:
+    """The registry entry of robot ``name``; a robot from a file or an entry point is validated first (every
+    check of :func:`crosscert.validate`, about 0.3 s, once per process), the built-in ones are tested.
+
+    Raises
+    ------
+    ModelError
+        One line naming the failed checks and the command that prints the report.
+    """
+    entry = get_entry(name)
+    origin = robot_origin(name)
+    if origin.source is not RobotSource.BUILT_IN and name not in _VALIDATED:
+        report = validate(entry.robot)
+        if not report.ok:
+            failed = "; ".join(f"{c.name}: {c.message}" for c in report.failures)
+            raise ModelError(f"robot {entry.robot.name!r} ({origin}) fails validation ({' '.join(failed.split())}); "
+                             f"'crosscert robots --validate {name}' prints every check")
+        _VALIDATED.add(name)
+    return entry
 
 
 def tracker_setup(a):
@@ -53,6 +82,24 @@ def compile_ahead(velocity_model: str = "sound") -> None:
     from crosscert.verifier.compiled import warm
 
     warm.start(velocity_model)
+
+
+#: Wall time of the kernels' first compilation, s: ``crosscert sweep``'s first run after an install took about
+#: 20 s more than the next ones on 2 shared cores (benchmarks/README.md#timings).
+FIRST_COMPILE_S = 20
+
+
+def compile_note(*velocity_models) -> bool:
+    """Say on stderr, in one line, that the kernels compile now when the driver of one of ``velocity_models``
+    (names or :class:`verifier.settings.VelocityModel`) is not in numba's disk cache yet: the first run after
+    an install waits for it without a terminal's progress bar.  Returns whether it said so."""
+    from crosscert.verifier.compiled import warm
+    from crosscert.verifier.constants import velocity_model_code
+
+    if all(warm.cached(velocity_model_code(vm)) for vm in velocity_models):
+        return False
+    print(f"crosscert: compiling the kernels (first run only, about {FIRST_COMPILE_S} s)", file=sys.stderr)
+    return True
 
 
 def benchmark_setup(name: str):
@@ -79,6 +126,15 @@ def true_geometry(robot, seed: int):
     if seed == 0:
         return None
     return random_geometry(robot, np.random.default_rng(seed))
+
+
+def simulation_cruise(a) -> float:
+    """Half-length (m) of ``simulate``'s constant-speed zone around the crossing: the default, or long enough
+    that the start lies ``--start-distance`` before the crossing point (a crossing starts its ramp plus this
+    zone before it; a bounce twice that before its turning point)."""
+    if a.start_distance is None:
+        return CRUISE
+    return cruise_for(a.v_sing, a.a_peak, a.start_distance / 2 if a.bounce else a.start_distance, CRUISE)
 
 
 def progress_bar(total, enabled: bool, desc: str):

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from crosscert.robots import KinematicModel
 from crosscert.robots.registry import get_entry
 from crosscert.verifier.plots import plot_run
@@ -12,7 +14,7 @@ from crosscert.verifier.trajfile import write_trajectory
 
 from ..simulate import simulate_bounce, simulate_crossing, simulate_motion
 from ..sweep import sweep as run_sweep
-from .setup import benchmark_setup, progress_bar, true_geometry
+from .setup import benchmark_setup, compile_note, progress_bar, simulation_cruise, true_geometry
 
 __all__ = ["simulate", "sweep"]
 
@@ -33,10 +35,12 @@ def simulate(a) -> int:
     entry, kin, bench = benchmark_setup(a.robot)
     fn = simulate_bounce if a.bounce else simulate_crossing
     run = fn(kin, bench.point, bench.direction, a.v_sing, xi_true=true_geometry(robot, a.seed), t_rest=a.t_rest,
-             a_peak=a.a_peak, working_guess=bench.q_point, seed=a.seed)
+             a_peak=a.a_peak, cruise=simulation_cruise(a), working_guess=bench.q_point, seed=a.seed)
     write_trajectory(a.output, run.t, run.q_meas)
     kind = "bounce" if a.bounce else "crossing"
-    print(f"wrote {a.output}: {run.n_samples} samples of a {kind} at {run.v_sing} m/s (singular sample {run.k_sing})")
+    start = float(np.dot(run.x_sing - run.x[0], run.direction))  # along the path, to where it meets the true locus
+    print(f"wrote {a.output}: {run.n_samples} samples of a {kind} at {run.v_sing} m/s (singular sample {run.k_sing}; "
+          f"start {start * 1e3:.1f} mm before the locus)")
     return 0
 
 
@@ -48,6 +52,7 @@ def sweep(a) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     models = (VelocityModel.PAPER, VelocityModel.SOUND)
+    compile_note(*models)
     bar, cb = progress_bar(None, not a.no_progress, "sweep")
     try:
         rows, figs = run_sweep(robot, kin, bench, speeds, models, xi_true=true_geometry(robot, a.seed), seed=a.seed,
