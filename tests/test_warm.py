@@ -125,7 +125,9 @@ def test_the_driver_compiled_by_the_child_gives_the_same_answer(tmp_path, simula
     assert proc.returncode == 0, proc.stderr
     lines = proc.stdout.strip().splitlines()
     got, stats = json.loads(lines[0]), json.loads(lines[-1])
-    assert stats == {"rc": 0, "codes": [0], "hits": 1, "misses": 0}
+    # the first configure waits for the child; later ones (the anchored windows' passes) find none to wait for
+    assert stats["codes"][0] == 0 and all(c is None for c in stats["codes"][1:])
+    assert {k: stats[k] for k in ("rc", "hits", "misses")} == {"rc": 0, "hits": 1, "misses": 0}
     assert main(["check", str(simulated_recording), "--initial-mode", "1", "--json", "--no-progress"]) == 0
     expected = json.loads(capsys.readouterr().out)
     for d in (got, expected):

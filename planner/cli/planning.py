@@ -60,7 +60,7 @@ def certify(a) -> int:
         cert = certify_crossing(robot, task, bounds, v_low=a.v_low, v_high=a.v_high, tol=a.tol,
                                 refute_tol=a.refute_tol, monte_carlo_runs=a.monte_carlo, refute=not a.no_refute, seed=a.seed,
                                 progress=bar, kin=kin, executor=pool)
-        figure = _figure(cert, bounds, out, joint_unit)
+        figure = _figure(cert, robot, bounds, out, joint_unit)
         if figure is not None and pool is not None and compares(robot, cert):
             # the figure depends on the first certificate only: the worker draws it while this process
             # runs the second certification's speed search (the worker is mostly idle then)
@@ -186,7 +186,7 @@ def _certify_given_plan(a) -> int:
     report["retimed_path"] = None if retimed is None else retimed.summary()
     report["command_line"] = ["crosscert", *a.argv]
     out.mkdir(parents=True, exist_ok=True)
-    figure = _figure(cert, cert.bounds, out, _joint_unit(robot))
+    figure = _figure(cert, robot, cert.bounds, out, _joint_unit(robot))
     files = []
     if figure is not None:
         fn, *args, kwargs = figure[1]
@@ -303,7 +303,7 @@ def _bound_text(value, search, unit: str, scale: float, fmt: str) -> str:
     return f"{format(scale * value, fmt)} {unit}"
 
 
-def _figure(cert, bounds, out: Path, joint_unit: str):
+def _figure(cert, robot, bounds, out: Path, joint_unit: str):
     """``(png path, (function, *args, kwargs))`` of the certificate's figure; None without a certifying run.
 
     The call is a module-level function with picklable arguments, so the worker process can draw it.
@@ -325,7 +325,7 @@ def _figure(cert, bounds, out: Path, joint_unit: str):
     if cert.window is not None:
         # the certified run as the online monitor reports it: after its window's decision, the decided mode's
         # boxes (the forward pass alone keeps both modes to the end); from the forward run's box at sample 0
-        model = interval_model(get_entry(name).robot)
+        model = interval_model(robot)
         forward = online_boxes(model, p.q, e.settings, (e.x_lo[0], e.x_hi[0]),
                                xi_box=None if cert.execution is None else cert.execution.xi_box)
     text = (f"{'given' if given else bounds.method} plan, eps_q = {cert.bounds.eps_q:.3g} {joint_unit}, a_max = "
