@@ -23,10 +23,14 @@ reading differences) was removed in turn, in each backend, and made these
 tests fail.  The strict sign test of the mode (``det > 0``, not ``>= 0``)
 is guarded on a toy robot whose determinant enclosure touches 0 exactly:
 directly (:func:`test_mode_of_needs_a_strict_sign`) and through the tracker
-(:func:`test_tracker_certifies_no_mode_on_the_singular_locus`).
+(:func:`test_tracker_certifies_no_mode_on_the_singular_locus`).  The ``joint-fd`` model's truncation
+term ``(t_s/2)|qdd|`` is spent in full by exact joint motions at the ``|qdd|`` bound on a toy robot whose
+pose is its joints (:func:`test_joint_fd_truncation_is_spent_in_full`; fails with the term halved).
 """
 
 from __future__ import annotations
+
+from fractions import Fraction
 
 import casadi as ca
 import numpy as np
@@ -226,3 +230,60 @@ def test_tracker_certifies_no_mode_on_the_singular_locus(backend):
     assert np.all(rec["xd_lo"][0] <= 0.0) and np.all(rec["xd_hi"][0] >= 0.0)
     assert np.all(rec["x_lo"][0, :, 1] == 0.0)  # the enclosure touches the locus, exactly
     np.testing.assert_array_equal(rec["mode"][0], 0)
+
+
+class _Joints:
+    """A robot-like object whose pose is its joints: ``f = (xi x0 - q0, x1 - q1)``, ``xi = 1``.
+
+    ``J_x = diag(xi, 1)``, ``J_q = -I``: the velocity is the joint rate and ``xdd = qdd``, so the
+    velocity box the tracker reports is its joint-rate box intersected with the prediction."""
+
+    n = 2
+    xi_nominal = (1.0,)
+    xi_lo = (1.0,)
+    xi_hi = (1.0,)
+    name = "joints"
+    mode_sign = 1.0
+
+    @staticmethod
+    def loop_closure(x, q, xi):
+        return ca.vertcat(xi[0] * x[0] - q[0], x[1] - q[1])
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_joint_fd_truncation_is_spent_in_full(backend):
+    """``joint-fd`` with a given ``|qdd|`` bound ``g``: its rate box is the finite difference of the last two
+    readings, ``+- 2 eps_q / t_s``, ``+ (t_s / 2) [-g, g]`` (A8).
+
+    The true joints accelerate at exactly ``+g`` and ``-g`` at every instant, and the readings err by
+    ``eps_q`` (less 1e-12 of it) with signs alternating from sample to sample, so that at every even
+    sample the reading errors and the truncation ``q_{k-1} = q_k - t_s qd_k + (t_s^2 / 2) qdd`` push
+    the finite difference the same way: the true rate is within rounding of an end of the rate box.
+    Checked in exact rational arithmetic: the true rate (= velocity) inside every velocity box.  With
+    ``(t_s / 2)|qdd|`` halved, the truth leaves the box by ``t_s g / 4`` = 0.25 rad/s.
+    """
+    ts, eps, g = 1e-3, 1e-4, 1000.0  # s, rad, rad/s^2
+    K = 30
+    settings = TrackerSettings(t_s=ts, eps_q=eps, a_max=(2 * g, 2 * g), xd0=(1.0, 1.0), xi_splits=None,
+                               velocity_model="joint-fd", qdd_bound=g)
+    T, G, E = Fraction(ts), Fraction(g), Fraction(eps) * (1 - Fraction(1, 10**12))
+    rng = np.random.default_rng(4301)
+    c0 = [Fraction(float(v)) for v in rng.uniform(-0.3, 0.3, 2)]  # rad
+    v0 = [Fraction(float(v)) for v in rng.uniform(-0.9, 0.9, 2)]  # rad/s, inside xd0
+    acc, push = (G, -G), (1, -1)  # joint 1 mirrors joint 0: both ends of the rate box are spent
+    q_true = [[c0[i] + v0[i] * k * T + acc[i] * (k * T) ** 2 / 2 for i in range(2)] for k in range(K)]
+    rate = [[v0[i] + acc[i] * k * T for i in range(2)] for k in range(K)]
+    q = np.array([[float(q_true[k][i] + push[i] * (-1) ** (k + 1) * E) for i in range(2)] for k in range(K)])
+    assert all(abs(Fraction(q[k, i]) - q_true[k][i]) <= Fraction(eps) for k in range(K) for i in range(2))  # A3
+    x0 = (q[0] - 0.01, q[0] + 0.01)  # holds the truth x(0) = q(0)
+    res, rec = _run(q[None], (x0[0][None], x0[1][None]), settings, backend, model=IntervalModel(_Joints()))
+    assert res.inconsistent_at_step[0] < 0
+    worst = []
+    for k in range(1, K):
+        for i in range(2):
+            lo, hi = Fraction(rec["xd_lo"][0, k, i]), Fraction(rec["xd_hi"][0, k, i])
+            assert lo <= rate[k][i] <= hi, (backend, k, i, float(lo), float(rate[k][i]), float(hi))
+            if k % 2 == 0:
+                worst.append(float(min(rate[k][i] - lo, hi - rate[k][i])))
+    # not vacuous: at the even samples the truth is at an end of the box (rounding and the 1e-12 apart)
+    assert max(worst) < 1e-9, max(worst)

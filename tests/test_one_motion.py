@@ -1,7 +1,9 @@
 """One motion, one geometry (verifier.one_motion): every inequality holds for the truth, only proved rows go.
 
 * the Farkas check accepts a true certificate and refuses a feasible system, including a certificate that
-  holds only in round-to-nearest arithmetic (tests/problems.py, ``FARKAS``);
+  holds only in round-to-nearest arithmetic (tests/problems.py, ``FARKAS``), and refuses systems tight at a
+  corner of their box with exact zeros, where only the strict ``>`` of the check stands between a feasible
+  system and a proof;
 * the loop-closure rows hold, in exact rational arithmetic, for true solutions at the corners of their boxes
   (the second-order remainder is what keeps them);
 * the acceleration rows hold exactly for motions at exactly ``±a`` (constant, and switching between samples)
@@ -81,6 +83,50 @@ def test_a_certificate_that_holds_only_in_floats_is_refused(compiled):
     assert exact <= 0  # z = lo satisfies every row exactly
     system, _ = _system("float_only")
     assert not OM.prove_infeasible(system, y, compiled=compiled)
+
+
+def _tight_at_a_corner(rng):
+    """A feasible ``A z <= 0`` over a box with a corner at ``z = 0``, tight there for every ``y >= 0``.
+
+    Column ``j``'s box is ``[0, h_j]`` with ``A_ij >= 0`` or ``[-h_j, 0]`` with ``A_ij <= 0`` (some entries
+    and some ``h_j`` exactly 0; magnitudes from 1e-150 to 1e150), ``b = 0``: ``z = 0`` satisfies every row
+    with equality, and for ``y >= 0`` each ``(yᵀA)_j z_j`` is smallest, exactly 0, at ``z_j = 0``, so the
+    Farkas bound ``min over the box of yᵀA z − yᵀb`` is exactly 0: a proof needs it strictly positive."""
+    M, N = int(rng.integers(1, 8)), int(rng.integers(1, 7))
+    side = rng.choice([-1.0, 1.0], N)
+    h = 10.0 ** rng.uniform(-150, 150, N) * (rng.random(N) > 0.1)
+    A = side * 10.0 ** rng.uniform(-150, 150, (M, N)) * (rng.random((M, N)) > 0.2)
+    rows, cols = np.nonzero(np.ones((M, N), dtype=bool))
+    lo, hi = np.where(side > 0, 0.0, -h), np.where(side > 0, h, 0.0)
+    return OM.LinearSystem(rows, cols, A[rows, cols], np.zeros(M), lo, hi)
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_system_tight_at_a_corner_with_exact_zeros_is_never_proved(compiled):
+    """Seeded systems feasible only with equality at a corner of their box, where the products and sums
+    of the check are exact zeros (:func:`_tight_at_a_corner`): no multipliers may prove them infeasible,
+    neither random ones (every scale, some 0, some negative or non-finite) nor the solver's.  The dual
+    bound is exactly ``left = yb = 0`` for most of them (checked: the test is not vacuous), so it fails
+    when the strict ``left > yb`` of :func:`prove_infeasible` is made ``>=``."""
+    rng = np.random.default_rng(4303)
+    tight = tried = 0
+    for _ in range(60):
+        system = _tight_at_a_corner(rng)
+        M = system.shape[0]
+        assert not _violations(system, [Fraction(0)] * system.shape[1])  # z = 0 is a solution
+        ys = [np.ones(M), 10.0 ** rng.uniform(-300, 300, M), rng.uniform(0, 1, M) * (rng.random(M) > 0.5),
+              np.where(rng.random(M) > 0.7, -1.0, rng.uniform(0, 5, M)),
+              np.where(rng.random(M) > 0.7, np.inf, rng.uniform(0, 5, M))]
+        found = OM._phase_one(system)
+        if found is not None:
+            ys.append(found)
+        for y in ys:
+            assert not OM.prove_infeasible(system, y, compiled=compiled), (system, y)
+            if np.any(np.isfinite(y) & (y > 0)):
+                left, yb = OM._dual_bound(system, y, compiled=compiled)
+                tight += bool(left == 0.0 and yb == 0.0)
+                tried += 1
+    assert tight > 0.5 * tried, (tight, tried)
 
 
 def _corner_boxes(rng, x, q, xi_lo, xi_hi, eps):
