@@ -235,3 +235,29 @@ def test_reseeded_tracker_finds_the_pose_in_a_tube_of_both_modes(settings):
     assert np.all(box[0] <= run.x_true[j]) and np.all(run.x_true[j] <= box[1])
     assert np.all(box[1] - box[0] < 5e-3), box
     mon.close()
+
+
+def test_there_and_back_through_the_cli(tmp_path, capsys, monkeypatch):
+    """``check`` gives a there-and-back run the right final verdict with both changes decided by anchored
+    windows; ``monitor`` on stdin (read faster than the window works: which changes it sees depends on when
+    its attempts run) reports true modes only and, after its last attempt, the right verdict."""
+    import io
+    import json
+    import sys
+
+    from crosscert.planner.cli import main
+    from crosscert.verifier.trajfile import write_trajectory
+
+    run = _simulated(1.1, 3, back=True)
+    path = tmp_path / "there_and_back.csv"
+    write_trajectory(path, np.arange(len(run.q_meas)) * 1e-3, run.q_meas)
+    assert main(["check", str(path), "--initial-mode", "1", "--json", "--no-progress"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["verdict"] == "mode-unchanged" and out["window_decisions"] >= 2 and out["window"] is None
+    lo, hi = np.array(out["final_pose_lo"]), np.array(out["final_pose_hi"])
+    assert np.all(lo <= run.x_true[-1]) and np.all(run.x_true[-1] <= hi)
+    monkeypatch.setattr(sys, "stdin", io.StringIO(path.read_text()))
+    assert main(["monitor", "--initial-mode", "1", "--json"]) == 0
+    *events, summary = [json.loads(v) for v in capsys.readouterr().out.splitlines()]
+    assert all(e["mode"] in (0, run.mode_true[e["k"]]) for e in events), events
+    assert summary["verdict"] == "mode-unchanged"
