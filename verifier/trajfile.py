@@ -15,7 +15,10 @@ Any other column, a missing column, a non-numeric, NaN or infinite value is
 an error (:class:`~robots.errors.TrajectoryFileError`).
 :func:`read_trajectory` reads a whole file (the period is the mean step);
 :class:`TrajectoryReader` reads a stream line by line (``crosscert monitor``;
-the period is given or fixed by the first step).
+the period is given or fixed by the first step).  Its time checks (increasing
+stamps, a constant step, the joint range) live in :class:`SampleReader`, the
+one validator every recording format passes through (the ROS 2 bags and
+``.npz`` files of :mod:`verifier.recordings` too).
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from crosscert.robots.errors import TrajectoryFileError
 from .files import atomic_write
 from .trajectory import Trajectory
 
-__all__ = ["Trajectory", "TrajectoryReader", "open_trajectory", "read_trajectory", "write_trajectory",
+__all__ = ["Trajectory", "SampleReader", "TrajectoryReader", "open_trajectory", "checked_path", "read_trajectory", "write_trajectory",
            "step_tolerance", "parse_number", "TIME_STEP_RTOL", "STAMP_ULPS"]
 
 #: Relative tolerance on the sampling step (time stamps written in decimal).
@@ -88,6 +91,22 @@ def step_tolerance(t_prev: float, t: float, t_s: float) -> float:
     return TIME_STEP_RTOL * t_s + STAMP_ULPS * float(np.spacing(max(abs(t_prev), abs(t))))
 
 
+def checked_path(path, *, folder: bool = False) -> Path:
+    """``path`` as a Path when it names a recording that exists (a folder only when ``folder``).
+
+    Raises
+    ------
+    TrajectoryFileError
+        For a missing path, or a directory where a file is expected.
+    """
+    p = Path(path)
+    if p.is_dir() and not folder:
+        raise TrajectoryFileError(f"{p}: is a directory, not a recording")
+    if not p.exists():
+        raise TrajectoryFileError(f"{p}: no such file")
+    return p
+
+
 @contextlib.contextmanager
 def open_trajectory(path):
     """The text stream of a recording: a file, a named pipe, or stdin for ``-``.
@@ -102,11 +121,7 @@ def open_trajectory(path):
     if str(path) == "-":
         yield sys.stdin, "<stdin>"
         return
-    p = Path(path)
-    if p.is_dir():
-        raise TrajectoryFileError(f"{p}: is a directory, not a recording")
-    if not p.exists():
-        raise TrajectoryFileError(f"{p}: no such file")
+    p = checked_path(path)
     try:
         fh = p.open(newline="", encoding="utf-8-sig")
     except OSError as exc:
@@ -115,18 +130,19 @@ def open_trajectory(path):
         yield fh, str(p)
 
 
-class TrajectoryReader:
-    """Read a trajectory CSV one sample at a time, validating each line as it comes.
+class SampleReader:
+    """The checks every recording's samples pass, whatever its format: the one validator of their times.
 
-    The header is read at the first iteration; then each non-blank line is
-    parsed and checked (cell count, numbers, finite values, increasing time,
-    and with ``even`` the step) when it is read, so a stream (a pipe, stdin)
-    is processed sample by sample.
+    A format yields ``(position, t, q, values)`` from :meth:`_records` (its
+    position: a CSV's line, a bag's message, an array's index; ``t`` in s;
+    ``q`` (n,) in the joints' units; ``values`` what the format wants back);
+    :meth:`samples` yields them as ``(position, t, q)`` once checked: finite,
+    strictly increasing times, and with ``even`` every step against ``t_s``
+    (within :func:`step_tolerance`) as it is read, so that a stream is
+    processed sample by sample.
 
     Parameters
     ----------
-    stream : text stream
-        Open for reading, ideally with ``newline=""``.
     n : int
         Number of joints of the robot.
     name : str
@@ -139,20 +155,158 @@ class TrajectoryReader:
         Check every step against ``t_s`` (within :func:`step_tolerance`) as it
         is read; :func:`read_trajectory` checks against the mean step instead.
     nominal_t_s : float, optional
-        The robot's sampling period, s: a file whose period differs gets a warning.
+        The robot's sampling period, s: a recording whose period differs gets a warning.
     q_range : (lo, hi) arrays (n,), optional
         The robot's joint range, rad: the first sample outside it gets a warning.
 
     Attributes
     ----------
-    header : list of str
-        Column names, once read.
     t_s : float or None
         Sampling period, once known.
     line : int
-        Number of the last line read (non-blank rows, the header being line 1).
+        Position of the last sample read (for a CSV, its line: non-blank rows, the header being line 1).
     warnings : list of str
         What was odd but not wrong (period off the robot's, joints out of range).
+
+    Raises
+    ------
+    TrajectoryFileError
+        While iterating, with a message naming the source, the position and what is wrong.
+    """
+
+    #: What a position is called in messages.
+    where = "line"
+    #: The advice for imprecise stamps of a fixed period: how to write them again, readings unchanged.
+    restamp = "re-stamp the time column at it (t_k = t_0 + k t_s, readings unchanged)"
+
+    def __init__(self, n: int, name, *, t_s: float | None = None, even: bool = True,
+                 nominal_t_s: float | None = None, q_range=None):
+        self.name, self.n, self.t_s, self.even = str(name), n, t_s, even
+        self.nominal_t_s, self.q_range = nominal_t_s, q_range
+        self.line = 0
+        self.warnings: list[str] = []
+        self._out_of_range = False
+
+    def _records(self):
+        """Yield ``(position, t, q, values)``, one per sample, in the order read (the format's part)."""
+        raise NotImplementedError
+
+    def _order_hint(self) -> str:
+        """What to add when the times do not increase (a format's likely cause)."""
+        return ""
+
+    def _error(self, message):
+        return TrajectoryFileError(f"{self.name}, {self.where} {self.line}: {message}")
+
+    def _check_range(self, q) -> None:
+        if self.q_range is None or self._out_of_range:
+            return
+        lo, hi = self.q_range
+        bad = np.flatnonzero((q < lo) | (q > hi))
+        if bad.size:
+            self._out_of_range = True
+            j = int(bad[0])
+            self.warnings.append(f"{self.name}, {self.where} {self.line}: q{j + 1} = {q[j]:.6g} rad is outside the "
+                                 f"robot's joint range [{lo[j]:.6g}, {hi[j]:.6g}] rad (first such sample; are the "
+                                 "units rad?)")
+
+    def _first_step(self, t_prev: float, t: float, line: int) -> None:
+        """Fix ``t_s`` from the first step: the nominal period when it matches, with a warning when not."""
+        step, nominal = float(t - t_prev), self.nominal_t_s
+        if nominal is not None and abs(step - nominal) <= step_tolerance(t_prev, t, nominal):
+            self.t_s = float(nominal)  # the controller's period, not a stamp difference rounded at 1.7e9 s
+            return
+        if nominal is not None and abs(step - nominal) <= JITTER_RTOL * nominal:
+            self.t_s = float(nominal)  # imprecise stamps of the nominal period: check_step says how to re-stamp
+            return
+        self.t_s = step
+        if nominal is not None:
+            self.warnings.append(f"{self.name}, {self.where} {line}: sampling period {step:.9g} s differs from the "
+                                 f"robot's nominal {nominal:.9g} s (the first step of the time column)"
+                                 + _unit_hint(step, nominal)
+                                 + f"; if {step:.9g} s is right, pass --t-s {step:.9g} to state it")
+
+    def _stated_step(self, t_prev: float, t: float, line: int) -> None:
+        """The first step against the period the caller stated (``--t-s``): a file sampled at another period is
+        said to be so, not reported as uneven."""
+        step = float(t - t_prev)
+        if abs(step - self.t_s) > step_tolerance(t_prev, t, self.t_s) and abs(step - self.t_s) > JITTER_RTOL * self.t_s:
+            raise self._error(f"the file's step is {step:.9g} s, --t-s says {self.t_s:.9g} s"
+                              + _unit_hint(step, self.t_s)
+                              + ": drop --t-s to read the period from the file, or correct it")
+
+    def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
+        """Raise unless the step ``t - t_prev`` ending at position ``line`` is within :func:`step_tolerance` of ``t_s``.
+
+        The advice never is to resample: interpolated readings are no longer
+        within ``eps_q`` of the true joints.  Stamps that are merely imprecise
+        (float32, clock jitter) are re-stamped at the nominal period instead
+        (:attr:`restamp`): jittered stamps are not supported yet.
+        """
+        step = t - t_prev
+        if abs(step - t_s) > step_tolerance(t_prev, t, t_s):
+            unit = _unit_hint(step, t_s)
+            if unit:
+                advice = f"{unit}; the time column is read in s"
+            elif abs(step - t_s) <= JITTER_RTOL * t_s:
+                advice = (f"; the steps differ by {abs(step - t_s):.3g} s only (float32 stamps or clock jitter?), "
+                          "and jittered stamps are not supported yet: if the samples were taken at a fixed period, "
+                          f"{self.restamp}; never resample the readings")
+            else:
+                advice = ("; the tracker assumes one constant sampling period (a dropped sample makes a step of two periods): "
+                          "split the recording where the period changes (do not resample: interpolated readings "
+                          "break the eps_q bound)")
+            raise TrajectoryFileError(
+                f"{self.name}, {self.where} {line}: uneven sampling (step {step:.9g} s, {what} {t_s:.9g} s){advice}")
+
+    def _validated(self):
+        """The records of :meth:`_records`, each checked as it is read."""
+        t_prev = None
+        first = True  # the first step: checked against a stated period with its own message
+        for line, t, q, values in self._records():
+            self.line = line
+            self._check_range(q)
+            if t_prev is not None:
+                if not t > t_prev:
+                    raise self._error(f"time {t} does not increase (previous {t_prev}); "
+                                      "the tracker needs strictly increasing times" + self._order_hint())
+                if self.even:
+                    if self.t_s is None:
+                        self._first_step(t_prev, t, line)
+                    elif first:
+                        self._stated_step(t_prev, t, line)
+                    self.check_step(t_prev, t, self.t_s, line)
+                first = False
+            yield line, t, q, values
+            t_prev = t
+
+    def samples(self):
+        """Yield ``(position, t, q)``: where the sample was read, its time (s) and readings ``(n,)``, checked."""
+        for line, t, q, _ in self._validated():
+            yield line, t, q
+
+
+class TrajectoryReader(SampleReader):
+    """Read a trajectory CSV one sample at a time, validating each line as it comes.
+
+    The header is read at the first iteration; then each non-blank line is
+    parsed and checked (cell count, numbers, finite values) and its time
+    checked by :class:`SampleReader` when it is read, so a stream (a pipe,
+    stdin) is processed sample by sample.
+
+    Parameters
+    ----------
+    stream : text stream
+        Open for reading, ideally with ``newline=""``.
+    n, name, t_s, even, nominal_t_s, q_range
+        As for :class:`SampleReader`.
+
+    Attributes
+    ----------
+    header : list of str
+        Column names, once read.
+    t_s, line, warnings
+        As for :class:`SampleReader`.
 
     Raises
     ------
@@ -162,12 +316,8 @@ class TrajectoryReader:
 
     def __init__(self, stream, n: int, name, *, t_s: float | None = None, even: bool = True,
                  nominal_t_s: float | None = None, q_range=None):
-        self.name, self.n, self.t_s, self.even = str(name), n, t_s, even
-        self.nominal_t_s, self.q_range = nominal_t_s, q_range
+        super().__init__(n, name, t_s=t_s, even=even, nominal_t_s=nominal_t_s, q_range=q_range)
         self.header = None
-        self.line = 0
-        self.warnings: list[str] = []
-        self._out_of_range = False
         self._rows = csv.reader(stream)
         self._cols = {"q": [f"q{i + 1}" for i in range(n)], "qd": [f"qd{i + 1}" for i in range(n)],
                       "x": [f"x{i + 1}" for i in range(n)]}
@@ -185,9 +335,6 @@ class TrajectoryReader:
         except (OSError, csv.Error) as exc:
             raise TrajectoryFileError(f"{self.name}: cannot read as CSV ({exc})") from None
         return None
-
-    def _error(self, message):
-        return TrajectoryFileError(f"{self.name}, line {self.line}: {message}")
 
     def _read_header(self):
         row = self._next_row()
@@ -257,88 +404,19 @@ class TrajectoryReader:
                 raise self._error(f"column {header[j]} is {values[j]} (NaN and infinities are not allowed)")
         return values
 
-    def _check_range(self, values) -> None:
-        if self.q_range is None or self._out_of_range:
-            return
-        q = self.columns(values)[1]
-        lo, hi = self.q_range
-        bad = np.flatnonzero((q < lo) | (q > hi))
-        if bad.size:
-            self._out_of_range = True
-            j = int(bad[0])
-            self.warnings.append(f"{self.name}, line {self.line}: q{j + 1} = {q[j]:.6g} rad is outside the robot's "
-                                 f"joint range [{lo[j]:.6g}, {hi[j]:.6g}] rad (first such sample; are the units rad?)")
-
-    def _first_step(self, t_prev: float, t: float, line: int) -> None:
-        """Fix ``t_s`` from the first step: the nominal period when it matches, with a warning when not."""
-        step, nominal = float(t - t_prev), self.nominal_t_s
-        if nominal is not None and abs(step - nominal) <= step_tolerance(t_prev, t, nominal):
-            self.t_s = float(nominal)  # the controller's period, not a stamp difference rounded at 1.7e9 s
-            return
-        if nominal is not None and abs(step - nominal) <= JITTER_RTOL * nominal:
-            self.t_s = float(nominal)  # imprecise stamps of the nominal period: check_step says how to re-stamp
-            return
-        self.t_s = step
-        if nominal is not None:
-            self.warnings.append(f"{self.name}, line {line}: sampling period {step:.9g} s differs from the robot's "
-                                 f"nominal {nominal:.9g} s (the first step of the time column)" + _unit_hint(step, nominal)
-                                 + f"; if {step:.9g} s is right, pass --t-s {step:.9g} to state it")
-
-    def _stated_step(self, t_prev: float, t: float, line: int) -> None:
-        """The first step against the period the caller stated (``--t-s``): a file sampled at another period is
-        said to be so, not reported as uneven."""
-        step = float(t - t_prev)
-        if abs(step - self.t_s) > step_tolerance(t_prev, t, self.t_s) and abs(step - self.t_s) > JITTER_RTOL * self.t_s:
-            raise self._error(f"the file's step is {step:.9g} s, --t-s says {self.t_s:.9g} s"
-                              + _unit_hint(step, self.t_s)
-                              + ": drop --t-s to read the period from the file, or correct it")
-
-    def check_step(self, t_prev: float, t: float, t_s: float, line: int, what: str = "sampling period") -> None:
-        """Raise unless the step ``t - t_prev`` ending on ``line`` is within :func:`step_tolerance` of ``t_s``.
-
-        The advice never is to resample: interpolated readings are no longer
-        within ``eps_q`` of the true joints.  Stamps that are merely imprecise
-        (float32, clock jitter) are re-stamped at the nominal period instead.
-        """
-        step = t - t_prev
-        if abs(step - t_s) > step_tolerance(t_prev, t, t_s):
-            unit = _unit_hint(step, t_s)
-            if unit:
-                advice = f"{unit}; the time column is read in s"
-            elif abs(step - t_s) <= JITTER_RTOL * t_s:
-                advice = (f"; the steps differ by {abs(step - t_s):.3g} s only (float32 stamps or clock jitter?): if "
-                          "the samples were taken at a fixed period, re-stamp the time column at it "
-                          "(t_k = t_0 + k t_s, readings unchanged); never resample the readings")
-            else:
-                advice = ("; the tracker assumes one constant sampling period: split the file where the period "
-                          "changes (do not resample: interpolated readings break the eps_q bound)")
-            raise TrajectoryFileError(
-                f"{self.name}, line {line}: uneven sampling (step {step:.9g} s, {what} {t_s:.9g} s){advice}")
-
-    def __iter__(self):
-        """Yield ``(line, values)``: the line number and its values in header order (array)."""
+    def _records(self):
         if self.header is None:
             self._read_header()
         it = self.header.index("t")
-        t_prev = None
-        first = True  # the first step: checked against a stated period with its own message
+        iq = [self.header.index(c) for c in self._cols["q"]]
         while (row := self._next_row()) is not None:
             values = self._parse(row)
-            self._check_range(values)
-            t = values[it]
-            if t_prev is not None:
-                if not t > t_prev:
-                    raise self._error(f"time {t} does not increase (previous {t_prev}); "
-                                      "the tracker needs strictly increasing times")
-                if self.even:
-                    if self.t_s is None:
-                        self._first_step(t_prev, t, self.line)
-                    elif first:
-                        self._stated_step(t_prev, t, self.line)
-                    self.check_step(t_prev, t, self.t_s, self.line)
-                first = False
-            yield self.line, values
-            t_prev = t
+            yield self.line, values[it], values[iq], values
+
+    def __iter__(self):
+        """Yield ``(line, values)``: the line number and its values in header order (array)."""
+        for line, _, _, values in self._validated():
+            yield line, values
 
     def columns(self, values):
         """Split values in header order, one row ``(C,)`` or rows ``(K, C)``, into ``t, q, qd, x`` (``None`` when absent)."""

@@ -27,6 +27,7 @@ import numpy as np
 from crosscert.robots.errors import InputError
 from crosscert.robots.registry import get_entry, robot_key
 from crosscert.verifier.files import check_output_path
+from crosscert.verifier.recordings import RecordingFormat, recording_format, require_rosbags
 
 from crosscert.robots.assumptions import check_bound
 
@@ -191,6 +192,30 @@ def _tracker(a, robot) -> None:
                                  "write the box as XLO,XHI,YLO,YHI,... (each lower bound first)")
 
 
+def joint_names(text: str, n: int) -> tuple[str, ...]:
+    """``--joints NAME,NAME``: ``n`` distinct names (blanks around each ignored)."""
+    names = tuple(v.strip() for v in text.split(","))
+    if len(names) != n or not all(names):
+        raise InputError(f"--joints {text!r}: give the {n} names of q1..q{n}, comma-separated, in order")
+    if len(set(names)) != n:
+        raise InputError(f"--joints {text!r}: a joint named twice")
+    return names
+
+
+def _recording(a, robot) -> None:
+    """The bag options with a bag only; a bag needs the bags extra: said before any work."""
+    fmt = recording_format(a.trajectory)
+    given = [f"--{name}" for name in ("topic", "joints", "stamp") if getattr(a, name) is not None]
+    if fmt is not RecordingFormat.BAG:
+        if given:
+            raise InputError(f"{', '.join(given)} read ROS 2 bags (.mcap, .db3 or a bag's folder); "
+                             f"{a.trajectory} is read as {fmt.value}")
+        return
+    require_rosbags(a.trajectory)
+    if a.joints is not None:
+        joint_names(a.joints, robot.n)
+
+
 def check_command(a, entry) -> None:
     """Check the options of command ``a.command`` for the registry ``entry``; InputError on the first bad one."""
     robot = entry.robot
@@ -207,6 +232,7 @@ def check_command(a, entry) -> None:
         return
     if cmd in ("check", "monitor"):
         _tracker(a, robot)
+        _recording(a, robot)
         _in("--horizon", a.horizon, 2, MAX_HORIZON, lo_open=False, unit=" samples")
         if cmd == "check" and a.plot is not None:
             _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))

@@ -13,6 +13,7 @@ from crosscert.verifier.step import Backend
 from crosscert.verifier.settings import VelocityModel
 from crosscert.verifier.trajfile import parse_number
 from crosscert.verifier.one_motion import ONE_MOTION_SAMPLES
+from crosscert.verifier.recordings import DEFAULT_TOPIC, Stamp
 from crosscert.verifier.window import ONLINE_HORIZON, Reasoning
 
 from ..execution import ExecutionKind
@@ -152,6 +153,14 @@ def _tracker_options(p, robot):
                         "around the plan, its verdict holds for this execution from the sample its run decided")
     p.add_argument("--certified-plan", metavar="FILE",
                    help="with --certificate: the certified plan file (default: the one it names, beside it)")
+    b = p.add_argument_group("ROS 2 bags (.mcap, .db3, or a bag's folder; pip install 'crosscert[bags]')")
+    b.add_argument("--topic", help=f"topic of the sensor_msgs/msg/JointState messages (default: {DEFAULT_TOPIC})")
+    b.add_argument("--joints", metavar="NAME,NAME",
+                   help="the messages' names of the joints q1..qn, in order (required for a bag: the robots declare "
+                        "no joint names; the error lists the names the messages carry)")
+    b.add_argument("--stamp", choices=[s.value for s in Stamp],
+                   help="a sample's time: the message's header stamp (the publisher's) or the bag's log time (when the "
+                        f"recorder received it) (default: {Stamp.HEADER.value})")
 
 
 def _task_options(p):
@@ -175,7 +184,8 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
         return sub.add_parser(name, help=help_, description=help_, formatter_class=_Formatter)
 
     c = command("check", "certify the assembly mode of a recorded joint trajectory")
-    c.add_argument("trajectory", help="CSV file: t,q1..qn[,qd1..qdn] (s, rad, rad/s)")
+    c.add_argument("trajectory", help="CSV file t,q1..qn[,qd1..qdn] (s, rad, rad/s), a ROS 2 bag (.mcap, .db3, a "
+                                      "bag's folder) or an .npz of arrays t (K,) and q (K, n)")
     _tracker_options(c, robot)
     c.add_argument("--reasoning", choices=[r.value for r in Reasoning], default=Reasoning.WINDOW.value,
                    help="'window': when the forward tracker leaves the verdict open, contract the whole recording "
@@ -186,7 +196,8 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
 
     mo = command("monitor", "certify the assembly mode online, from samples read one line at a time")
     mo.add_argument("trajectory", nargs="?", default="-",
-                    help="CSV stream t,q1..qn[,qd1..qdn]: '-' for stdin, a named pipe or a file")
+                    help="CSV stream t,q1..qn[,qd1..qdn]: '-' for stdin, a named pipe or a file; or a ROS 2 bag "
+                         "(.mcap, .db3, a bag's folder) or an .npz, read message by message")
     _tracker_options(mo, robot)
     mo.add_argument("--json", action="store_true", help="one JSON object per event, then one summary object")
     mo.add_argument("--reasoning", choices=[r.value for r in Reasoning], default=Reasoning.WINDOW.value,

@@ -16,12 +16,13 @@ from crosscert.verifier.step import Backend
 from crosscert.verifier.tracker import Tracker
 from crosscert.verifier.settings import Verdict
 from crosscert.verifier.tracker import initial_box_from_mode
-from crosscert.verifier.trajfile import TrajectoryReader, open_trajectory
+from crosscert.verifier.recordings import open_recording
 from crosscert.verifier.window import HypothesisStatus, OnlineMonitor, Reasoning, VerdictReason, track_window
 
 from ..certify.envelope import CertifiedEnvelope, EnvelopeMonitor, EnvelopeState
 from ..progress import Phase, enter
 from ..refute import RefutingExplainer
+from .checks import joint_names
 from .setup import compile_ahead, phase_bar, tracker_setup
 
 __all__ = ["check", "monitor", "Monitor"]
@@ -57,16 +58,22 @@ def _print_warnings(reader) -> None:
     reader._printed = len(reader.warnings)
 
 
+def _recording(a, robot):
+    """The recording ``a.trajectory`` names, opened (a CSV, a ROS 2 bag or an ``.npz``): one reader whose
+    ``samples()`` are ``(position, t, q)``, every format's times checked alike."""
+    return open_recording(a.trajectory, robot.n, topic=a.topic, stamp=a.stamp,
+                          joints=None if a.joints is None else joint_names(a.joints, robot.n),
+                          t_s=a.t_s, nominal_t_s=robot.t_s, q_range=(robot.q_lo_array, robot.q_hi_array))
+
+
 def _tracked(a, robot, model, run, bar):
     """The recording through ``run`` (the forward pass), then the window passes when they may decide:
     ``(summary, file name)``; ``bar`` (a :class:`PhaseBar` or None) is told each phase."""
     readings = [] if a.reasoning == Reasoning.WINDOW.value else None
     enter(bar, Phase.FORWARD, unit="sample")
-    with open_trajectory(a.trajectory) as (src, name):
-        reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
-                                  q_range=(robot.q_lo_array, robot.q_hi_array))
-        for line, values in reader:
-            t, q = reader.columns(values)[:2]
+    with _recording(a, robot) as reader:
+        name = reader.name
+        for line, t, q in reader.samples():
             _print_warnings(reader)
             run.feed(line, t, q, reader.t_s)
             if readings is not None:
@@ -485,12 +492,9 @@ def monitor(a) -> int:
     if a.backend == Backend.COMPILED.value:
         load_kernels(robot, model, settings, a.spread_hypotheses)
     mon = Monitor(a, model, make_settings, x0, envelope=_envelope(a, robot))
-    with open_trajectory(a.trajectory) as (src, name):
-        reader = TrajectoryReader(src, robot.n, name, t_s=a.t_s, nominal_t_s=robot.t_s,
-                                  q_range=(robot.q_lo_array, robot.q_hi_array))
+    with _recording(a, robot) as reader:
         try:
-            for line, values in reader:
-                t, q = reader.columns(values)[:2]
+            for line, t, q in reader.samples():
                 _print_warnings(reader)
                 mon.feed(line, t, q, reader.t_s)
             if mon.samples < 2:
