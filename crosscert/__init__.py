@@ -42,6 +42,7 @@ _API = {
     "OnlineMonitor": "verifier.window.online",
     "Trajectory": "verifier.trajectory",
     "read_trajectory": "verifier.trajfile",
+    "open_recording": "verifier.recordings",
     # robots and errors
     "validate": "verifier.validation",
     "get_robot": "robots.registry",

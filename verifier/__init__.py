@@ -11,7 +11,8 @@ What a user calls, by task (explicit re-exports, no star imports):
   sample whose mode it knew), :class:`Reasoning`;
 * **the interval model** of a robot — :class:`IntervalModel`;
 * **recordings** — :class:`Trajectory`, :func:`read_trajectory`,
-  :func:`write_trajectory`;
+  :func:`write_trajectory`, and :func:`open_recording` (a CSV, a ROS 2 bag
+  or an ``.npz``, sample by sample);
 * **check a robot definition** — :func:`validate` (every check, the interval
   ones included).
 
@@ -28,6 +29,7 @@ from .settings import TrackerSettings, VelocityModel, Verdict
 from .step import Backend
 from .tracker import BatchResult, SampleStream, Tracker, TrackResult, initial_box_from_mode, track, track_batch
 from .trajectory import Trajectory
+from .recordings import open_recording
 from .trajfile import read_trajectory, write_trajectory
 from .validation import validate
 from .window import OnlineEvent, OnlineMonitor, OnlineResult, Reasoning, WindowResult, WindowState, track_window
@@ -59,6 +61,7 @@ __all__ = [
     "Trajectory",
     "read_trajectory",
     "write_trajectory",
+    "open_recording",
     # check a robot definition
     "validate",
 ]
