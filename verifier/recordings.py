@@ -209,7 +209,7 @@ class BagReader(SampleReader):
             if self.joints is None:
                 raise TrajectoryFileError(
                     f"{self.name}: the messages on {self.topic} name the joints {listed}: say which are "
-                    f"q1..q{self.n}, in order, with --joints NAME,NAME")
+                    f"q1..q{self.n}, in order, with --joints NAME,NAME (the robots declare no joint names)")
             missing = [j for j in self.joints if j not in names]
             if missing:
                 raise self._error(f"no joint named {', '.join(missing)} in the message (it names {listed}); --joints names "
