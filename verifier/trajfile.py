@@ -135,11 +135,12 @@ class SampleReader:
 
     A format yields ``(position, t, q, values)`` from :meth:`_records` (its
     position: a CSV's line, a bag's message, an array's index; ``t`` in s;
-    ``q`` (n,) in the joints' units; ``values`` what the format wants back);
-    :meth:`samples` yields them as ``(position, t, q)`` once checked: finite,
-    strictly increasing times, and with ``even`` every step against ``t_s``
-    (within :func:`step_tolerance`) as it is read, so that a stream is
-    processed sample by sample.
+    ``q`` (n,) in the joints' units, both finite: the format checks its
+    values; ``values`` what the format wants back); :meth:`samples` yields
+    them as ``(position, t, q)`` once checked: strictly increasing times,
+    with ``even`` every step against ``t_s`` (within :func:`step_tolerance`),
+    and the joint range, each as it is read, so that a stream is processed
+    sample by sample.
 
     Parameters
     ----------
