@@ -130,6 +130,7 @@ class BagReader(SampleReader):
                         "unchanged)" + (", or read the publisher's stamps with --stamp header (--stamp log reads when "
                                         "the recorder received each message)" if self.stamp is Stamp.LOG else ""))
         self._stack = None
+        self._errors = ()  # rosbags' read errors, once it is imported
         self._bag = None
         self._messages = None
         self._first = None
