@@ -122,7 +122,7 @@ def main() -> None:
     print(f"CPU: {_cpu()}; {a.geometries} geometries per speed; the monitor fed at 1 kHz", flush=True)
     warm = _crossing(kin, 1.1, 1)
     online(model, s, warm.q_meas, int(warm.mode_true[0]), paced=False)  # kernels loaded, caches warm
-    delays, lat_open, lat_all, ratios, outside = [], [], [], [], 0
+    delays, lat_open, lat_all, lat_before, ratios, outside = [], [], [], [], [], 0
     print("[1] v (m/s) | check certifies | online: tracker alone (before) | online: anchored window (after) "
           "| check certifies, online not | wrong verdicts")
     for v in speeds:
@@ -131,8 +131,10 @@ def main() -> None:
             run = _crossing(kin, v, g)
             m0 = int(run.mode_true[0])
             vc = check(model, s, run.q_meas, m0)
-            n_before += online(model, s, run.q_meas, m0, window=False)[0].verdict() is Verdict.MODE_CHANGED
+            before, _, _, lat_b, _ = online(model, s, run.q_meas, m0, window=False)
+            n_before += before.verdict() is Verdict.MODE_CHANGED
             mon, res, events, lat, open_ = online(model, s, run.q_meas, m0)
+            lat_before.append(lat_b[open_])
             vo = mon.verdict()
             n_check += vc is Verdict.MODE_CHANGED
             n_online += vo is Verdict.MODE_CHANGED
@@ -155,9 +157,11 @@ def main() -> None:
     if delays:
         print(f"[2] decision delay at 1.1 m/s: median {statistics.median(delays):.0f} ms, max {max(delays):.0f} ms "
               f"({len(delays)} runs decided online)")
-    lo, la = np.concatenate(lat_open) / 1e3, np.concatenate(lat_all) / 1e3
+    lo, la, lb = (np.concatenate(v) / 1e3 for v in (lat_open, lat_all, lat_before))
     print(f"[3] update latency while a window is open: mean {lo.mean():.1f} us, max {lo.max():.0f} us "
-          f"({lo.size} samples); whole runs: mean {la.mean():.1f} us, max {la.max():.0f} us")
+          f"({lo.size} samples); the tracker alone (before) on the same samples: mean {lb.mean():.1f} us, max "
+          f"{lb.max():.0f} us (ratio of means {lo.mean() / lb.mean():.2f}); whole runs: mean {la.mean():.1f} us, "
+          f"max {la.max():.0f} us")
     if ratios:
         print(f"[4] pose box 0.2 s after the decision / never crossed: median {statistics.median(ratios):.2f}, "
               f"worst {max(ratios):.2f}; samples with the truth outside a box: {outside}")
