@@ -31,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
+from bench_window import _cpu  # noqa: E402  (one reading of the CPU's name for the benchmarks)
 from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
 from crosscert.planner.sweep import cruise_for  # noqa: E402
 from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
@@ -42,16 +43,6 @@ from crosscert.verifier.tracker import Tracker, initial_box_from_mode  # noqa: E
 from crosscert.verifier.window import OnlineMonitor, WindowState, track_window  # noqa: E402
 
 REST_AFTER = 0.5  # s at rest after the motion
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
 
 
 def _geometry(seed: int):

@@ -58,6 +58,7 @@ from crosscert.verifier.constants import AXIS_DTYPE, BASELINE_DTYPE  # noqa: E40
 from crosscert.verifier.model import IntervalModel  # noqa: E402
 from crosscert.verifier.tape import OPCODES  # noqa: E402
 from crosscert.verifier.tracker import TrackerSettings, track  # noqa: E402
+from bench_window import _cpu as cpu_name  # noqa: E402  (one reading of the CPU's name for the benchmarks)
 
 FLAGS = dict(nogil=True, _nrt=False)  # the kernels' flags (verifier.compiled.ops.KERNEL_FLAGS): no fast-math
 INF = np.inf
@@ -68,17 +69,6 @@ ETA = 5e-324
 _INPUT, _CONST, _ADD, _SUB, _MUL, _DIV = (OPCODES[k] for k in ("OP_INPUT", "OP_CONST", "OP_ADD", "OP_SUB", "OP_MUL",
                                                                 "OP_DIV"))
 _NEG, _SQ, _SIN, _COS, _TWICE = (OPCODES[k] for k in ("OP_NEG", "OP_SQ", "OP_SIN", "OP_COS", "OP_TWICE"))
-
-
-def cpu_name() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
 
 
 # ---------------------------------------------------------------------------- real rows

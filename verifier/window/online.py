@@ -152,7 +152,7 @@ class _Lane:
         self._snap = (st.x.copy(), st.xd.copy(), st.xi.copy(), st.row_bad.copy())
         self._snap_k = -1
         self._snap_mode = 0
-        self._prev_q = None
+        self._prev_q = self._prev_x = None  # the previous reading and pose box: an anchor's first sample
         self._known = 0  # a re-seeded lane: the mode a window decided at its first sample
 
     def step(self, q):
@@ -192,6 +192,12 @@ class _Lane:
         self._prev_q, self._prev_x = q, self.tracker.state.x_hull[0].copy()
         self._known = 0
         return events
+
+    def boxes(self):
+        """Copies of the pose and velocity boxes ``((lo, hi), (lo, hi))`` at the newest sample."""
+        st = self.tracker.state
+        x, xd = st.x_hull[0], st.xd_hull[0]
+        return (x[0].copy(), x[1].copy()), (xd[0].copy(), xd[1].copy())
 
     def certified(self, k, known_at, mode, by_window):
         """The event of ``mode`` certified from sample ``k`` on."""
@@ -341,14 +347,12 @@ class OnlineMonitor:
                 else:
                     self._wake.notify()
             lane = self._lane
-            st = lane.tracker.state
-            x, xd = st.x_hull[0], st.xd_hull[0]
+            x, xd = lane.boxes()
             self._note(events)
             if lane.consistent:
                 self.max_width_pose = max(self.max_width_pose, float(np.max(x[1] - x[0])))
                 self.max_width_velocity = max(self.max_width_velocity, float(np.max(xd[1] - xd[0])))
-            return OnlineResult(lane.k, lane.mode, (x[0].copy(), x[1].copy()), (xd[0].copy(), xd[1].copy()),
-                                lane.consistent, tuple(events), lane.window)
+            return OnlineResult(lane.k, lane.mode, x, xd, lane.consistent, tuple(events), lane.window)
 
     @property
     def k(self) -> int:
@@ -378,9 +382,7 @@ class OnlineMonitor:
         """``(x, xd)``: the pose (m) and velocity (m/s) boxes ``(lo, hi)`` at the newest sample, from the
         decided mode's boxes once a window decided (also after :meth:`settle`)."""
         with self._lock:
-            st = self._lane.tracker.state
-            x, xd = st.x_hull[0], st.xd_hull[0]
-            return (x[0].copy(), x[1].copy()), (xd[0].copy(), xd[1].copy())
+            return self._lane.boxes()
 
     @property
     def tracker(self) -> Tracker:
