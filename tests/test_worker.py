@@ -252,7 +252,7 @@ def test_the_worker_draws_the_certificate_figure_as_this_process_does(tmp_path):
 
     cert = certify_crossing(DEXTAR, _task(), PlanningBounds(), v_low=1.2, v_high=1.3, tol=0.1, monte_carlo_runs=0,
                             refute=False, kin=kinematics(), imodel=interval_model(), bounce=False)
-    png, (fn, *args, kwargs) = _figure(cert, PlanningBounds(), tmp_path / "here", "rad")
+    png, (fn, *args, kwargs) = _figure(cert, DEXTAR, PlanningBounds(), tmp_path / "here", "rad")
     png.parent.mkdir()
     fn(*args, **kwargs)
     there = tmp_path / "there" / png.name
