@@ -261,3 +261,19 @@ def test_there_and_back_through_the_cli(tmp_path, capsys, monkeypatch):
     *events, summary = [json.loads(v) for v in capsys.readouterr().out.splitlines()]
     assert all(e["mode"] in (0, run.mode_true[e["k"]]) for e in events), events
     assert summary["verdict"] == "mode-unchanged"
+
+
+def test_an_error_in_the_worker_reaches_the_caller(settings, monkeypatch):
+    """An attempt that raises on the worker thread is not lost: the next ``update`` (or ``settle``) raises it."""
+    run = _simulated(1.1, 1)
+
+    def broken(self, at):
+        raise RuntimeError("attempt failed")
+
+    monkeypatch.setattr(O.OnlineMonitor, "_run", broken)
+    mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker=True)
+    with pytest.raises(RuntimeError, match="attempt failed"):
+        for q in run.q_meas:
+            mon.update(q)
+        mon.settle()
+    mon.close()
