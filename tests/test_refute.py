@@ -266,7 +266,7 @@ NEAR_FLOOR = 0.848  # m/s
 def test_the_benchmark_task_is_refuted_at_0_848_m_s():
     """Above the printed bound of 0.84375 m/s: a verified bounce on certify's own plan and starts, which the
     trusted check accepts again."""
-    from crosscert.planner.certify.crossing import refute_speed
+    from crosscert.planner.refute.orchestrate import refute_speed
     from crosscert.planner.simulate import random_geometry
     from crosscert.planner.task import PlanningBounds, crossing_on_segment
 

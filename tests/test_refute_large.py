@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from crosscert.planner.certify import crossing as C
+from crosscert.planner.refute import orchestrate as O
 from crosscert.planner.refute import fk_branch_guess, verified_counterexample
 from crosscert.planner.refute.nlp import nlp_variables, scaled_cpu_time
 from crosscert.planner.simulate import random_geometry
@@ -49,7 +50,7 @@ def test_dextar_searches_keep_their_cap():
     # so its searches, and its refutation bound, are those of before the scaling
     robot, kin, task, b, _m0, _starts = _setup("dextar")
     plan = plan_crossing(kin, task, C.SCAN_FROM, b)
-    assert nlp_variables(kin, len(plan.q)) <= C.REFUTE_CAP_VARIABLES
+    assert nlp_variables(kin, len(plan.q)) <= O.REFUTE_CAP_VARIABLES
 
 
 def test_branch_guess_does_not_jump_to_the_other_assembly():
@@ -70,9 +71,9 @@ def test_slow_3rpr_plan_is_refuted_with_certifys_cap():
     # certify's own search (refute_speed: its plan, a_max, eps_q, starts and cap): verified at 0.05 m/s from
     # the box centre, and at 0.075 m/s started from that counterexample, as its bisection does
     robot, kin, task, b, m0, starts = _setup(RPR3_REFUTATION["robot"])
-    row = C.refute_speed(robot, task, b, m0, starts, RPR3_REFUTATION["refuted"], kin=kin)
+    row = O.refute_speed(robot, task, b, m0, starts, RPR3_REFUTATION["refuted"], kin=kin)
     assert row.verified, (row.status, [(a.status, a.verification) for a in row.attempts])
     warm = verified_counterexample(row)
-    row2 = C.refute_speed(robot, task, b, m0, starts, RPR3_REFUTATION["refuted_warm"], kin=kin, warm=warm)
+    row2 = O.refute_speed(robot, task, b, m0, starts, RPR3_REFUTATION["refuted_warm"], kin=kin, warm=warm)
     assert row2.verified, (row2.status, [(a.status, a.verification) for a in row2.attempts])
     assert row2.attempts[0].verification.accel_ratio <= 1.0

@@ -16,8 +16,9 @@ import pytest
 
 import crosscert.planner.certify.plan as certify_mod
 import crosscert.planner.certify.crossing as crossing_mod
+import crosscert.planner.refute.orchestrate as orchestrate_mod
 from crosscert.planner.certify.plan import search_v_min
-from crosscert.planner.certify.crossing import Refuter, refutation_search
+from crosscert.planner.refute.orchestrate import Refuter, refutation_search
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR
 from crosscert.robots.errors import InputError
@@ -113,7 +114,7 @@ def test_refuter_never_starts_a_search_at_or_above_the_certified_ceiling(monkeyp
             gate.wait(10)  # hold the first search until the ceiling is set
         return _Row(v, v <= 0.84)
 
-    monkeypatch.setattr(crossing_mod, "refute_speed", fake)
+    monkeypatch.setattr(orchestrate_mod, "refute_speed", fake)
     scan = [round(0.3 + 0.1 * i, 6) for i in range(17)]
     with ThreadPoolExecutor(max_workers=1) as pool:
         ref = Refuter(DEXTAR, None, None, 1, [], None, pool)
@@ -142,7 +143,7 @@ def _refuting(monkeypatch, refuted, log=None):
         row.attempts = (_Attempt(v),) if row.verified else ()
         return row
 
-    monkeypatch.setattr(crossing_mod, "refute_speed", fake)
+    monkeypatch.setattr(orchestrate_mod, "refute_speed", fake)
 
 
 def test_bisection_steps_start_from_the_fastest_refuted_speeds_counterexample(monkeypatch):

@@ -11,7 +11,7 @@ import pytest
 
 from crosscert.planner import CrossingTask, PlanningBounds, certify_crossing, execution_class, plan_crossing
 from crosscert.planner.execution import in_class
-from crosscert.planner.certify.crossing import Refuter, refute_speed
+from crosscert.planner.refute.orchestrate import Refuter, refute_speed
 from crosscert.planner.simulate import random_geometry
 from crosscert.planner.worker import SubprocessExecutor, WorkerStopped
 from problems import interval_model, kinematics

@@ -44,8 +44,8 @@ from ..progress import Phase, enter
 from ..simulate import random_geometry
 from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
 from ..path import path_task_of
-from .crossing import (REFUTE_CAP_VARIABLES, REFUTE_CPU_TIME, CrossingCertificate, certify_crossing,
-                       package_versions, refute_overrides)
+from ..refute.orchestrate import REFUTE_CAP_VARIABLES, REFUTE_CPU_TIME, refute_overrides
+from .crossing import CrossingCertificate, certify_crossing, package_versions
 from .plan import certify_planned
 
 __all__ = ["PlanSource", "read_plan", "plan_from_trajectory", "certify_trajectory", "certify_path", "POSE_RESIDUAL_TOL"]

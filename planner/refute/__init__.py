@@ -17,7 +17,11 @@ every candidate independently.
   verified search per final-mode hypothesis, to stop a window no sound method
   can decide;
 * :mod:`.search` — the sweeps over a family of recordings: crossings by speed
-  (:func:`refutation_bound`), bounces by turn-back distance (:func:`crossing_floor`).
+  (:func:`refutation_bound`), bounces by turn-back distance (:func:`crossing_floor`);
+* :mod:`.orchestrate` — a certification's searches by speed, run ahead on an
+  executor while the speed search runs (:class:`~.orchestrate.Refuter`), and
+  the bisection to the refutation bound (:func:`~.orchestrate.refutation_search`);
+  imported from there (it plans, so it is not re-exported here).
 
 Non-convergence of IPOPT is never a counterexample; an unverified candidate is
 never reported as one.  Only :attr:`BounceSearch.verified` results
