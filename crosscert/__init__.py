@@ -28,7 +28,7 @@ if not (_HERE / "verifier").is_dir() and all((_HERE.parent / p / "__init__.py").
 _API = {
     # planning: the main job
     "certify_crossing": "planner.certify.crossing",
-    "CrossingCertificate": "planner.certify.crossing",
+    "CrossingCertificate": "planner.certify.certificate",
     "benchmark_task": "planner.task",
     "CrossingTask": "planner.task",
     "PlanningBounds": "planner.task",

@@ -24,7 +24,8 @@ generator, counterexample searches) are imported from their modules.
 import logging
 
 from .assumption_cost import AtRobotAMax, ComparisonOutcome, certify_at_robot_a_max
-from .certify.crossing import CrossingCertificate, certify_crossing
+from .certify.certificate import CrossingCertificate
+from .certify.crossing import certify_crossing
 from .certify.plan import CertifiedRun, SpeedSearch, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
 from .execution import ExecutionClass
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation

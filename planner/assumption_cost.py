@@ -25,7 +25,8 @@ import numpy as np
 from crosscert.verifier.settings import Verdict
 
 from .acceleration import AccelerationAssumption, robot_a_max_assumption
-from .certify.crossing import CrossingCertificate, certify_crossing
+from .certify.certificate import CrossingCertificate
+from .certify.crossing import certify_crossing
 from .progress import suffixed
 from .refute import SearchCompleteness, verified_counterexample
 
@@ -52,7 +53,7 @@ class AtRobotAMax:
     verdict : Verdict or None
         ``MODE_CHANGED`` when some speed certifies; None when not computed.
     v_min, refutation_bound : float or None
-        m/s, as in :class:`planner.certify.crossing.CrossingCertificate`.
+        m/s, as in :class:`planner.certify.certificate.CrossingCertificate`.
     v_low : float or None
         Slowest speed tried, m/s (the default's ``v_min`` when the robot's
         bound covers the default's on every axis).
@@ -112,7 +113,7 @@ def compares(robot, cert: CrossingCertificate) -> bool:
 def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6, v_high=None, tol=0.01,
                            refute=True, seed=0, executor=None, progress=None, kin=None,
                            imodel=None, refute_tol=None) -> CrossingCertificate:
-    """``cert`` with :attr:`~planner.certify.crossing.CrossingCertificate.at_robot_a_max` filled in.
+    """``cert`` with :attr:`~planner.certify.certificate.CrossingCertificate.at_robot_a_max` filled in.
 
     Parameters
     ----------

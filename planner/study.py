@@ -40,7 +40,8 @@ from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, ModelError
 from crosscert.robots.registry import DEFAULT_ROBOT, get_entry, robot_key
 
-from .certify.crossing import certify_crossing, package_versions
+from .certify.certificate import package_versions
+from .certify.crossing import certify_crossing
 from .task import Method, PlanningBounds, benchmark_task, parse_option
 
 __all__ = ["GRID_KEYS", "StudyCase", "study_cases", "run_case", "run_study", "read_results", "repair_results",

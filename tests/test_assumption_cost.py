@@ -11,7 +11,8 @@ import pytest
 import crosscert.planner.assumption_cost as ac
 import crosscert.planner.certify.plan as certify_mod
 from crosscert.planner.acceleration import robot_a_max_assumption
-from crosscert.planner.certify.crossing import CrossingCertificate, certify_crossing
+from crosscert.planner.certify.certificate import CrossingCertificate
+from crosscert.planner.certify.crossing import certify_crossing
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR
 from crosscert.verifier.tracker import Verdict

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crosscert.planner.bounce import BounceGap
-from crosscert.planner.certify.crossing import CrossingCertificate
+from crosscert.planner.certify.certificate import CrossingCertificate
 from crosscert.planner.certify.plan import SpeedTrial
 from crosscert.planner.cli.planning import _bound_text
 from crosscert.planner.refute import BounceSearch, SearchCompleteness, SpeedRefutation, completeness

@@ -45,7 +45,8 @@ from ..simulate import random_geometry
 from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
 from ..path import path_task_of
 from ..refute.orchestrate import REFUTE_CAP_VARIABLES, REFUTE_CPU_TIME, refute_overrides
-from .crossing import CrossingCertificate, certify_crossing, package_versions
+from .certificate import CrossingCertificate, package_versions
+from .crossing import certify_crossing
 from .plan import certify_planned
 
 __all__ = ["PlanSource", "read_plan", "plan_from_trajectory", "certify_trajectory", "certify_path", "POSE_RESIDUAL_TOL"]
