@@ -61,8 +61,9 @@ star imports).
 
 from .explain import Explainer, ExplainRequest, Explanation
 from .offline import WINDOW_MAX_GEOMETRIES, WINDOW_MAX_PASSES, WindowStart, track_window
-from .online import ONLINE_HORIZON, OnlineEvent, OnlineMonitor, OnlineResult, WindowState, online_boxes
-from .results import HypothesisResult, HypothesisStatus, Reasoning, Refutation, VerdictReason, WindowResult
+from .online import ONLINE_HORIZON, OnlineMonitor, online_boxes
+from .results import (HypothesisResult, HypothesisStatus, OnlineEvent, OnlineResult, Reasoning, Refutation,
+                      VerdictReason, WindowResult, WindowState)
 
 __all__ = ["Reasoning", "HypothesisStatus", "Refutation", "HypothesisResult", "WindowResult", "track_window",
            "WindowStart", "OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON", "online_boxes",

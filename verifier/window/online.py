@@ -5,7 +5,6 @@ from __future__ import annotations
 import sys
 import threading
 from dataclasses import dataclass, replace
-from enum import Enum
 
 import numpy as np
 
@@ -16,9 +15,9 @@ from ..step import Backend, Event, pose_solution_arrays, reading_box
 from ..tracker import Tracker
 from .offline import WindowStart, track_window
 from .passes import hull_of_mode
-from .results import HypothesisStatus
+from .results import HypothesisStatus, OnlineEvent, OnlineResult, WindowState
 
-__all__ = ["OnlineMonitor", "OnlineResult", "OnlineEvent", "WindowState", "ONLINE_HORIZON", "online_boxes"]
+__all__ = ["OnlineMonitor", "ONLINE_HORIZON", "online_boxes"]
 
 #: Longest anchored window (samples from the anchor to the newest reading) of :class:`OnlineMonitor`: past
 #: it the window gives up (``unknown``, :attr:`WindowState.GAVE_UP`) until the tracker certifies a mode again.
@@ -45,72 +44,6 @@ INLINE_FULL = (32, 128)
 #: Window length (samples from the anchor) of an inline :class:`OnlineMonitor`'s first attempt; the next
 #: ones double it, so the work of a window that never decides stays about twice that of its last attempt.
 FIRST_ATTEMPT = 8
-
-
-class WindowState(str, Enum):
-    """What the anchored window of an :class:`OnlineMonitor` is doing."""
-
-    IDLE = "idle"  #: the tracker certifies the mode at the newest sample (or never did): no window
-    OPEN = "open"  #: the mode was lost: the window from the anchor reasons over the readings as they arrive
-    GAVE_UP = "gave-up"  #: the window reached the horizon undecided: unknown until the tracker certifies a mode
-
-    def __str__(self) -> str:
-        return self.value
-
-
-@dataclass(frozen=True)
-class OnlineEvent:
-    """A change of what is certified, as an :class:`OnlineMonitor` reports it.
-
-    Attributes
-    ----------
-    event : Event
-        ``MODE_GAINED`` (certified for the first time, or again in the mode it had before it was lost),
-        ``MODE_LOST``, ``MODE_CHANGED`` (certified in the other mode than the last certified one) or
-        ``INCONSISTENT`` (an assumption was violated).
-    k : int
-        Sample the event is about: from it on the new mode is certified.
-    known_at : int
-        Sample at whose reading it became known (``k`` for the tracker's events; later for a window's).
-    mode : int
-        Certified mode from ``k`` on (+1 / -1; 0 for ``MODE_LOST`` and ``INCONSISTENT``).
-    by_window : bool
-        Decided by the anchored window over the readings from the anchor to ``k``.
-    """
-
-    event: Event
-    k: int
-    known_at: int
-    mode: int
-    by_window: bool = False
-
-
-@dataclass(frozen=True)
-class OnlineResult:
-    """What an :class:`OnlineMonitor` knows after reading sample ``k``.
-
-    Attributes
-    ----------
-    k : int
-        Index of the reading just fed.
-    mode : int
-        Mode certified at sample ``k`` (+1 / -1; 0 not certified).
-    x, xd : (lo, hi) arrays (n,)
-        Pose (m) and velocity (m/s) boxes at sample ``k`` (from the decided mode's boxes once a window decided).
-    consistent : bool
-        False once every geometry hypothesis became empty (an assumption was violated).
-    events : tuple of OnlineEvent
-        What changed with this reading, a window's decision about an earlier sample included.
-    window : WindowState
-    """
-
-    k: int
-    mode: int
-    x: tuple
-    xd: tuple
-    consistent: bool
-    events: tuple
-    window: WindowState
 
 
 @dataclass

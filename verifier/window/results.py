@@ -1,4 +1,5 @@
-"""What a window reports: how a verdict is reached, each final-mode hypothesis' outcome, the window's result."""
+"""What a window reports: how a verdict is reached, each final-mode hypothesis' outcome, the window's result;
+and what the online monitor reports after each reading (its events and the state of its window)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ from enum import Enum
 import numpy as np
 
 from ..settings import Verdict
+from ..step import Event
 
-__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "VerdictReason", "HypothesisResult", "WindowResult"]
+__all__ = ["Reasoning", "HypothesisStatus", "Refutation", "VerdictReason", "HypothesisResult", "WindowResult",
+           "WindowState", "OnlineEvent", "OnlineResult"]
 
 
 class Reasoning(str, Enum):
@@ -163,3 +166,69 @@ class WindowResult:
             "steps": int(self.steps),
             "elapsed_s": float(self.elapsed_s),
         }
+
+
+class WindowState(str, Enum):
+    """What the anchored window of an :class:`OnlineMonitor` is doing."""
+
+    IDLE = "idle"  #: the tracker certifies the mode at the newest sample (or never did): no window
+    OPEN = "open"  #: the mode was lost: the window from the anchor reasons over the readings as they arrive
+    GAVE_UP = "gave-up"  #: the window reached the horizon undecided: unknown until the tracker certifies a mode
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class OnlineEvent:
+    """A change of what is certified, as an :class:`OnlineMonitor` reports it.
+
+    Attributes
+    ----------
+    event : Event
+        ``MODE_GAINED`` (certified for the first time, or again in the mode it had before it was lost),
+        ``MODE_LOST``, ``MODE_CHANGED`` (certified in the other mode than the last certified one) or
+        ``INCONSISTENT`` (an assumption was violated).
+    k : int
+        Sample the event is about: from it on the new mode is certified.
+    known_at : int
+        Sample at whose reading it became known (``k`` for the tracker's events; later for a window's).
+    mode : int
+        Certified mode from ``k`` on (+1 / -1; 0 for ``MODE_LOST`` and ``INCONSISTENT``).
+    by_window : bool
+        Decided by the anchored window over the readings from the anchor to ``k``.
+    """
+
+    event: Event
+    k: int
+    known_at: int
+    mode: int
+    by_window: bool = False
+
+
+@dataclass(frozen=True)
+class OnlineResult:
+    """What an :class:`OnlineMonitor` knows after reading sample ``k``.
+
+    Attributes
+    ----------
+    k : int
+        Index of the reading just fed.
+    mode : int
+        Mode certified at sample ``k`` (+1 / -1; 0 not certified).
+    x, xd : (lo, hi) arrays (n,)
+        Pose (m) and velocity (m/s) boxes at sample ``k`` (from the decided mode's boxes once a window decided).
+    consistent : bool
+        False once every geometry hypothesis became empty (an assumption was violated).
+    events : tuple of OnlineEvent
+        What changed with this reading, a window's decision about an earlier sample included.
+    window : WindowState
+    """
+
+    k: int
+    mode: int
+    x: tuple
+    xd: tuple
+    consistent: bool
+    events: tuple
+    window: WindowState
