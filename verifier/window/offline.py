@@ -62,7 +62,7 @@ class WindowStart:
     """The rows a window starts from, with what is known at its first sample: a tracker's state there.
 
     A window that starts in the middle of a motion (the online anchor,
-    :class:`~verifier.window.online.OnlineWindow`) starts from the tracker's
+    :class:`~verifier.window.online.OnlineMonitor`) starts from the tracker's
     rows at that sample: each geometry sub-box with its own pose and velocity
     box.  The tracker's boxes hold the truth under its assumptions, so the
     window's first forward pass may start from them (its initial velocity is
@@ -84,14 +84,6 @@ class WindowStart:
     x: np.ndarray = field(repr=False)
     xd: np.ndarray = field(repr=False)
     mode: int = 0
-
-    @classmethod
-    def of_state(cls, state) -> "WindowStart":
-        """The live rows of a one-scenario :class:`~verifier.step.TrackerState` (copies)."""
-        live = state.row_bad < 0
-        xi = state.xi[live]
-        return cls(np.ascontiguousarray(xi[:, 0]), np.ascontiguousarray(xi[:, 1]), state.x[live].copy(),
-                   state.xd[live].copy())
 
     @property
     def rows(self) -> int:
