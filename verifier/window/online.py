@@ -85,7 +85,8 @@ class _Lane:
         self._snap = (st.x.copy(), st.xd.copy(), st.xi.copy(), st.row_bad.copy())
         self._snap_k = -1
         self._snap_mode = 0
-        self._prev_q = self._prev_x = None  # the previous reading and pose box: an anchor's first sample
+        self._prev_q = None  # the previous reading and pose box: an anchor's first sample
+        self._prev_x = st.x_hull[0].copy()  # overwritten in place at every sample
         self._known = 0  # a re-seeded lane: the mode a window decided at its first sample
 
     def step(self, q):
@@ -122,7 +123,8 @@ class _Lane:
                     self._open(q)
             if self.anchor is not None and len(self.anchor.q) > self.horizon:
                 self.anchor, self.window = None, WindowState.GAVE_UP
-        self._prev_q, self._prev_x = q, self.tracker.state.x_hull[0].copy()
+        self._prev_q = q
+        np.copyto(self._prev_x, self.tracker.state.x_hull[0])
         self._known = 0
         return events
 
@@ -144,7 +146,7 @@ class _Lane:
         start = WindowStart(np.ascontiguousarray(xi[live, 0]), np.ascontiguousarray(xi[live, 1]), x[live].copy(),
                             xd[live].copy(), self._snap_mode)
         self.anchor = _Anchor(self._snap_k, self.last_mode, start, [self._prev_q, q],
-                              [self._prev_x, self.tracker.state.x_hull[0].copy()])
+                              [self._prev_x.copy(), self.tracker.state.x_hull[0].copy()])
         self.window = WindowState.OPEN
 
 
