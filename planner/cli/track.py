@@ -98,7 +98,8 @@ def _tracked(a, robot, model, run, bar):
             enter(bar, Phase.WINDOW, unit="")
             # stops the window early on a recording no sound method can decide (both final modes explained)
             explainer = RefutingExplainer()
-            win = track_window(model, np.asarray(readings, dtype=float), run.tracker.config.settings,
+            # the run's own settings: a tracker re-seeded by a window starts with no bound on its velocity
+            win = track_window(model, np.asarray(readings, dtype=float), run.online.settings,
                                x0=run.x0_used, backend=a.backend, explainer=explainer)
             out["window"] = win.summary()
             out["window"]["explainer"] = [
@@ -250,11 +251,6 @@ class Monitor:
         self.backlog = []  # --certificate: (line, t, q) held while the certificate answers
         self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
 
-    @property
-    def tracker(self):
-        """The tracker of the newest sample (None before it starts)."""
-        return None if self.online is None else self.online.tracker
-
     def _start(self, t_s: float) -> None:
         settings = self.make_settings(t_s)
         self.t_s = float(t_s)
@@ -318,9 +314,8 @@ class Monitor:
             print(json.dumps(ev) if self.a.json else text, flush=True)
 
     def _redraw(self, e) -> None:
-        """A figure shows the decided mode from a window's decision on: the samples tracked meanwhile are
-        drawn again from the re-seeded tracker's boxes as they come (this one keeps its box; the mode is the
-        decided one from ``e.k``)."""
+        """A window's decision in the figure: the mode drawn at the sample it is about is the decided one
+        (the samples after it are the re-seeded tracker's as they come)."""
         if e.k < len(self.boxes["mode"]):
             self.boxes["mode"][e.k] = e.mode
 
