@@ -72,6 +72,15 @@ class MonteCarloResult:
         Certified modes or verdicts contradicting the truth (a bug if not empty).
     not_detected : tuple of RunRecord
         Executions whose change the run-time tracker did not certify.
+    envelope_checked : bool
+        Whether each execution's readings were also checked against the certificate's envelope, as
+        ``monitor --certificate`` checks them (:mod:`planner.certify.envelope`).
+    covered_at_run_time : int
+        Executions whose readings stay in the envelope up to the certified decision: the certificate's
+        verdict holds for them at run time, whatever the tracker says (0 when not checked).
+    left_envelope : tuple of dict
+        The others: where each one's readings left (``run``, ``sample``, ``joint`` 1-based, ``excess`` in the
+        joint's unit, ``check``).
     """
 
     runs: int
@@ -83,10 +92,16 @@ class MonteCarloResult:
     containment_failures: tuple
     wrong_verdicts: tuple
     not_detected: tuple
+    envelope_checked: bool = False
+    covered_at_run_time: int = 0
+    left_envelope: tuple = ()
 
     def summary(self) -> dict:
         """JSON-ready form."""
         return {
+            "envelope_checked": self.envelope_checked,
+            "covered_at_run_time": self.covered_at_run_time if self.envelope_checked else None,
+            "left_envelope": list(self.left_envelope),
             "runs": self.runs, "seed": self.seed, "detected": self.detected, "in_class": self.in_class,
             "detected_in_class": self.detected_in_class, "outside_class": list(self.outside_class),
             "containment_failures": list(self.containment_failures),
@@ -109,7 +124,8 @@ BESIDE_CHUNK = 1
 def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
                              a_max=None, progress=None, execution: ex_.ExecutionClass | None = None,
                              executor: Executor | None = None, batch_runs: int = BATCH_RUNS,
-                             parallel: bool = True, beside: Executor | None = None) -> MonteCarloResult:
+                             parallel: bool = True, beside: Executor | None = None,
+                             envelope=None) -> MonteCarloResult:
     """Execute ``plan``'s Cartesian motion with random true geometries and quantisations.
 
     Each execution ``r``: geometry uniform in ``[xi]`` (every 5th at a random
@@ -128,6 +144,9 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
         Run the executions in batches of ``batch_runs`` on it (a process pool,
         a Dask client's ``get_executor()``): for 10^5 executions and more.
         Each worker builds the robot's models once.
+    envelope : planner.certify.envelope.CertifiedEnvelope, optional
+        The certificate's run-time envelope: each execution's readings are checked against it too
+        (``covered_at_run_time``).
     beside : concurrent.futures.Executor, optional
         Without ``executor``: share the executions with it (a certification's background worker, idle for
         part of the run): it takes :data:`BESIDE_CHUNK` executions at a time from the first ones (serial
@@ -149,28 +168,31 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
     if executor is None and beside is None:
         return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress,
-                                parallel=parallel)
+                                parallel=parallel, envelope=envelope)
     if executor is None:
         def there(start, stop):
-            return beside.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, stop, parallel=False)
+            return beside.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, stop, parallel=False,
+                                 envelope=envelope)
 
         def here(start, stop):
             return monte_carlo_runs(robot, plan, b, s, cls, seed, start, stop, models=(kin, imodel),
-                                    parallel=parallel)
+                                    parallel=parallel, envelope=envelope)
 
         return merge_results(_shared(there, here, runs, BESIDE_CHUNK, progress))
-    futures = [executor.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, min(runs, start + batch_runs))
+    futures = [executor.submit(monte_carlo_runs, robot, plan, b, s, cls, seed, start, min(runs, start + batch_runs),
+                               envelope=envelope)
                for start in range(0, runs, batch_runs)]
     return merge_results([f.result() for f in futures])
 
 
 def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings: TrackerSettings,
                      cls: ex_.ExecutionClass, seed: int, start: int, stop: int, *, models=None,
-                     progress=None, parallel: bool = True) -> MonteCarloResult:
+                     progress=None, parallel: bool = True, envelope=None) -> MonteCarloResult:
     """Executions ``start .. stop - 1`` of a Monte Carlo confirmation (module-level: any executor can run it).
 
     ``b`` are bounds bound to the robot (``PlanningBounds.for_robot``); ``models`` the robot's ``(KinematicModel,
-    IntervalModel)``, those this thread keeps when absent (:mod:`planner.models`).
+    IntervalModel)``, those this thread keeps when absent (:mod:`planner.models`); ``envelope`` the
+    certificate's run-time envelope, any object with ``check(q)`` (:mod:`planner.certify.envelope`).
     """
     kin, imodel = (kinematic_model(robot), interval_model(robot)) if models is None else models
     m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
@@ -214,6 +236,13 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
         elif verdicts[i] is not Verdict.MODE_CHANGED:
             failures.append(RunRecord(r, verdicts[i], truths[i][0]))
     admissible = [i for i in range(len(qs)) if truths[i][2]]
+    left = []
+    for i, r in enumerate(range(start, stop)):
+        st = envelope.check(q[i]) if envelope is not None else None
+        if st is not None and not st.holds:
+            where = st.summary()
+            left.append({"run": r, "sample": where["left_at_sample"], "joint": where["joint"],
+                         "excess": where["excess"], "check": where["check"]})
     return MonteCarloResult(
         runs=stop - start,
         seed=seed,
@@ -224,6 +253,9 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings
         containment_failures=tuple(misses),
         wrong_verdicts=tuple(wrong),
         not_detected=tuple(failures),
+        envelope_checked=envelope is not None,
+        covered_at_run_time=0 if envelope is None else stop - start - len(left),
+        left_envelope=tuple(left),
     )
 
 
@@ -308,4 +340,7 @@ def merge_results(parts: list[MonteCarloResult]) -> MonteCarloResult:
         containment_failures=tuple(r for p in parts for r in p.containment_failures),
         wrong_verdicts=tuple(w for p in parts for w in p.wrong_verdicts),
         not_detected=tuple(w for p in parts for w in p.not_detected),
+        envelope_checked=all(p.envelope_checked for p in parts),
+        covered_at_run_time=sum(p.covered_at_run_time for p in parts),
+        left_envelope=tuple(w for p in parts for w in p.left_envelope),
     )

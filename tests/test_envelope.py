@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 
@@ -10,7 +11,9 @@ import pytest
 
 from crosscert.planner import PlanningBounds
 from crosscert.planner.certify.envelope import CertifiedEnvelope, EnvelopeMonitor, EnvelopeState
+from crosscert.planner.certify.plan import certify_planned
 from crosscert.planner.cli import main
+from crosscert.planner.montecarlo import monte_carlo_confirmation
 from crosscert.planner.plan import plan_crossing
 from crosscert.planner.simulate import quantise, random_geometry
 from crosscert.robots import DEXTAR, RPR3
@@ -121,6 +124,40 @@ def test_executions_of_another_geometry_following_the_path_leave_the_joint_envel
     assert ok.all()
     s = _run(envelope, quantise(q_true, DEXTAR.eps_q, "floor", rng))
     assert s.state is EnvelopeState.LEFT
+
+
+def test_the_envelope_of_a_certified_run_is_the_one_its_certificate_file_gives(kin, imodel, certified, envelope):
+    """``CertifiedRun.envelope`` (what the Monte Carlo checks) and ``CertifiedEnvelope.load`` (what ``monitor
+    --certificate`` reads) are one envelope."""
+    b = PlanningBounds().for_robot(DEXTAR)
+    run = certify_planned(kin, imodel, certified[1], b)
+    env = run.envelope(DEXTAR, DEXTAR.eps_q)
+    assert (env.verdict, env.decided_at, env.initial_mode, env.final_mode) == (
+        envelope.verdict, envelope.decided_at, envelope.initial_mode, envelope.final_mode)
+    np.testing.assert_array_equal(env.radius, envelope.radius)
+    np.testing.assert_array_equal(env.step, envelope.step)
+    np.testing.assert_allclose(env.q_plan, envelope.q_plan, rtol=0, atol=1e-12)  # the file's decimal digits
+
+
+def test_monte_carlo_counts_the_executions_the_envelope_confirms(kin, imodel, certified, envelope):
+    """Each execution's readings go through the run-time envelope check: those of random geometries leave
+    the certificate's envelope (where, recorded), and an envelope wide enough confirms them all."""
+    plan = certified[1]
+    b = PlanningBounds().for_robot(DEXTAR)
+    run = certify_planned(kin, imodel, plan, b)
+    mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=3, seed=1, execution=run.execution, envelope=envelope)
+    assert mc.envelope_checked and mc.covered_at_run_time == 0 and len(mc.left_envelope) == 3
+    assert all(w["sample"] is not None and w["sample"] <= envelope.decided_at and w["excess"] > 0
+               for w in mc.left_envelope)
+    summary = mc.summary()
+    assert summary["covered_at_run_time"] == 0 and summary["left_envelope"][0]["run"] == 0
+    wide = dataclasses.replace(envelope, radius=np.full(2, 0.05), step=None)
+    mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=3, seed=1, execution=run.execution, envelope=wide)
+    assert mc.covered_at_run_time == 3 and mc.left_envelope == ()
+    mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=1, seed=1, execution=run.execution)
+    assert not mc.envelope_checked and mc.summary()["covered_at_run_time"] is None
+    short = wide.check(np.array(envelope.q_plan)[: envelope.decided_at])  # ends before the decision
+    assert short.state is EnvelopeState.INSIDE and not short.holds
 
 
 def test_check_with_the_certificate_reports_its_verdict(certified, tmp_path, capsys):

@@ -21,6 +21,7 @@ from ..acceleration import AccelerationAssumption
 from ..bounce import BounceGap
 from ..montecarlo import MonteCarloResult
 from ..task import CrossingTask, PlannedTrajectory, PlanningBounds
+from .plan import decision_sample
 
 __all__ = ["CrossingCertificate", "CERTIFICATE_SCHEMA", "package_versions"]
 
@@ -108,10 +109,9 @@ class CrossingCertificate:
                                                                                        Verdict.MODE_UNCHANGED):
             return None
         e = self.enclosures
-        forward = e.verdict is self.verdict and e.certified_at_step >= 0
+        at, by = decision_sample(e, self.verdict, len(self.trajectory.q))
         final = -e.initial_mode if self.verdict is Verdict.MODE_CHANGED else e.initial_mode
-        return {"decided_at_sample": int(e.certified_at_step) if forward else len(self.trajectory.q) - 1,
-                "decided_by": "forward" if forward else "window", "initial_mode": int(e.initial_mode),
+        return {"decided_at_sample": at, "decided_by": by, "initial_mode": int(e.initial_mode),
                 "final_mode": int(final)}
 
     def _named(self, xi) -> dict | None:

@@ -328,7 +328,8 @@ def _confirm(job: _Job, run, runs: int, seed, progress, pool=None):
     else:
         enter(progress, Phase.MONTE_CARLO, runs, unit="execution")
     return monte_carlo_confirmation(job.kin, job.imodel, run.plan, job.b, runs=runs, seed=seed, progress=progress,
-                                    execution=run.execution, parallel=job.threads, beside=pool)
+                                    execution=run.execution, parallel=job.threads, beside=pool,
+                                    envelope=run.envelope(job.robot, job.b.eps_q))
 
 
 def _certificate(job: _Job, search, run, mc, ref_bound, ref, gap, clock, t0) -> CrossingCertificate:

@@ -69,6 +69,11 @@ class EnvelopeStatus:
     excess: float = 0.0
     what: str = ""
 
+    @property
+    def holds(self) -> bool:
+        """The certificate's verdict holds for this run (``CERTIFIED``, or ``BEYOND_PLAN`` after it)."""
+        return self.state in (EnvelopeState.CERTIFIED, EnvelopeState.BEYOND_PLAN)
+
     def summary(self) -> dict:
         return {"k": self.k, "state": self.state.value, "verdict": self.verdict.value,
                 "left_at_sample": None if self.left_at < 0 else self.left_at,
@@ -153,24 +158,51 @@ class CertifiedEnvelope:
             raise InputError(f"--certificate {certificate}: the plan {plan} is not the certified one (sha256 "
                              f"{digest[:12]}..., certified {source['sha256'][:12]}...)")
         traj = read_trajectory(plan, robot.n, nominal_t_s=robot.t_s)
+        return cls.of(robot, traj.q, traj.t_s, cls_, eps_q, verdict=Verdict(report["verdict"]),
+                      decided_at=int(run["decided_at_sample"]), initial_mode=int(run["initial_mode"]),
+                      final_mode=int(run["final_mode"]), sha256=digest, where=f"--certificate {certificate}: ")
+
+    @classmethod
+    def of(cls, robot, q_plan, t_s, execution: dict, eps_q, *, verdict: Verdict, decided_at: int,
+           initial_mode: int, final_mode: int, sha256: str = "", where: str = "") -> CertifiedEnvelope:
+        """The envelope of a certified run: the plan's joints ``q_plan`` (K, n) at period ``t_s`` (s), its
+        execution class as in ``certificate.json`` (``execution``: ``ExecutionClass.summary()``), readings
+        within ``eps_q`` (joint units), the certified ``verdict`` reached at sample ``decided_at``.
+
+        Raises
+        ------
+        InputError
+            The fast reading error is below ``eps_q`` (``where`` prefixes the message).
+        """
         eps = np.broadcast_to(np.asarray(eps_q, float), (robot.n,))
-        e = np.broadcast_to(np.asarray(cls_["reading_error_rad"], float), (robot.n,))
-        fast = cls_.get("fast_error_rad")
+        e = np.broadcast_to(np.asarray(execution["reading_error_rad"], float), (robot.n,))
+        fast = execution.get("fast_error_rad")
         fast = e if fast is None else np.broadcast_to(np.asarray(fast, float), (robot.n,))
         if np.any(eps > fast):
-            raise InputError(f"--certificate {certificate}: the readings' error eps_q = {float(np.max(eps)):.4g} "
-                             f"exceeds the certified fast reading error {float(np.min(fast)):.4g}: the certificate "
-                             "does not cover readings that coarse")
+            raise InputError(f"{where}the readings' error eps_q = {float(np.max(eps)):.4g} exceeds the certified "
+                             f"fast reading error {float(np.min(fast)):.4g}: the certificate does not cover "
+                             "readings that coarse")
         radius = _down(e - eps)
         if np.any(radius < 0.0):
             radius = np.zeros(robot.n)  # no room left around the plan: only the plan itself, never reached
-        d = cls_.get("drift_per_sample_rad")
+        d = execution.get("drift_per_sample_rad")
         step = None if d is None else _down(np.broadcast_to(np.asarray(d, float), (robot.n,)))
-        q = np.array(traj.q, float)
+        q = np.array(q_plan, float)
         for a in (q, radius) + (() if step is None else (step,)):
             a.setflags(write=False)
-        return cls(robot.name, q, float(traj.t_s), radius, step, Verdict(report["verdict"]),
-                   int(run["decided_at_sample"]), int(run["initial_mode"]), int(run["final_mode"]), digest)
+        return cls(robot.name, q, float(t_s), radius, step, verdict, int(decided_at), int(initial_mode),
+                   int(final_mode), sha256)
+
+    def check(self, q) -> EnvelopeStatus:
+        """The readings ``q`` (K, n) of one run checked up to the certified decision, as ``monitor
+        --certificate`` checks them: ``CERTIFIED`` when all of them lie in the envelope (the certificate's
+        verdict holds for that run), else where they left it (``LEFT``, or ``INSIDE`` for a run that ends
+        before the decision)."""
+        mon = EnvelopeMonitor(self)
+        for k in range(min(len(q), self.decided_at + 1)):
+            if mon.update(q[k]).state is EnvelopeState.LEFT:
+                break
+        return mon.status
 
 
 class EnvelopeMonitor:

@@ -66,6 +66,7 @@ from ..acceleration import AccelerationAssumption, acceleration_assumption, deri
 from ..plan import plan_crossing
 from ..refute import RefutingExplainer
 from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
+from .envelope import CertifiedEnvelope
 
 __all__ = [
     "SpeedTrial",
@@ -202,11 +203,29 @@ class CertifiedRun:
         """The run's verdict: the window passes' when they ran, else the forward run's."""
         return (self.window or self.forward).verdict
 
+    def envelope(self, robot, eps_q) -> CertifiedEnvelope:
+        """What ``monitor --certificate`` holds a run of this plan against (a decided run only), readings
+        within ``eps_q`` (joint units)."""
+        at, _by = decision_sample(self.forward, self.verdict, len(self.plan.q))
+        final = -self.forward.initial_mode if self.verdict is Verdict.MODE_CHANGED else self.forward.initial_mode
+        return CertifiedEnvelope.of(robot, self.plan.q, self.plan.t_s, self.execution.summary(), eps_q,
+                                    verdict=self.verdict, decided_at=at, initial_mode=self.forward.initial_mode,
+                                    final_mode=final)
+
     def trial(self) -> SpeedTrial:
         """The row of the search's table."""
         f = self.forward
         return SpeedTrial(float(self.plan.v_sing), self.verdict, float(f.max_width_pose), float(f.max_width_velocity),
                           None if f.certified_at_step < 0 else int(f.certified_at_step), f.verdict)
+
+
+def decision_sample(forward: TrackResult, verdict: Verdict, samples: int) -> tuple[int, str]:
+    """``(sample, by)``: where a certifying run of ``samples`` samples reached ``verdict``: the forward pass's
+    streak start (``"forward"``) when it reached that verdict, else the last sample (``"window"``: the window
+    passes read the whole run)."""
+    if forward.verdict is verdict and forward.certified_at_step >= 0:
+        return int(forward.certified_at_step), "forward"
+    return samples - 1, "window"
 
 
 def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel: bool = True) -> CertifiedRun:

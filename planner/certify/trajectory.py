@@ -306,7 +306,7 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
     if certified and monte_carlo_runs:
         enter(progress, Phase.MONTE_CARLO, len(plan.q), unit="sample")
         mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=monte_carlo_runs, seed=seed, progress=progress,
-                                      execution=run.execution, parallel=parallel)
+                                      execution=run.execution, parallel=parallel, envelope=run.envelope(robot, b.eps_q))
     clock["monte_carlo"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     if refute_plan and not certified and run.verdict is not Verdict.INCONSISTENT:
