@@ -26,8 +26,9 @@ import logging
 from .assumption_cost import AtRobotAMax, ComparisonOutcome, certify_at_robot_a_max
 from .certify.certificate import CrossingCertificate
 from .certify.crossing import certify_crossing
-from .certify.plan import CertifiedRun, SpeedSearch, certify_plan, certify_speed, execution_class, minimal_v_sing, search_v_min
+from .certify.plan import CertifiedRun, SpeedSearch, certify_plan, certify_speed, minimal_v_sing, search_v_min
 from .execution import ExecutionClass
+from .execution_proof import execution_class
 from .montecarlo import MonteCarloResult, monte_carlo_confirmation
 from .plan import plan_crossing, speed_ceiling
 from .refute import CrossingFloor, RecordingBounds, RefutationBound, crossing_floor, refutation_bound

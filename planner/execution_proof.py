@@ -73,10 +73,11 @@ from crosscert.verifier.implicit import (ImplicitTapes, contract_roots, inflate_
                                          slope_change, strictly_inside)
 from crosscert.verifier.linalg import imat_ivec
 
-from .execution import ExecutionClass, ExecutionKind
+from .execution import ExecutionClass, ExecutionKind, cartesian_class, joint_class
+from .task import PlannedTrajectory
 
 __all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "prove_cartesian_class_cached", "proved_class",
-           "with_proof_failure", "describe", "offset_split"]
+           "with_proof_failure", "describe", "offset_split", "execution_class"]
 
 #: How the bounds are proved (reported in certificate.json).
 METHOD = ("interval branch and bound over [xi]: Krawczyk-proved IK enclosures, mean-value forms with "
@@ -677,3 +678,24 @@ def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error
 def with_proof_failure(cls: ExecutionClass, proof: ClassProof) -> ExecutionClass:
     """A measured class marked ``proved: false`` with the proof's reason."""
     return replace(cls, proved=False, proof=proof.summary())
+
+
+def execution_class(kin, plans, bounds) -> ExecutionClass:
+    """The admissible executions of one plan or a list of plans (union of their paths) under ``bounds``
+    (:class:`planner.task.PlanningBounds`).
+
+    See :mod:`planner.execution`; ``cartesian`` classes are proved over the
+    whole box ``[xi]`` (:mod:`planner.execution_proof`) and, when the proof
+    is not available for the robot's model, measured on sampled geometries
+    (seeded, deterministic) and marked ``proved: false`` with the reason.
+    """
+    robot = kin.robot
+    b = bounds.for_robot(robot)
+    if b.execution is ExecutionKind.JOINT:
+        return joint_class(robot, b.eps_q, b.tracking_error)
+    plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)
+    xs, qs = [p.x for p in plans], [p.q for p in plans]
+    proof = prove_cartesian_class_cached(robot, xs, qs, plans[0].xi_plan)
+    if proof.proved:
+        return proved_class(robot, proof, plans[0].xi_plan, b.eps_q, b.tracking_error)
+    return with_proof_failure(cartesian_class(kin, xs, qs, plans[0].xi_plan, b.eps_q, b.tracking_error), proof)

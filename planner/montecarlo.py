@@ -24,7 +24,7 @@ from crosscert.verifier.tracker import initial_box_from_mode, track_batch
 from crosscert.verifier.window import Reasoning, track_window
 
 from . import execution as ex_
-from .certify.plan import execution_class
+from .execution_proof import execution_class
 from .models import interval_model, kinematic_model
 from .plan import derived_a_max
 from .simulate import Quantisation, quantise, random_geometry

@@ -65,6 +65,18 @@ def test_no_upward_import(name):
             assert not target.startswith("planner.cli"), f"{name}:{line} imports the command line {target}"
 
 
+#: Planner modules that certification builds on: they may not import ``planner.certify`` back (a room below
+#: reaching up into the one that uses it).
+BELOW_CERTIFY = ("planner.montecarlo", "planner.execution", "planner.execution_proof", "planner.task",
+                 "planner.plan", "planner.refute", "planner.simulate", "planner.generate", "planner.timescale")
+
+
+@pytest.mark.parametrize("name", sorted(n for n in MODULES if n.startswith(BELOW_CERTIFY)))
+def test_certification_is_not_imported_from_below(name):
+    for target, _, line in IMPORTS[name]:
+        assert not target.startswith("planner.certify"), f"{name}:{line} imports {target}, which builds on it"
+
+
 @pytest.mark.parametrize("name", sorted(MODULES))
 def test_no_private_name_across_modules(name):
     for target, names, line in IMPORTS[name]:

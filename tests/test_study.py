@@ -10,7 +10,7 @@ import pytest
 distributed = pytest.importorskip("distributed")
 
 from crosscert.planner import PlanningBounds, plan_crossing  # noqa: E402
-from crosscert.planner.certify.plan import execution_class  # noqa: E402
+from crosscert.planner.execution_proof import execution_class  # noqa: E402
 from crosscert.planner.montecarlo import monte_carlo_confirmation  # noqa: E402
 from crosscert.planner.study import run_study, read_results, run_case, study_cases  # noqa: E402
 from crosscert.robots.errors import InputError  # noqa: E402

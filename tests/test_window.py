@@ -26,7 +26,8 @@ import pytest
 
 from adversarial import near_scenarios
 from problems import MARGIN, check_contains, interval_model
-from crosscert.planner.certify.plan import execution_class, tracker_settings
+from crosscert.planner.certify.plan import tracker_settings
+from crosscert.planner.execution_proof import execution_class
 from crosscert.planner.plan import derived_a_max, plan_crossing
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR, get_entry

@@ -51,7 +51,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-
 from crosscert.robots import KinematicModel
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError
@@ -61,11 +60,11 @@ from crosscert.verifier.tracker import TrackResult, track
 from crosscert.verifier.window import Explainer, Reasoning, WindowResult, track_window
 
 from .. import execution as ex_
-from .. import execution_proof as exp_
 from ..acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
+from ..execution_proof import execution_class
 from ..plan import plan_crossing
 from ..refute import RefutingExplainer
-from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
+from ..task import PlannedTrajectory, PlanningBounds
 from .envelope import CertifiedEnvelope
 
 __all__ = [
@@ -73,7 +72,6 @@ __all__ = [
     "certify_plan",
     "certify_plan_window",
     "CERTIFY_WINDOW_GEOMETRIES",
-    "execution_class",
     "tracker_settings",
     "minimal_v_sing",
     "search_v_min",
@@ -107,27 +105,6 @@ def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -
     """Tracker settings of a certifying run: the class's assumptions (reading error, drift, geometry box) at
     the plan's ``t_s`` and ``a_max`` (per axis, its unit/s^2), with the bounds' geometry hypotheses."""
     return TrackerSettings(assumptions=cls.assumptions(robot, b.t_s, a_max, b.xd0), xi_splits=b.xi_splits)
-
-
-def execution_class(kin, plans, bounds: PlanningBounds) -> ex_.ExecutionClass:
-    """The admissible executions of one plan or a list of plans (union of their paths) under ``bounds``.
-
-    See :mod:`planner.execution`; ``cartesian`` classes are proved over the
-    whole box ``[xi]`` (:mod:`planner.execution_proof`) and, when the proof
-    is not available for the robot's model, measured on sampled geometries
-    (seeded, deterministic) and marked ``proved: false`` with the reason.
-    """
-    robot = kin.robot
-    b = bounds.for_robot(robot)
-    if b.execution is ExecutionKind.JOINT:
-        return ex_.joint_class(robot, b.eps_q, b.tracking_error)
-    plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)
-    xs, qs = [p.x for p in plans], [p.q for p in plans]
-    proof = exp_.prove_cartesian_class_cached(robot, xs, qs, plans[0].xi_plan)
-    if proof.proved:
-        return exp_.proved_class(robot, proof, plans[0].xi_plan, b.eps_q, b.tracking_error)
-    return exp_.with_proof_failure(ex_.cartesian_class(kin, xs, qs, plans[0].xi_plan, b.eps_q, b.tracking_error),
-                                   proof)
 
 
 def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int, *,
