@@ -42,7 +42,9 @@ from crosscert.verifier.model import IntervalModel  # noqa: E402
 from crosscert.verifier.trajfile import write_trajectory  # noqa: E402
 
 
-def main_bench() -> None:
+def main_bench() -> dict:
+    """Print the figures; return them (benchmarks/figures.py)."""
+    out = {}
     print(f"CPU: {cpu_name()}; Python {platform.python_version()}")
     kin, imodel = KinematicModel(DEXTAR), IntervalModel(DEXTAR)
     task = benchmark_task(get_entry("dextar"))
@@ -56,6 +58,7 @@ def main_bench() -> None:
     t0 = time.perf_counter()
     given = certify_trajectory(DEXTAR, p095, monte_carlo_runs=0, refute_plan=False, kin=kin, imodel=imodel)
     t_plan = time.perf_counter() - t0
+    out["plan_095"] = {"given": given.verdict.value, "own": own.value, "wall_s": t_plan}
     print(f"1. certify --plan (plan --v-sing 0.95): {given.verdict.value}; certify's verdict at 0.95 m/s: "
           f"{own.value}; {'same' if given.verdict is own else 'DIFFERENT'}")
 
@@ -74,6 +77,8 @@ def main_bench() -> None:
     write_trajectory(again_file, r.t, r.q, x=r.x)
     again = certify_trajectory(DEXTAR, again_file, monte_carlo_runs=0, kin=kin, imodel=imodel)
     bound = "none" if retimed.refutation_bound is None else f"{retimed.refutation_bound:.4f} m/s"
+    out["arc"] = {"v_given": v_given, "given": arc_given.verdict.value, "v_min": retimed.v_min,
+                  "bound": retimed.refutation_bound, "again": again.verdict.value, "wall_s": t_retime}
     print(f"2. arc given at {v_given} m/s: {arc_given.verdict.value}; re-timed: certifies from "
           f"{retimed.v_min:.4f} m/s, refutation bound {bound} ({retimed.refutation_search}); the re-timed plan "
           f"certified again: {again.verdict.value}")
@@ -94,6 +99,7 @@ def main_bench() -> None:
             m.update(q)
             times.append(time.perf_counter_ns() - t0)
     ns = np.array(times[len(plan.q):])  # the first pass warms numpy up
+    out["envelope_us"] = {"mean": float(ns.mean() / 1e3), "max": float(ns.max() / 1e3), "samples": int(ns.size)}
     print(f"4. envelope check per sample, inside the envelope: mean {ns.mean() / 1e3:.1f} us, max "
           f"{ns.max() / 1e3:.1f} us ({len(ns)} samples); state at the end: {m.status.state.value}")
 
@@ -107,10 +113,20 @@ def main_bench() -> None:
         for q in quantise(q_true, DEXTAR.eps_q, "floor", rng):
             s = m.update(q)
         inside += s.state is EnvelopeState.CERTIFIED
+    out["envelope_mc"] = {"inside": inside, "runs": runs, "radius_mrad": 1e3 * float(np.max(env.radius))}
     print(f"5. Monte Carlo executions (the planned path, random geometries): {inside}/{runs} confirmed by the "
           f"envelope at run time (half-width {1e3 * float(np.max(env.radius)):.2f} mrad); the others fall back "
           "to the tracker")
+    return out
 
 
 if __name__ == "__main__":
-    main_bench()
+    import argparse
+    import json
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--json", help="also write the figures to this file (benchmarks/figures.py reads it)")
+    args = ap.parse_args()
+    figures = main_bench()
+    if args.json:
+        Path(args.json).write_text(json.dumps(figures, indent=1))

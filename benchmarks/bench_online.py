@@ -22,6 +22,7 @@ geometry and speed on 2 cores, most of it the real-time feeding).  The CPU is na
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import time
@@ -106,7 +107,9 @@ def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--geometries", type=int, default=20)
     p.add_argument("--speeds", default="1.0,1.1,1.2")
+    p.add_argument("--json", help="also write the figures to this file (benchmarks/figures.py reads it)")
     a = p.parse_args()
+    out = {"geometries": a.geometries, "speeds": {}}
     speeds = [float(v) for v in a.speeds.split(",")]
     kin, model = KinematicModel(DEXTAR), IntervalModel(DEXTAR)
     s = TrackerSettings.for_robot(DEXTAR)
@@ -143,23 +146,32 @@ def main() -> None:
                 for _ in range(201):
                     r0 = still.update(run.q_meas[k])
                 ratios.append(float(np.max((res[k].x[1] - res[k].x[0]) / (r0.x[1] - r0.x[0]))))
+        out["speeds"][f"{v:.1f}"] = {"check": n_check, "before": n_before, "online": n_online, "differ": differ,
+                                      "wrong": wrong}
         print(f"    {v:.1f}     | {n_check:2d}/{a.geometries} | {n_before:2d}/{a.geometries} | {n_online:2d}/{a.geometries} "
               f"| {differ} | {wrong}", flush=True)
     if delays:
+        out["delay_ms"] = {"median": statistics.median(delays), "max": max(delays), "runs": len(delays)}
         print(f"[2] decision delay at 1.1 m/s: median {statistics.median(delays):.0f} ms, max {max(delays):.0f} ms "
               f"({len(delays)} runs decided online)")
     lo, la, lb = (np.concatenate(v) / 1e3 for v in (lat_open, lat_all, lat_before))
+    out["update_us"] = {"open_mean": float(lo.mean()), "open_max": float(lo.max()), "samples": int(lo.size),
+                        "alone_mean": float(lb.mean()), "alone_max": float(lb.max()), "all_mean": float(la.mean()),
+                        "all_max": float(la.max())}
     print(f"[3] update latency while a window is open: mean {lo.mean():.1f} us, max {lo.max():.0f} us "
           f"({lo.size} samples); the tracker alone (before) on the same samples: mean {lb.mean():.1f} us, max "
           f"{lb.max():.0f} us (ratio of means {lo.mean() / lb.mean():.2f}); whole runs: mean {la.mean():.1f} us, "
           f"max {la.max():.0f} us")
+    out["outside"] = outside
     if ratios:
+        out["box_ratio"] = {"median": statistics.median(ratios), "worst": max(ratios)}
         print(f"[4] pose box 0.2 s after the decision / never crossed: median {statistics.median(ratios):.2f}, "
               f"worst {max(ratios):.2f}; samples with the truth outside a box: {outside}")
     back = _crossing(kin, 1.1, 3)
     q = np.concatenate([back.q_meas, back.q_meas[-2::-1]])
     mon, res, events, _, _ = online(model, s, q, int(back.mode_true[0]))
     changes = [(e.k, e.mode) for e in events if e.event is Event.MODE_CHANGED]
+    out["there_and_back"] = {"changes": [int(k) for k, _ in changes], "verdict": mon.verdict().value}
     print(f"[5] there-and-back at 1.1 m/s: changes reported online {changes}; final verdict {mon.verdict().value} "
           "(expected mode-unchanged)")
     n_changed = n_check_unchanged = n_online_unchanged = 0
@@ -171,6 +183,10 @@ def main() -> None:
         n_changed += Verdict.MODE_CHANGED in (vc, vo)
         n_check_unchanged += vc is Verdict.MODE_UNCHANGED
         n_online_unchanged += vo is Verdict.MODE_UNCHANGED and vc is Verdict.MODE_UNCHANGED
+    out["bounces"] = {"changed": n_changed, "check_unchanged": n_check_unchanged,
+                      "online_unchanged": n_online_unchanged}
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1))
     print(f"[6] bounces 15 mm before the locus at 1.0 m/s: mode-changed {n_changed} (must be 0); check "
           f"mode-unchanged {n_check_unchanged}/{a.geometries}, online too on {n_online_unchanged} of them")
 

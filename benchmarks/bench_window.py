@@ -69,13 +69,13 @@ from crosscert.verifier.tracker import initial_box_from_mode, track  # noqa: E40
 from crosscert.verifier.window import track_window  # noqa: E402
 
 
-def _true_geometries(n: int) -> list:
+def true_geometries(n: int) -> list:
     """The true geometries of the tables: the centre of [xi] (None) and ``n - 1`` seeded ones, every other at a
     corner of the box."""
     return [None] + [random_geometry(DEXTAR, np.random.default_rng(i), corners=(i % 2 == 0)) for i in range(1, n)]
 
 
-def _crossing(v, xi):
+def crossing(v, xi):
     """The simulated straight crossing of the tables at ``v`` m/s with true geometry ``xi``."""
     kin, bench = kinematics(), benchmark_crossing()
     return simulate_crossing(kin, bench.point, bench.direction, v, xi_true=xi, t_rest=0.05,
@@ -96,7 +96,7 @@ def _run(fn, v, xi, **kw):
 
 
 def main() -> None:
-    geoms = _true_geometries(20)
+    geoms = true_geometries(20)
     print("[1] crossings: v_sing, certified forward / window of 20, wrong, window s per run, us per sample fwd / win")
     for v in (0.9, 0.95, 1.0, 1.05, 1.1, 1.2, 1.3):
         res = [_run(simulate_crossing, v, xi) for xi in geoms]
@@ -118,7 +118,7 @@ def ceiling(speeds, starts: int, geometries: int = 20) -> None:
     from crosscert.planner.refute import RecordingBounds, search_bounce
 
     kin, im, s = kinematics(), interval_model(), default_settings()
-    geoms = _true_geometries(geometries)
+    geoms = true_geometries(geometries)
     # starting geometries of the non-convex search, seeded apart from the true ones
     seeds = [None] + [random_geometry(DEXTAR, np.random.default_rng(100 + i), corners=(i % 2 == 0))
                       for i in range(starts)]
@@ -128,7 +128,7 @@ def ceiling(speeds, starts: int, geometries: int = 20) -> None:
     for v in speeds:
         marks = []
         for xi in geoms:
-            r = _crossing(v, xi)
+            r = crossing(v, xi)
             w = track_window(im, r.q_meas, s, initial_mode=1)
             rb = RecordingBounds(q_meas=r.q_meas, m0=1, assumptions=s.assumptions)
             bounce = any(search_bounce(kin, rb, xi_start=x0).verified for x0 in seeds)
@@ -158,7 +158,7 @@ def bounce_floor(v: float, geometries: int = 20, step: float = 5e-4) -> None:
           f"bisected to {1e3 * step:.1f} mm), window verdicts (track_window defaults) at floor + "
           f"{1e3 * step:.1f} and + {2e3 * step:.1f} mm", flush=True)
     met = 0
-    for i, xi in enumerate(_true_geometries(geometries)):
+    for i, xi in enumerate(true_geometries(geometries)):
         t0 = time.perf_counter()
         fl = crossing_floor(kin, lambda d, xi=xi: (bounce(xi, d).q_meas, 1e-3), [0.002, 0.02], tol=step,
                             xi_starts=starts)
@@ -269,7 +269,7 @@ def speed(geometries: int, parts: str = "S1,S2", explain: bool = False) -> None:
 
     print(f"CPU: {_cpu()}; {_load('at start: ')}", flush=True)
     im, s = interval_model(), default_settings()
-    runs = [_crossing(1.0, xi).q_meas for xi in _true_geometries(geometries)]
+    runs = [crossing(1.0, xi).q_meas for xi in true_geometries(geometries)]
     kw = {}
     if explain:  # warm-up of the searches too: the explainer's NLPs of both kinds built once per process
         _warm_explainer(im, s, runs[0])

@@ -2,9 +2,9 @@
 
 numba types a literal ``0`` or ``True`` in a call from compiled code as
 ``Literal[int](0)`` / ``Literal[bool](True)`` and compiles the callee once more
-for that value, with its whole call tree: before 2026-12-02 the first run
-compiled 88 copies of 69 kernels, 26 s instead of 18 s (benchmarks/README.md,
-"Fewer copies").  Constant arguments are numpy scalars instead
+for that value, with its whole call tree: with Python literals the first run
+compiled 88 copies of 69 kernels, 26 s instead of 18 s (measured side by side;
+benchmarks/README.md's git history).  Constant arguments are numpy scalars instead
 (:data:`verifier.compiled.contractors.I0`, ``YES``, ``NO``, ...), which numba
 types as ``int64`` / ``bool``.  This test reads the source of
 ``verifier/compiled`` and fails on any call of a kernel with an int or bool
@@ -92,7 +92,7 @@ def _reachable_kernels(fn) -> set[str]:
 def test_the_default_velocity_model_compiles_only_its_own_kernels():
     """The row step of the default model (``SOUND``) reaches neither the joint-acceleration bound nor the
     Gauss-Seidel contractor of the joint-rate models: numba compiles only what a call reaches, and these
-    two cost 2 s of the first run (benchmarks/README.md, "Compile only the velocity model in use")."""
+    two cost 2 s of the first run (measured; benchmarks/README.md's git history)."""
     from crosscert.verifier.compiled import step as kernels
     from crosscert.verifier.constants import JOINT_FD, PAPER, SOUND
 

@@ -3,8 +3,8 @@
 The kernels that only compiled code calls are built without numba's CPython
 and C wrappers (:class:`verifier.compiled.ops.Kernel`): numba compiles and
 optimises every function's library with everything it calls, so each wrapper
-cost in every caller's compilation too (benchmarks/README.md, "Kernels
-without wrappers").  numba would run such a function, called from Python,
+cost in every caller's compilation too (measured; benchmarks/README.md's git
+history).  numba would run such a function, called from Python,
 through a null address (a segfault): a :class:`Kernel` called from Python runs
 a twin compiled with the wrappers instead.  The entry points :mod:`verifier`
 calls keep their wrappers and the on-disk cache.

@@ -103,7 +103,7 @@ cached_jit = njit(cache=True, **KERNEL_FLAGS)
 #: Kernels inlined into their callers' IR before typing (numba's ``inline="always"``): no compiled
 #: function of their own.  numba optimises and generates the machine code of each compiled function's
 #: library with all it calls linked in, so a large kernel called from one place only costs that work
-#: once more as a function of its own (benchmarks/README.md, "The tenth session side by side").
+#: once more as a function of its own (measured side by side; benchmarks/README.md's git history).
 inline_jit = kernel(inline="always", **KERNEL_FLAGS)
 #: IEEE division as numpy's (x / 0 is inf or NaN): numba's default raises
 #: ZeroDivisionError, which an empty divisor such as [0.3, 0] reached.

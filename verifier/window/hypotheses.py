@@ -229,7 +229,7 @@ def decide(hyps, passes, max_passes, rel_tol, max_geometries, full_w, targets=No
     but marked incomplete (``HypothesisResult.complete``), since its skipped rounds might have refuted
     it too (the recording would then be ``inconsistent``).  Running them would cost the surviving
     hypothesis' rounds on every decided recording, and a refuted hypothesis is false whatever the
-    other one's tubes are (measured: benchmarks/README.md [8]).  A hypothesis left out of ``targets``
+    other one's tubes are (measured: benchmarks/README.md's git history).  A hypothesis left out of ``targets``
     runs no round and is marked incomplete too.
 
     ``ask`` (``ask(h) -> Explanation``, optional) is called once per hypothesis, when its budget of
