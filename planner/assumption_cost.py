@@ -1,9 +1,11 @@
 """What a certificate's acceleration assumption buys: v_min again under the robot's physical ``a_max``.
 
-A certificate's default acceleration bounds (:mod:`planner.acceleration`)
-may be tighter than the robot's physical ``a_max`` on some axes (an axis the
-plan accelerates gets its planned peak + 10 %).  A tighter assumption covers
-fewer executions and can certify a slower crossing.
+A certificate's acceleration bounds (:mod:`planner.acceleration`) are the
+robot's physical ``a_max`` by default, and tighter on some axes when the user
+states so: a tracking margin around the plan (``--a-margin``, a declared
+``Robot.tracking_a_margin``) or ``--a-max`` below the robot's.  A tighter
+assumption covers fewer executions and can certify a slower crossing; with the
+default nothing more runs (the outcome is that the two coincide).
 :func:`certify_at_robot_a_max` re-runs :func:`planner.certify.crossing.certify_crossing`
 with ``a_max`` = the robot's, so a certificate can state both speeds.
 
@@ -99,7 +101,7 @@ def speed_guess(v_min: float, used: AccelerationAssumption, ref: AccelerationAss
     A motion at speed ``v`` turning back at the locus needs ``v**2 / (2 a)`` of room, so the slowest speed whose
     turn-backs the tracker can rule out grows like ``sqrt(a)``: ``v_min`` times the square root of the largest
     ratio of the robot's bound to the certificate's over the axes (dimensionless: each ratio is in one unit).
-    On the benchmark task of docs/planning.md it gives 1.0588 m/s for the 1.0624 m/s found.
+    A guess only: the search asks the speeds themselves, so a poor guess costs questions, never the answer.
     """
     ratio = max(r / u for r, u in zip(ref.values, used.values))
     return float(v_min) * math.sqrt(max(ratio, 1e-12))
