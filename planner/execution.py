@@ -50,6 +50,7 @@ import numpy as np
 
 from crosscert.robots.assumptions import Assumptions
 from crosscert.robots.errors import InputError, SimulationError
+from crosscert.verifier import interval as I
 
 __all__ = ["ExecutionKind", "ExecutionClass", "joint_class", "cartesian_class", "effective_deviation", "in_class"]
 
@@ -134,11 +135,23 @@ class ExecutionClass:
         }
 
 
+def joint_error(eps_q: float, tracking_error: float = 0.0, *, down: bool = False) -> float:
+    """``eps_q + tracking_error`` (joint units): how far the readings may lie from the planned joints.
+
+    The one place the two are summed.  Rounded up for a class a certificate covers (every execution within
+    the exact sum is in it); ``down=True`` rounds down, for a counterexample search, whose motion must lie
+    within the exact sum.
+    """
+    lo, hi = I.add(eps_q, eps_q, tracking_error, tracking_error)
+    return float(lo if down else hi)
+
+
 def joint_class(robot, eps_q: float, tracking_error: float = 0.0) -> ExecutionClass:
     """Joints within ``eps_q + tracking_error`` (rad) of the plan, geometry in ``[xi]``."""
-    return ExecutionClass(ExecutionKind.JOINT, float(eps_q + tracking_error), 0.0, robot.xi_lo_array.copy(),
+    bound = joint_error(eps_q, tracking_error)
+    return ExecutionClass(ExecutionKind.JOINT, bound, 0.0, robot.xi_lo_array.copy(),
                           robot.xi_hi_array.copy(), {"source": "robot calibration box"},
-                          float(eps_q + tracking_error), None, True,
+                          bound, None, True,
                           {"proved": True, "method": "stated, not derived: eps_q + tracking_error and [xi] as given"})
 
 
@@ -280,8 +293,9 @@ def cartesian_class(kin, x_path, q_plan, xi_plan, eps_q: float, tracking_error: 
         "safety": float(safety),
         "seed": int(seed),
     }
-    fast = float(eps_q + tracking_error)
-    return ExecutionClass(ExecutionKind.CARTESIAN, fast + float(drift), float(drift), lo, hi, derivation, fast, float(step))
+    fast = joint_error(eps_q, tracking_error)
+    reading = float(I.add(fast, fast, float(drift), float(drift))[1])
+    return ExecutionClass(ExecutionKind.CARTESIAN, reading, float(drift), lo, hi, derivation, fast, float(step))
 
 
 def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: float, tracking_error: float = 0.0) -> bool:
@@ -296,7 +310,8 @@ def in_class(cls: ExecutionClass, robot, q_true, q_plan, xi, xi_plan, eps_q: flo
     q_true, q_plan, xi = (np.asarray(a, float) for a in (q_true, q_plan, xi))
     lo, hi = cls.xi_lo, cls.xi_hi
     if cls.kind is ExecutionKind.JOINT:
-        return bool(np.all(np.abs(q_true - q_plan) <= eps_q + tracking_error) and np.all((lo <= xi) & (xi <= hi)))
+        return bool(np.all(np.abs(q_true - q_plan) <= joint_error(eps_q, tracking_error))
+                    and np.all((lo <= xi) & (xi <= hi)))
     offs = dict(_offsets(robot))
     others = [k for k in range(xi.size) if k not in offs.values()]
     if not np.all((lo[others] <= xi[others]) & (xi[others] <= hi[others])):

@@ -73,7 +73,7 @@ from crosscert.verifier.implicit import (ImplicitTapes, contract_roots, inflate_
                                          slope_change, strictly_inside)
 from crosscert.verifier.linalg import imat_ivec
 
-from .execution import ExecutionClass, ExecutionKind, cartesian_class, joint_class
+from .execution import ExecutionClass, ExecutionKind, cartesian_class, joint_class, joint_error
 from .task import PlannedTrajectory
 
 __all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "prove_cartesian_class_cached", "proved_class",
@@ -661,7 +661,7 @@ def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error
     for i, j in _offsets(robot).items():
         cl, ch = I.add(xi_plan[j], xi_plan[j], proof.c_lo[i], proof.c_hi[i])
         lo[j], hi[j] = min(float(cl), lo[j]), max(float(ch), hi[j])
-    fast = float(I.add(eps_q, eps_q, tracking_error, tracking_error)[1])  # rounded up
+    fast = joint_error(eps_q, tracking_error)
     reading = float(I.add(fast, fast, proof.drift, proof.drift)[1])
     derivation = {
         "constant_range_rad": [[float(a), float(b)] for a, b in zip(proof.c_lo, proof.c_hi)],

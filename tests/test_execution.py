@@ -104,3 +104,41 @@ def test_certifying_run_encloses_every_execution_of_the_class(plan, cls, imodel)
     assert res.verdict is Verdict.MODE_CHANGED
     check_contains(res.x_lo, res.x_hi, plan.x, "planned pose")
     check_contains(res.xd_lo, res.xd_hi, plan.xd, "planned velocity", start=1)
+
+
+def _rounding_pairs(rng, count=200):
+    """Seeded ``(eps_q, tracking_error)`` pairs whose float sum rounds down for some, up for others."""
+    return [(float(rng.uniform(1e-5, 1e-3)), float(rng.uniform(1e-7, 1e-3))) for _ in range(count)]
+
+
+def test_the_joint_error_is_rounded_outward_on_each_side():
+    """eps_q + tracking_error, summed in one place: rounded up for the classes a certificate covers, down for
+    a counterexample's readings (exact sums checked with fractions)."""
+    from fractions import Fraction
+
+    from crosscert.planner.execution import joint_error
+    from crosscert.planner.refute.orchestrate import refute_overrides
+
+    pairs = _rounding_pairs(np.random.default_rng(20261207))
+    below = [(e, t) for e, t in pairs if Fraction(e + t) < Fraction(e) + Fraction(t)]
+    above = [(e, t) for e, t in pairs if Fraction(e + t) > Fraction(e) + Fraction(t)]
+    assert below and above  # the plain sum would err on both sides
+    for e, t in pairs:
+        exact = Fraction(e) + Fraction(t)
+        assert Fraction(joint_error(e, t)) >= exact
+        assert Fraction(joint_error(e, t, down=True)) <= exact
+        jc = joint_class(DEXTAR, e, t)
+        assert Fraction(jc.reading_error) >= exact and Fraction(jc.fast_error) >= exact
+        b = PlanningBounds(eps_q=e, tracking_error=t).for_robot(DEXTAR)
+        assert Fraction(refute_overrides(b, DEXTAR.a_max)["eps_q"]) <= exact
+
+
+def test_the_measured_cartesian_class_rounds_its_reading_error_up(kin, plan):
+    """The measured class's fast and total reading errors cover the exact sums (eps_q + tracking_error, then
+    + the drift bound)."""
+    from fractions import Fraction
+
+    for e, t in _rounding_pairs(np.random.default_rng(7), 6):
+        c = cartesian_class(kin, [plan.x], [plan.q], plan.xi_plan, e, t, samples=2)
+        assert Fraction(c.fast_error) >= Fraction(e) + Fraction(t)
+        assert Fraction(c.reading_error) >= Fraction(c.fast_error) + Fraction(c.drift)

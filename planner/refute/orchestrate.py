@@ -20,6 +20,7 @@ import numpy as np
 from crosscert.robots.errors import InputError, SimulationError
 
 from ..acceleration import derived_a_max
+from ..execution import joint_error
 from ..models import kinematic_model
 from ..plan import plan_crossing
 from ..task import PlanningBounds
@@ -62,7 +63,7 @@ def load_model(robot) -> None:
 def refute_overrides(b: PlanningBounds, a_max) -> dict:
     """The bounds a counterexample search of a certifying run uses (:func:`planner.refute.refutation_bound`'s
     ``bounds``): the readings within ``eps_q + tracking_error``, ``a_max`` per axis, and the stated initial speed."""
-    out = {"eps_q": b.eps_q + b.tracking_error, "a_max": np.asarray(a_max, float)}
+    out = {"eps_q": joint_error(b.eps_q, b.tracking_error, down=True), "a_max": np.asarray(a_max, float)}
     if b.xd0 is not None:
         out["v0_max"] = np.asarray(b.xd0, float)
     return out
