@@ -133,8 +133,8 @@ class ClassProof:
             return {"proved": False, "reason": self.reason, "time_s": self.time_s}
         return {"proved": True, "method": METHOD, "boxes_explored": self.boxes, "time_s": self.time_s,
                 "converged": self.converged, "tolerance": self.tol,
-                "largest_drift_found_rad": self.found.get("drift"),
-                "largest_step_found_rad": self.found.get("step")}
+                "largest_drift_found": self.found.get("drift"),
+                "largest_step_found": self.found.get("step")}
 
 
 def offset_split(lo_min, hi_max, r_lo, r_hi):
@@ -664,11 +664,11 @@ def proved_class(robot, proof: ClassProof, xi_plan, eps_q: float, tracking_error
     fast = joint_error(eps_q, tracking_error)
     reading = float(I.add(fast, fast, proof.drift, proof.drift)[1])
     derivation = {
-        "constant_range_rad": [[float(a), float(b)] for a, b in zip(proof.c_lo, proof.c_hi)],
-        "largest_drift_rad": proof.drift,
-        "largest_step_rad": proof.step,
-        "largest_drift_found_rad": proof.found.get("drift"),
-        "largest_step_found_rad": proof.found.get("step"),
+        "constant_range": [[float(a), float(b)] for a, b in zip(proof.c_lo, proof.c_hi)],
+        "largest_drift": proof.drift,
+        "largest_step": proof.step,
+        "largest_drift_found": proof.found.get("drift"),
+        "largest_step_found": proof.found.get("step"),
         "offset_box": "hull of the proved constants and the robot's offset intervals",
     }
     return ExecutionClass(ExecutionKind.CARTESIAN, reading, proof.drift, lo, hi, derivation, fast, proof.step,

@@ -162,8 +162,11 @@ def test_certificate_json_of_the_3rpr_names_units_sources_and_the_robot_a_max_ru
             "axis 3: 200 rad/s^2 (robot a_max)") in text
     assert "at the robot's a_max (80 m/s^2, 80 m/s^2, 200 rad/s^2): minimal certified v_sing" in text
     report = json.loads((out / "certificate.json").read_text())
-    assert report["schema"] == "crosscert-certificate/3"
+    assert report["schema"] == "crosscert-certificate/4"
     assert report["acceleration_units"] == ["m/s^2", "m/s^2", "rad/s^2"]
+    # prismatic legs: the joint quantities (eps_q, the execution class) are in metres, and say so
+    assert report["joint_units"] == ["m", "m", "m"] and report["pose_units"] == ["m", "m", "rad"]
+    assert report["bounds"]["eps_q"] == 5e-6 and "eps_q_rad" not in report["bounds"]
     assert report["bounds"]["a_margin"] == 0.1
     assert report["a_max_used"] == [
         {"value": pytest.approx(66.0), "unit": "m/s^2", "source": "plan peak + margin"},

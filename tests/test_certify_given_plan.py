@@ -85,7 +85,7 @@ def test_cli_certifies_a_plan_file_and_reports_its_source(plan_file, tmp_path, c
     assert text.startswith(f"your plan ({V_CERTIFIED:.3f} m/s at the singularity): certified mode-changed")
     assert "a_max used: axis 1: 80 m/s^2 (robot a_max); axis 2: 80 m/s^2 (robot a_max)" in text
     report = json.loads((out / "certificate.json").read_text())
-    assert report["schema"] == "crosscert-certificate/3" and report["verdict"] == "mode-changed"
+    assert report["schema"] == "crosscert-certificate/4" and report["verdict"] == "mode-changed"
     assert report["plan"]["sha256"] == hashlib.sha256(plan_file.read_bytes()).hexdigest()
     assert report["plan"]["poses"] == "given" and report["task"] is None
     assert report["execution"]["kind"] == "cartesian" and report["monte_carlo"]["runs"] == 2

@@ -53,7 +53,7 @@ def test_the_certified_run_is_recorded_with_the_class_it_rests_on(certified, env
     run = report["certified_run"]
     assert report["verdict"] == "mode-changed" and run["final_mode"] == -run["initial_mode"]
     assert run["decided_by"] == "window" and run["decided_at_sample"] == len(certified[1].q) - 1
-    e = report["execution"]["reading_error_rad"]
+    e = report["execution"]["reading_error"]
     assert np.all(envelope.radius < e - DEXTAR.eps_q) and np.all(envelope.radius > 0.99 * (e - DEXTAR.eps_q))
 
 

@@ -126,9 +126,9 @@ def test_certify_crossing_with_background_refutation():
     assert summary["execution"]["kind"] == "cartesian"
     assert np.isfinite(summary["gap_mps"]) and summary["gap_mps"] > 0
     # self-describing: what was certified, under which bounds, in our words
-    assert summary["schema"] == "crosscert-certificate/3" and summary["robot"] == "dextar"
-    assert summary["task"]["start_m"] == list(_task().start) and summary["method"] == "smoothstep"
-    assert summary["bounds"]["a_peak_mps2"] == 60.0 and summary["bounds"]["eps_q_rad"] == DEXTAR.eps_q
+    assert summary["schema"] == "crosscert-certificate/4" and summary["robot"] == "dextar"
+    assert summary["task"]["start"] == list(_task().start) and summary["method"] == "smoothstep"
+    assert summary["bounds"]["a_peak_mps2"] == 60.0 and summary["bounds"]["eps_q"] == DEXTAR.eps_q
     assert list(summary["execution"]["xi_lo"]) == list(DEXTAR.param_names)
     found = [r for r in summary["refutation"] if r["counterexample"]]
     assert found and all(r["outcome"] == "counterexample-found" for r in found)

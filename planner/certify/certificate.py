@@ -26,7 +26,7 @@ from .plan import decision_sample
 __all__ = ["CrossingCertificate", "CERTIFICATE_SCHEMA", "package_versions"]
 
 #: Version of the layout of :meth:`CrossingCertificate.summary` (``certificate.json``).
-CERTIFICATE_SCHEMA = "crosscert-certificate/3"
+CERTIFICATE_SCHEMA = "crosscert-certificate/4"
 
 @dataclass(frozen=True)
 class CrossingCertificate:
@@ -53,7 +53,8 @@ class CrossingCertificate:
     computed with the refutation bound).  ``a_max_used`` is the acceleration
     bound of every pose axis with its unit and source
     (:mod:`planner.acceleration`), ``acceleration_units`` the robot's unit of
-    each axis' acceleration; ``at_robot_a_max`` the same search under
+    each axis' acceleration, ``joint_units`` and ``pose_units`` those of the
+    joints (``eps_q``, ``tracking_error``, the execution class) and of the pose axes; ``at_robot_a_max`` the same search under
     the robot's physical ``a_max`` (:func:`planner.assumption_cost.certify_at_robot_a_max`;
     None when not asked for).
     """
@@ -79,6 +80,8 @@ class CrossingCertificate:
     bounce: BounceGap | None = field(default=None, repr=False)
     at_robot_a_max: object = field(default=None, repr=False)
     acceleration_units: tuple = ()
+    joint_units: tuple = ()
+    pose_units: tuple = ()
     refutation_ran: bool = False
     plan_source: object = None  # planner.certify.trajectory.PlanSource of a given plan; None: planned here
 
@@ -134,16 +137,18 @@ class CrossingCertificate:
             "schema": CERTIFICATE_SCHEMA,
             "robot": self.robot_name,
             "plan": None if self.plan_source is None else self.plan_source.summary(),
-            "task": None if self.task is None else {"start_m": self.task.start.tolist(), "goal_m": self.task.goal.tolist(),
-                                                    "working_guess_rad": self.task.working_guess.tolist()},
+            "task": None if self.task is None else {"start": self.task.start.tolist(), "goal": self.task.goal.tolist(),
+                                                    "working_guess": self.task.working_guess.tolist()},
+            "joint_units": [str(u) for u in self.joint_units],
+            "pose_units": [str(u) for u in self.pose_units],
             "acceleration_units": list(self.acceleration_units),
             "method": b.method.value,
             "bounds": {
-                "eps_q_rad": b.eps_q, "tracking_error_rad": b.tracking_error, "t_s": b.t_s, "t_rest_s": b.t_rest,
+                "eps_q": b.eps_q, "tracking_error": b.tracking_error, "t_s": b.t_s, "t_rest_s": b.t_rest,
                 "a_peak_mps2": b.a_peak,
                 "a_max": None if b.a_max is None else [{"value": v, "unit": u} for v, u in zip(b.a_max, self.acceleration_units)],
                 "a_margin": b.a_margin, "xi_splits": None if b.xi_splits is None else list(b.xi_splits),
-                "execution": b.execution.value, "qd_max_radps": b.qd_max, "qdd_max_radps2": b.qdd_max,
+                "execution": b.execution.value, "qd_max": b.qd_max, "qdd_max": b.qdd_max,
                 "reasoning": b.reasoning.value, "one_motion_samples": b.one_motion,
             },
             "verdict": self.verdict.value,

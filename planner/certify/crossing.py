@@ -357,5 +357,7 @@ def _certificate(job: _Job, search, run, mc, ref_bound, ref, gap, clock, t0) -> 
         window=win,
         bounce=gap,
         acceleration_units=robot.acceleration_units,
+        joint_units=robot.joint_units,
+        pose_units=robot.pose_units,
         refutation_ran=ref is not None,
     )

@@ -175,8 +175,8 @@ class CertifiedEnvelope:
             The fast reading error is below ``eps_q`` (``where`` prefixes the message).
         """
         eps = np.broadcast_to(np.asarray(eps_q, float), (robot.n,))
-        e = np.broadcast_to(np.asarray(execution["reading_error_rad"], float), (robot.n,))
-        fast = execution.get("fast_error_rad")
+        e = np.broadcast_to(np.asarray(execution["reading_error"], float), (robot.n,))
+        fast = execution.get("fast_error")
         fast = e if fast is None else np.broadcast_to(np.asarray(fast, float), (robot.n,))
         if np.any(eps > fast):
             raise InputError(f"{where}the readings' error eps_q = {float(np.max(eps)):.4g} exceeds the certified "
@@ -185,7 +185,7 @@ class CertifiedEnvelope:
         radius = _down(e - eps)
         if np.any(radius < 0.0):
             radius = np.zeros(robot.n)  # no room left around the plan: only the plan itself, never reached
-        d = execution.get("drift_per_sample_rad")
+        d = execution.get("drift_per_sample")
         step = None if d is None else _down(np.broadcast_to(np.asarray(d, float), (robot.n,)))
         q = np.array(q_plan, float)
         for a in (q, radius) + (() if step is None else (step,)):

@@ -336,6 +336,8 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
         param_names=tuple(robot.param_names),
         window=run.window,
         acceleration_units=robot.acceleration_units,
+        joint_units=robot.joint_units,
+        pose_units=robot.pose_units,
         refutation_ran=rows is not None,
         plan_source=source,
     )

@@ -383,7 +383,8 @@ def _study(a) -> None:
     if isinstance(bounds.get("eps_q"), (int, float)) and not isinstance(bounds["eps_q"], bool):
         _bound("[bounds] eps_q", "eps_q", bounds["eps_q"], study_robot, MAX_JOINT_ERROR)
     if isinstance(bounds.get("tracking_error"), (int, float)) and not isinstance(bounds["tracking_error"], bool):
-        _in("[bounds] tracking_error", bounds["tracking_error"], 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
+        _in("[bounds] tracking_error", bounds["tracking_error"], 0.0, MAX_JOINT_ERROR, lo_open=False,
+            unit=" " + study_robot.assumptions.unit("eps_q"))
     if isinstance(bounds.get("a_peak"), (int, float)) and not isinstance(bounds.get("a_peak"), bool):
         _in("[bounds] a_peak", bounds["a_peak"], 0.0, 1e6, unit=" m/s^2")
     _in("[certify] tol", cert.get("tol"), MIN_TOL, 1.0, lo_open=False, unit=" m/s")
@@ -418,7 +419,8 @@ def _study(a) -> None:
 def _certify_bounds(a, robot) -> None:
     """``certify``'s bounds, with or without ``--plan``: reading error, tracking error, acceleration."""
     _bound("--eps-q", "eps_q", a.eps_q, robot, MAX_JOINT_ERROR)
-    _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False, unit=" rad")
+    _in("--tracking-error", a.tracking_error, 0.0, MAX_JOINT_ERROR, lo_open=False,
+        unit=" " + robot.assumptions.unit("eps_q"))
     _a_max_per_axis(a, robot)
     if a.a_margin is not None and a.a_max is not None:
         raise InputError("--a-margin and --a-max both set the acceleration bound: give one")

@@ -358,8 +358,9 @@ class Monitor:
 
     def bounds_text(self) -> str:
         """The bounds the run assumed, for a figure: eps_q, a_max, t_s and the velocity model."""
-        s = self.online.settings
-        return (f"eps_q = {np.max(s.eps_q):.3g} rad, a_max = {np.max(s.a_max):.3g} m/s^2, t_s = {s.t_s:.3g} s, "
+        s, units = self.online.settings, self.model.robot.assumptions
+        return (f"eps_q = {np.max(s.eps_q):.3g} {units.unit('eps_q')}, a_max = {np.max(s.a_max):.3g} "
+                f"{units.unit('a_max')}, t_s = {s.t_s:.3g} s, "
                 f"velocity model {s.velocity_model}")
 
     def summary(self, error: str | None = None) -> dict:
