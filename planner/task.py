@@ -168,10 +168,10 @@ class PlanningBounds:
         Samples of the one-motion step in those windows
         (``verifier.window.track_window(one_motion=...)``; default
         :data:`verifier.one_motion.ONE_MOTION_SAMPLES`, 40, as in ``track_window``;
-        0: not tried).  It lowers the benchmark task's v_min from 0.961 to 0.929
-        m/s at about twice certify's time (docs/tracker.md, "One motion, one
-        geometry"); an optimisation loop that values time over the last 3 %
-        of speed passes 0.
+        0: not tried).  It lowers the benchmark task's v_min by a few percent
+        at about twice certify's time (docs/tracker.md, "One motion, one
+        geometry"); an optimisation loop that values time over the last few
+        percent of speed passes 0.
     xd0 : float or array (n,), optional
         Initial speed bound per pose axis, its unit per s: the executions start
         with ``|x'(0)| <= xd0`` (robot default: near rest).  A given plan that
