@@ -25,7 +25,7 @@ from .registry import (DEFAULT_ROBOT, ENTRY_POINT_GROUP, ROBOTS, RobotEntry, Rob
                        get_entry, get_robot, robot_origin)
 from .rpr3 import RPR3
 from .units import PoseUnit
-from .validation import CheckOutcome, CheckResult, ValidationReport, validate
+from .validation import CheckOutcome, CheckResult, ValidationReport, check_definition
 
 __all__ = [
     # the shipped robots and the registry
@@ -55,7 +55,7 @@ __all__ = [
     "KinematicModel",
     "LumpedDynamics",
     # checking a definition (the interval checks: crosscert.validate)
-    "validate",
+    "check_definition",
     "ValidationReport",
     "CheckResult",
     "CheckOutcome",

@@ -96,7 +96,7 @@ class Robot:
         ``mode_reference(x, q, xi) -> int``: the assembly mode (+1/-1) of a
         regular configuration computed from the robot's geometry, without
         CasADi (e.g. a cross product).  It states the mode convention
-        independently of ``mode_sign``, so that :func:`robots.validate` can
+        independently of ``mode_sign``, so that :func:`crosscert.validate` can
         check that the two agree.  ``None``: that check is not run.
     tracking_a_margin : tuple of float, length n, optional
         How far the executed end-effector acceleration may deviate from the

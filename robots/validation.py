@@ -1,9 +1,9 @@
-"""Check a robot definition before use: :func:`validate`.
+"""The float checks of a robot definition: :func:`check_definition` (every check: ``crosscert.validate``).
 
 A :class:`~robots.base.Robot` is data plus one CasADi loop closure; most
 mistakes in writing one (a pose coordinate in degrees, a bound in mm, a mode
 sign flipped, a loop closure the interval evaluator reads differently from
-CasADi) give no error, only wrong answers.  :func:`validate` runs a fixed
+CasADi) give no error, only wrong answers.  :func:`check_definition` runs a fixed
 list of checks on seeded random configurations and returns a
 :class:`ValidationReport` with one :class:`CheckResult` per check.
 
@@ -26,7 +26,7 @@ from .base import Robot
 from .errors import CrosscertError, ModelError
 from .kinematics import KinematicModel
 
-__all__ = ["CheckOutcome", "CheckResult", "ValidationReport", "Sample", "validate", "INTERVAL_CHECK_NAMES"]
+__all__ = ["CheckOutcome", "CheckResult", "ValidationReport", "Sample", "check_definition", "INTERVAL_CHECK_NAMES"]
 
 #: Relative agreement required between CasADi's Jacobians and central differences of f.
 JACOBIAN_RTOL = 1e-5
@@ -219,8 +219,8 @@ def _check_mode(robot: Robot, km: KinematicModel, s: Sample) -> CheckResult:
                        + ("; every sign is flipped: mode_sign has the wrong sign)" if flipped else ")"))
 
 
-def validate(robot: Robot, *, seed: int = 0, samples: int = 16,
-             interval_checks: dict[str, IntervalCheck] | None = None) -> ValidationReport:
+def check_definition(robot: Robot, *, seed: int = 0, samples: int = 16,
+                     interval_checks: dict[str, IntervalCheck] | None = None) -> ValidationReport:
     """Check a robot definition on seeded random configurations.
 
     Checks, in order: ``model`` (the loop closure builds a kinematic model),
@@ -249,7 +249,7 @@ def validate(robot: Robot, *, seed: int = 0, samples: int = 16,
     ValidationReport
     """
     if not isinstance(robot, Robot):
-        raise ModelError(f"validate needs a Robot, got {type(robot).__name__}")
+        raise ModelError(f"check_definition needs a Robot, got {type(robot).__name__}")
     rng = np.random.default_rng(seed)
     checks: list[CheckResult] = []
     later = ("units", "sampling", "jacobians", "ik-fk-round-trip", "mode-convention", *INTERVAL_CHECK_NAMES)

@@ -24,7 +24,7 @@ from crosscert.robots.gough_stewart import HOME, gs_ik, mode_by_plucker
 from crosscert.robots.rpr3 import RPR3, mode_by_leg_lines, rpr3_ik
 from crosscert.robots.errors import ModelError
 from crosscert.robots.validation import CheckOutcome
-from crosscert.robots.validation import validate as validate_geometry
+from crosscert.robots.validation import check_definition
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import TrackerSettings, Verdict, initial_box_from_mode, track_batch
 from crosscert.verifier.validation import validate
@@ -164,9 +164,9 @@ def test_validate_finds_a_loop_closure_the_interval_evaluator_cannot_read():
 
 
 def test_validate_reports_interval_checks_not_run_without_them():
-    """The robots layer's validate never runs (or passes) the interval checks, whatever was imported before
+    """The robots layer's check_definition never runs (or passes) the interval checks, whatever was imported before
     (the verifier is imported here); the message says which call runs them."""
-    report = validate_geometry(RPR3)
+    report = check_definition(RPR3)
     by_name = {c.name: c for c in report.checks}
     assert by_name["interval-evaluation"].outcome is CheckOutcome.NOT_RUN
     assert "crosscert.verifier.validate" in by_name["interval-containment"].message
@@ -176,10 +176,10 @@ def test_validate_reports_interval_checks_not_run_without_them():
 def test_validate_does_not_depend_on_what_was_imported():
     """A fresh interpreter that imports only crosscert.robots gets the same report as this process, which has
     imported the verifier (it registered its checks on import before: NOT_RUN in one, passed in the other)."""
-    code = ("from crosscert.robots import RPR3, validate\n"
-            "print([(c.name, c.outcome.value) for c in validate(RPR3, samples=4).checks])")
+    code = ("from crosscert.robots import RPR3, check_definition\n"
+            "print([(c.name, c.outcome.value) for c in check_definition(RPR3, samples=4).checks])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
-    here = [(c.name, c.outcome.value) for c in validate_geometry(RPR3, samples=4).checks]
+    here = [(c.name, c.outcome.value) for c in check_definition(RPR3, samples=4).checks]
     assert out.stdout.strip() == str(here)
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from crosscert.robots.validation import CheckOutcome, CheckResult, ValidationReport
-from crosscert.robots.validation import validate as validate_geometry
+from crosscert.robots.validation import check_definition
 
 from .contractors import hc4_pose, newton
 from .model import IntervalModel
@@ -100,7 +100,7 @@ INTERVAL_CHECKS = {"interval-evaluation": check_interval_evaluation,
 
 
 def validate(robot, *, seed: int = 0, samples: int = 16) -> ValidationReport:
-    """Every check of ``robot``: :func:`robots.validation.validate` with :data:`INTERVAL_CHECKS`.
+    """Every check of ``robot``: :func:`robots.validation.check_definition` with :data:`INTERVAL_CHECKS`.
 
     Parameters
     ----------
@@ -115,4 +115,4 @@ def validate(robot, *, seed: int = 0, samples: int = 16) -> ValidationReport:
     ValidationReport
         ``.ok`` when every check ran and passed.
     """
-    return validate_geometry(robot, seed=seed, samples=samples, interval_checks=INTERVAL_CHECKS)
+    return check_definition(robot, seed=seed, samples=samples, interval_checks=INTERVAL_CHECKS)

@@ -289,7 +289,7 @@ def build_parser(robot: str = DEFAULT_ROBOT) -> argparse.ArgumentParser:
 
     ro = command("robots", "list the robots (n, m, defaults, where each comes from: built-in, an installed entry point "
                            "or a file), or check one definition with --validate")
-    ro.add_argument("--validate", metavar="NAME", help=f"run robots.validate on robot NAME ({', '.join(available_robots())}, "
+    ro.add_argument("--validate", metavar="NAME", help=f"run crosscert.validate on robot NAME ({', '.join(available_robots())}, "
                                                        "or path/to/robot.py:NAME)")
     ro.add_argument("--robot", dest="files", action="append", default=[], metavar="FILE.py:NAME",
                     help="list the robot of this file too (repeatable)")
