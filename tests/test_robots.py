@@ -37,7 +37,7 @@ def random_elbows_out_pose(rng, xi):
 
 # ------------------------------------------------------------------ registry
 def test_registry():
-    assert available_robots() == ["3rpr", "dextar", "gough-stewart"]
+    assert available_robots() == ["3rpr", "dextar", "gough-stewart", "iri-five-bar"]
     assert ROBOTS["dextar"].robot is DEXTAR
     assert get_robot("dextar") is DEXTAR
     assert get_robot("  DexTAR ") is DEXTAR
