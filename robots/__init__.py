@@ -5,7 +5,8 @@ The bottom layer of crosscert: it imports neither :mod:`verifier` nor
 one owner of the bounds a certificate assumes (:mod:`robots.assumptions`) and
 the argument checks (:mod:`robots.arguments`) live here so every layer above
 can use them.  A robot's own helpers (IK, its benchmark crossing) stay in its
-module (:mod:`robots.dextar`, :mod:`robots.rpr3`, :mod:`robots.gough_stewart`).
+module (:mod:`robots.dextar`, :mod:`robots.iri_five_bar`, :mod:`robots.rpr3`,
+:mod:`robots.gough_stewart`).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from .dynamics import LumpedDynamics
 from .errors import (CrosscertError, InputError, ModelError, RobotSourceError, SimulationError, TrajectoryFileError,
                      UnknownRobotError)
 from .gough_stewart import GOUGH_STEWART
+from .iri_five_bar import IRI_FIVE_BAR
 from .kinematics import KinematicModel
 from .mass_model import LumpedMassModel
 from .registry import (DEFAULT_ROBOT, ENTRY_POINT_GROUP, ROBOTS, RobotEntry, RobotOrigin, RobotSource, available_robots,
@@ -32,6 +34,7 @@ __all__ = [
     "DEXTAR",
     "RPR3",
     "GOUGH_STEWART",
+    "IRI_FIVE_BAR",
     "ROBOTS",
     "DEFAULT_ROBOT",
     "RobotEntry",

@@ -26,6 +26,7 @@ from typing import Callable
 from .base import BenchmarkCrossing, ReferenceMotion, Robot
 from .gough_stewart import GOUGH_STEWART, gs_reference_motion
 from .dextar import DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing
+from .iri_five_bar import IRI_FIVE_BAR, iri_benchmark_crossing
 from .mass_model import LumpedMassModel
 from .rpr3 import RPR3, rpr3_benchmark_crossing
 from .errors import InputError, RobotSourceError, UnknownRobotError
@@ -86,6 +87,7 @@ ROBOTS: dict[str, RobotEntry] = {
     e.name: e
     for e in (
         RobotEntry(DEXTAR, DEXTAR_DYNAMICS, benchmark_crossing),
+        RobotEntry(IRI_FIVE_BAR, None, iri_benchmark_crossing),
         RobotEntry(RPR3, None, rpr3_benchmark_crossing),
         RobotEntry(GOUGH_STEWART, None, None, gs_reference_motion),
     )

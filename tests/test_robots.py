@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from crosscert.robots import DEXTAR, ROBOTS, KinematicModel, Robot, available_robots, get_robot
+from crosscert.robots import DEXTAR, IRI_FIVE_BAR, ROBOTS, KinematicModel, Robot, available_robots, get_robot
 from crosscert.robots.dextar import benchmark_crossing, distal_joints, elbows_out_ik, mode_by_cross_product, singular_y
 from crosscert.robots.errors import InputError, ModelError, SimulationError, UnknownRobotError
 
@@ -37,7 +37,7 @@ def random_elbows_out_pose(rng, xi):
 
 # ------------------------------------------------------------------ registry
 def test_registry():
-    assert available_robots() == ["3rpr", "dextar", "gough-stewart"]
+    assert available_robots() == ["3rpr", "dextar", "gough-stewart", "iri-five-bar"]
     assert ROBOTS["dextar"].robot is DEXTAR
     assert get_robot("dextar") is DEXTAR
     assert get_robot("  DexTAR ") is DEXTAR
@@ -132,7 +132,7 @@ def test_model_is_immutable(kin):
     assert kin.sx_x.shape == (2, 1) and kin.sx_xi.shape == (7, 1)
 
 
-@pytest.mark.parametrize("robot", [DEXTAR], ids=lambda r: r.name)
+@pytest.mark.parametrize("robot", [DEXTAR, IRI_FIVE_BAR], ids=lambda r: r.name)
 def test_declared_joint_offsets_enter_as_q_plus_xi(robot):
     """f(x, q + t e_i, xi - t e_j) == f(x, q, xi) for every declared offset (i, j)."""
     kin = KinematicModel(robot)
