@@ -238,7 +238,7 @@ def test_a_parallel_batch_runs_one_slot_per_thread(monkeypatch):
     boxes are the same (:func:`test_threads_change_nothing`)."""
     import numba
 
-    from crosscert.verifier import step as S
+    from crosscert.verifier.compiled import driver as S
 
     asked, real = [], S._slot_pool
     monkeypatch.setattr(S, "_slot_pool", lambda n: asked.append(n) or real(n))
@@ -270,3 +270,16 @@ def test_scratch_follows_the_configuration(imodel, settings):
     pieces = st.kernel_args["scratch"].pieces.shape
     step(big, st, q[1:2])
     assert st.kernel_args["config"] is big and st.kernel_args["scratch"].pieces.shape[1] > pieces[1]
+
+
+def test_the_state_schema_is_written_once():
+    """Every array of the state is a row or a scenario array, and the compiled kernels receive exactly those
+    parts under the state's own names (built from verifier.state, never listed again)."""
+    import dataclasses
+
+    from crosscert.verifier.compiled import step as kernels
+    from crosscert.verifier.state import ROW_FIELDS, SCENARIO_FIELDS, TrackerState
+
+    arrays = [f.name for f in dataclasses.fields(TrackerState) if f.type in ("np.ndarray", np.ndarray)]
+    assert sorted(arrays) == sorted(ROW_FIELDS + SCENARIO_FIELDS) and not set(ROW_FIELDS) & set(SCENARIO_FIELDS)
+    assert kernels.Rows._fields == ROW_FIELDS and kernels.Scenarios._fields == SCENARIO_FIELDS

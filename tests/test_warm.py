@@ -24,7 +24,8 @@ from crosscert.verifier.compiled import warm
 from crosscert.verifier.constants import JOINT_FD, PAPER, SOUND
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.settings import TrackerSettings
-from crosscert.verifier.step import CompiledStep, configure, init_state
+from crosscert.verifier.compiled.driver import CompiledStep
+from crosscert.verifier.step import configure, init_state
 
 
 def _tracker_signature(name: str, velocity_model: str) -> tuple:
@@ -257,7 +258,7 @@ def test_the_pair_contraction_is_loaded_while_the_child_compiles(monkeypatch):
     """While a child compiles the driver, the parent compiles the window's pair contraction instead of waiting
     idle, with the argument types of the window's own calls (one compilation serves both)."""
     import crosscert.verifier.compiled.motion as motion
-    import crosscert.verifier.step as step_module
+    import crosscert.verifier.compiled.driver as step_module
     from crosscert.verifier.window import track_window
 
     from problems import default_settings, interval_model, simulate

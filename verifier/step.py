@@ -12,7 +12,7 @@ and :func:`verifier.tracker.track_batch` are loops over the same step.
 Two implementations of one small step protocol (:class:`StepImpl`) compute
 the same step, chosen by the user-facing :class:`Backend`:
 
-* ``"compiled"`` (default, :class:`CompiledStep`): numba kernels
+* ``"compiled"`` (default, :class:`~verifier.compiled.driver.CompiledStep`): numba kernels
   (:mod:`verifier.compiled`), no Python per operation, no allocation per
   sample; scenarios in parallel for batches;
 * ``"numpy"`` (:class:`NumpyStep`): the reference, vectorised over rows.
@@ -36,21 +36,21 @@ not depend on the other scenarios of its batch.
 from __future__ import annotations
 
 import itertools
-import threading
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from enum import Enum
 from typing import Protocol
 
 import numpy as np
 
+from crosscert.robots.errors import InputError
+
 from . import interval as I
+from .compiled.driver import CompiledStep
+from .constants import JOINT_FD, PAPER, SOUND, StepConstants, pack_constants
 from .contractors import hc4_pose, mode_of, newton, split_prune, velocity, velocity_displacement
 from .contractors import pose_solutions as _np_pose_solutions
-from crosscert.robots.errors import InputError
-from .constants import JOINT_FD, PAPER, SOUND, StepConstants, pack_constants
 from .linalg import linear_enclosure
-from .motion_model import contract_tubes
+from .state import TrackerState
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
            "advance", "pose_solutions", "pose_solution_arrays", "reading_box", "kernel_array", "StepImpl", "NumpyStep",
@@ -129,51 +129,6 @@ def configure(model, settings, backend: str | Backend = Backend.COMPILED, *, par
         raise InputError(f"xi_splits needs {model.m} counts (one per geometric parameter), got {len(s.xi_splits)}")
     return StepConfig(model=model, settings=s, backend=backend, impl=_IMPLS[backend], const=pack_constants(s, model.n),
                       parallel=bool(parallel), spread_hypotheses=bool(spread_hypotheses))
-
-
-@dataclass(eq=False)
-class TrackerState:
-    """Everything a run changes, for ``B`` scenarios of ``P`` geometry hypotheses.
-
-    Row arrays (``R = B P`` rows): ``x``, ``xd`` ``(R, 2, n)`` pose (m) and
-    velocity (m/s) boxes, row 0 lower and row 1 upper bounds; ``xi``
-    ``(R, 2, m)`` calibration sub-box; ``q`` ``(R, 2, n)`` joint box of the
-    last sample, rad; ``past_x``, ``past_q`` ``(R, D, 2, n)`` and ``past_r``
-    ``(R, D, n)``: boxes and readings of the last ``D`` samples (slot
-    ``k mod D``); ``row_bad`` ``(R,)`` sample at which the hypothesis became
-    empty (-1: consistent).
-
-    Scenario arrays (``B``): ``init_mode``, ``mode`` (certified mode at the
-    first / last sample, 0 = not certified), ``streak`` (sample since which
-    ``mode`` holds), ``bad_at`` (first sample with no consistent hypothesis,
-    -1 none), ``max_width_pose``, ``max_width_velocity`` (m, m/s), ``x_hull``,
-    ``xd_hull`` ``(B, 2, n)`` the boxes of the last sample, ``qdd_hull``
-    ``(B, n)`` the joint-acceleration bound used (rad/s^2, ``inf`` none).
-    ``k`` counts the samples consumed.
-    """
-
-    batch: int
-    hypotheses: int
-    k: int
-    x: np.ndarray
-    xd: np.ndarray
-    xi: np.ndarray
-    q: np.ndarray
-    past_x: np.ndarray
-    past_q: np.ndarray
-    past_r: np.ndarray
-    row_bad: np.ndarray
-    init_mode: np.ndarray
-    mode: np.ndarray
-    streak: np.ndarray
-    bad_at: np.ndarray
-    max_width_pose: np.ndarray
-    max_width_velocity: np.ndarray
-    x_hull: np.ndarray
-    xd_hull: np.ndarray
-    qdd_hull: np.ndarray
-    #: the compiled implementation's per-thread scratch and argument tuples, built once per state
-    kernel_args: dict = field(default_factory=dict, repr=False)
 
 
 def partition_xi(XI, splits):
@@ -486,9 +441,8 @@ def _qdd_over_step(model, ts, X, XD, Q_prev, Q_now, XI, A):
 
 
 class StepImpl(Protocol):
-    """What an implementation of the step provides (:class:`NumpyStep`, :class:`CompiledStep`)."""
-
-    backend: Backend
+    """What an implementation of the step provides (:class:`NumpyStep` here, its twin
+    :class:`verifier.compiled.driver.CompiledStep` beside the kernels)."""
 
     def advance(self, config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
         """Advance ``state`` over checked readings ``q`` ``(B, Kc, n)`` (see :func:`advance`)."""
@@ -499,8 +453,6 @@ class StepImpl(Protocol):
 
 class NumpyStep:
     """The reference: the step vectorised over rows with numpy, one sample at a time."""
-
-    backend = Backend.NUMPY
 
     def advance(self, config, state, q, record=None, prior=None):
         for kk in range(q.shape[1]):
@@ -519,162 +471,6 @@ class NumpyStep:
             return None
         boxes = np.array([np.stack(b) for b, _ in sols], dtype=np.float64).reshape(-1, 2, model.n)
         return boxes, np.array([m for _, m in sols], dtype=np.int64)
-
-
-class CompiledStep:
-    """The numba kernels of :mod:`verifier.compiled.step`, imported (and
-    compiled or loaded from the cache) on first use only."""
-
-    backend = Backend.COMPILED
-
-    @staticmethod
-    def _threads(config, st):
-        """Which driver runs ``st`` and with how many scratch slots (threads): the hypotheses of a
-        sample over numba's threads (``spread_hypotheses``), or :func:`run_slot` once per slot, the
-        slots on Python threads (``parallel``; the kernels release the GIL)."""
-        import numba
-
-        from .compiled import step as kernels
-
-        threads = numba.config.NUMBA_NUM_THREADS
-        if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
-            return kernels.run_hypotheses_parallel, min(threads, st.hypotheses)
-        if threads > 1 and config.parallel and st.batch > 1:
-            return kernels.run_slot, min(threads, st.batch)
-        return kernels.run_slot, 1
-
-    def _args(self, config, st):
-        """The kernel's arguments that stay the same from call to call, built
-        once per state: the state's arrays as tuples, the per-thread scratch
-        and the empty record and prior."""
-        a = st.kernel_args
-        if not a or a["config"] is not config or a["rows"].x is not st.x or a["scen"].mode is not st.mode:
-            # first call, another configuration (the scratch is sized from it), or
-            # a state copied with other arrays (dataclasses.replace)
-            a = st.kernel_args = {"config": config}
-            from .compiled import step as kernels
-            from .compiled.contractors import scratch_arrays
-
-            model, c = config.model, config.const
-            run, threads = self._threads(config, st)
-            if run is kernels.run_slot:
-                from .compiled import warm
-
-                # a child process may be compiling it (planner.cli starts one): its cache entry, not a second
-                # compilation here; without one (or if it failed) the first call below compiles as usual
-                if int(c.velocity_model) in warm.pending():
-                    _load_pair_kernel(model.n)  # meanwhile: the window's, which it would compile after the driver
-                warm.wait(c.velocity_model)
-            B, n = st.batch, model.n
-            a.update(
-                run=run,
-                # the extra arguments of each call per block: run_slot's (slot, slots), once per slot; the
-                # hypotheses' driver is called once, with none
-                slots=tuple((t, threads) for t in range(threads)) if run is kernels.run_slot else ((),),
-                # the kernels' views of the state, field by field under the same names
-                rows=kernels.Rows(*(getattr(st, f) for f in kernels.Rows._fields)),
-                scen=kernels.Scenarios(*(getattr(st, f) for f in kernels.Scenarios._fields)),
-                scratch=scratch_arrays(threads, model.program.n_nodes, n, model.m, c.baseline.shape[0],
-                                       c.split_boxes, st.hypotheses),
-                no_record=kernels.Record(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n)), np.zeros((B, 0), np.int64),
-                                         np.zeros((B, 0, n))),
-                no_prior=kernels.Prior(np.zeros((B, 0, 2, n)), np.zeros((B, 0, 2, n))),
-                # its type selects the velocity model's kernels: a driver compiled per model in use
-                vel=kernels.velocity_strategy(c.velocity_model),
-                Record=kernels.Record, Prior=kernels.Prior)
-        return a
-
-    def advance(self, config, st, q, record=None, prior=None):
-        a = self._args(config, st)
-        slots = a["slots"]
-        head = (config.model.program, config.const, a["vel"], a["rows"], a["scen"], a["scratch"])
-        if record is None and prior is None and len(slots) == 1:
-            # the online path: every argument's type is fixed for this state (q is a
-            # C-contiguous float64 copy), so after the first call the compiled entry
-            # point runs directly; numba's dispatcher would spend longer typing the
-            # nested tuples of arrays than the kernel takes for a sample at rest
-            args = head + slots[0] + (int(st.k), q, False, a["no_record"], False, a["no_prior"])
-            entry = a.get("entry")
-            if entry is None:
-                a["run"](*args)
-                a["entry"] = _entry_point(a["run"], args)
-            else:
-                entry(*args)
-        else:
-            rec = a["no_record"] if record is None else a["Record"](*record)
-            pri = a["no_prior"] if prior is None else a["Prior"](*prior)
-            tail = (int(st.k), q, record is not None, rec, prior is not None, pri)
-            # slot 0 on this thread, the others on the pool's
-            others = [_slot_pool(len(slots) - 1).submit(a["run"], *head, *extra, *tail) for extra in slots[1:]]
-            try:
-                a["run"](*head, *slots[0], *tail)
-            finally:
-                for f in others:
-                    f.result()  # every slot finishes before the state is read; re-raises a slot's error
-        st.k += q.shape[1]
-
-    def pose_solutions(self, model, Q, XI, X_search, tol, small, max_boxes, sweeps):
-        from .compiled.contractors import pose_solutions as kernel
-
-        box = lambda b: np.ascontiguousarray(np.stack([np.asarray(b[0], float), np.asarray(b[1], float)])[None])  # noqa: E731
-        out, modes, scratch, work = _enumeration_buffers(model, int(max_boxes))
-        count = kernel(model.program, box(Q), box(XI), box(X_search), float(tol), float(small), int(max_boxes),
-                       int(sweeps), out, modes, scratch, work)
-        if count < 0:
-            return None
-        return out[:count].copy(), modes[:count].copy()
-
-
-def _load_pair_kernel(n: int) -> None:
-    """Compile (or load) the window's pair contraction (:func:`verifier.compiled.motion.pair_kernel`) by
-    contracting two samples of one row whose velocity boxes are disjoint: the argument types of every call
-    (C-contiguous tubes of ``n`` pose coordinates)."""
-    x = np.zeros((1, 2, 2, n))
-    xd = np.zeros((1, 2, 2, n))
-    xd[0, 1] = 1.0
-    contract_tubes(x, xd, 1e-3, np.ones(n), offsets=(1,), compiled=True)
-
-
-_BUFFERS = threading.local()
-
-
-def _enumeration_buffers(model, max_boxes: int):
-    """The compiled enumeration's output, scratch and stack ``(max_boxes + 4, 2, n)`` for this thread,
-    allocated once per size (the fixed-lag window enumerates at nearly every sample; the kernel
-    overwrites whatever it reads)."""
-    from .compiled.contractors import scratch_arrays
-
-    key = (model.n, model.m, model.program.n_nodes, max_boxes)
-    got = getattr(_BUFFERS, "by_size", None)
-    if got is None or got[0] != key:
-        got = _BUFFERS.by_size = (key, (np.empty((max_boxes, 2, model.n)), np.empty(max_boxes, np.int64),
-                                        scratch_arrays(1, model.program.n_nodes, model.n, model.m, 0, 0, 1),
-                                        np.empty((max_boxes + 4, 2, model.n))))
-    return got[1]
-
-
-_POOL: dict = {}
-_POOL_LOCK = threading.Lock()
-
-
-def _slot_pool(threads):
-    """The threads that run a batch's slots: one pool per thread count, for the process."""
-    with _POOL_LOCK:
-        if threads not in _POOL:
-            _POOL[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="crosscert-slot")
-        return _POOL[threads]
-
-
-def _entry_point(dispatcher, args):
-    """The compiled function a numba dispatcher runs for ``args``, called
-    without the dispatcher's typing of every argument (``dispatcher`` itself
-    when it has no such overload)."""
-    import numba
-
-    try:
-        return dispatcher.overloads[tuple(numba.typeof(v) for v in args)].entry_point
-    except (KeyError, AttributeError):
-        return dispatcher
 
 
 _IMPLS = {Backend.NUMPY: NumpyStep(), Backend.COMPILED: CompiledStep()}

@@ -28,6 +28,7 @@ from numba import njit, prange, types
 from numba.extending import overload
 
 from ..constants import JOINT_FD, PAPER, SOUND
+from ..state import ROW_FIELDS, SCENARIO_FIELDS
 from . import ops
 from .contractors import (
     TB_ACC,
@@ -60,31 +61,11 @@ from .ops import KERNEL_FLAGS, NO_WRAPPERS, inline_jit, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 
-class Rows(NamedTuple):
-    """Row arrays of the state (see :class:`verifier.step.TrackerState`)."""
-
-    x: np.ndarray
-    xd: np.ndarray
-    xi: np.ndarray
-    q: np.ndarray
-    past_x: np.ndarray
-    past_q: np.ndarray
-    past_r: np.ndarray
-    row_bad: np.ndarray
-
-
-class Scenarios(NamedTuple):
-    """Scenario arrays of the state (see :class:`verifier.step.TrackerState`)."""
-
-    init_mode: np.ndarray
-    mode: np.ndarray
-    streak: np.ndarray
-    bad_at: np.ndarray
-    max_width_pose: np.ndarray
-    max_width_velocity: np.ndarray
-    x_hull: np.ndarray
-    xd_hull: np.ndarray
-    qdd_hull: np.ndarray
+#: The state's row arrays as the kernels receive them, field by field under the names of
+#: :class:`verifier.state.TrackerState` (its schema: :data:`verifier.state.ROW_FIELDS`).
+Rows = NamedTuple("Rows", [(name, np.ndarray) for name in ROW_FIELDS])
+#: The state's scenario arrays, likewise (:data:`verifier.state.SCENARIO_FIELDS`).
+Scenarios = NamedTuple("Scenarios", [(name, np.ndarray) for name in SCENARIO_FIELDS])
 
 
 class Record(NamedTuple):
