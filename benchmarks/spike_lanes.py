@@ -7,7 +7,7 @@ bounds stored structure-of-arrays (``[feature, row]``), one tape instruction dis
 the inner loop over rows.  Three kernels on the same inputs:
 
 * ``per-row``: today's kernel, called row after row from a compiled loop;
-* ``lanes``: rows in lanes with today's scalar operations (``verifier.compiled.ops``: the bit-level
+* ``lanes``: rows in lanes with today's scalar operations (``verifier.compiled.interval``: the bit-level
   ``nextafter`` step); its boxes must be the per-row kernel's bit for bit (asserted);
 * ``lanes-rzbm``: rows in lanes with the branch-free outward step of Rump, Zimmermann, Boldo and
   Melquiond (BIT 49, 2009) in the sums and products: ``c - (phi |c| + eta)`` below and ``c + (phi |c| +
@@ -50,7 +50,7 @@ from crosscert.planner.sweep import cruise_for  # noqa: E402
 from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
 from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 from crosscert.verifier import interval as I  # noqa: E402
-from crosscert.verifier.compiled import ops  # noqa: E402
+from crosscert.verifier.compiled import interval as ops  # noqa: E402
 from crosscert.verifier.compiled.contractors import scratch_arrays, thread_scratch, velocity_displacement  # noqa: E402
 from crosscert.verifier.compiled.linalg import _inverse_2  # noqa: E402
 from crosscert.verifier.compiled.tape import T_VEL, trig, trig_memo  # noqa: E402
@@ -60,7 +60,7 @@ from crosscert.verifier.tape import OPCODES  # noqa: E402
 from crosscert.verifier.tracker import TrackerSettings, track  # noqa: E402
 from bench_window import _cpu as cpu_name  # noqa: E402  (one reading of the CPU's name for the benchmarks)
 
-FLAGS = dict(nogil=True, _nrt=False)  # the kernels' flags (verifier.compiled.ops.KERNEL_FLAGS): no fast-math
+FLAGS = dict(nogil=True, _nrt=False)  # the kernels' flags (verifier.compiled.interval.KERNEL_FLAGS): no fast-math
 INF = np.inf
 MAX = float(np.finfo(np.float64).max)
 U = 2.0**-53
@@ -197,7 +197,7 @@ def _mx(x, y):
 
 def make_ops(dn, up):
     """``add, sub, mul_fast, mul, pmul`` with the outward step ``dn, up``: today's operations
-    (``verifier.compiled.ops``) written as selects.  ``mul_fast`` is ``ops.mul``'s common case (every bound
+    (``verifier.compiled.interval``) written as selects.  ``mul_fast`` is ``ops.mul``'s common case (every bound
     nonzero and not NaN, no product rounded to 0) with a flag: False sends the lane to today's general
     path (``ops._mul_general``), in a second loop over the flagged lanes only."""
 

@@ -2,7 +2,7 @@
 
 Every test runs on both cores (the ``core`` fixture): the numpy reference
 :mod:`verifier.interval` and the compiled scalar operations of
-:mod:`verifier.compiled.ops` through :mod:`verifier.compiled.vectorized`.
+:mod:`verifier.compiled.interval` through :mod:`verifier.compiled.vectorized`.
 
 Every operation is checked for *containment*: for random intervals (with 0 as a
 bound, subnormal, tiny and huge bounds, some unbounded ones) and random real

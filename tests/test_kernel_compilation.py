@@ -28,7 +28,7 @@ from numba.core.registry import CPUDispatcher
 
 import crosscert.verifier.compiled as compiled_pkg
 
-MODULES = ("ops", "tape", "linalg", "contractors", "step", "vectorized", "motion", "one_motion")
+MODULES = ("interval", "tape", "linalg", "contractors", "step", "vectorized", "motion_model", "one_motion")
 
 
 def _literal(node) -> bool:
@@ -41,7 +41,7 @@ def _literal(node) -> bool:
 def _literal_kernel_calls(module_name: str) -> list[str]:
     mod = importlib.import_module(f"crosscert.verifier.compiled.{module_name}")
     kernels = {name for name, obj in vars(mod).items() if isinstance(obj, CPUDispatcher)}
-    ops_kernels = {name for name, obj in vars(importlib.import_module("crosscert.verifier.compiled.ops")).items()
+    ops_kernels = {name for name, obj in vars(importlib.import_module("crosscert.verifier.compiled.interval")).items()
                    if isinstance(obj, CPUDispatcher)}
     tree = ast.parse(Path(mod.__file__).read_text())
     bad = []

@@ -1,7 +1,7 @@
 """Kernels without numba's wrappers are never entered from Python through a null address.
 
 The kernels that only compiled code calls are built without numba's CPython
-and C wrappers (:class:`verifier.compiled.ops.Kernel`): numba compiles and
+and C wrappers (:class:`verifier.compiled.interval.Kernel`): numba compiles and
 optimises every function's library with everything it calls, so each wrapper
 cost in every caller's compilation too (measured; benchmarks/README.md's git
 history).  numba would run such a function, called from Python,
@@ -25,13 +25,13 @@ from numba.core.registry import CPUDispatcher
 
 from problems import CATALOGUE, default_settings, interval_model, run_of, simulate
 from crosscert.verifier import interval as I
-from crosscert.verifier.compiled.ops import NO_WRAPPERS, Kernel
+from crosscert.verifier.compiled.interval import NO_WRAPPERS, Kernel
 
-MODULES = ("ops", "tape", "linalg", "contractors", "step", "motion", "vectorized", "one_motion")
+MODULES = ("interval", "tape", "linalg", "contractors", "step", "motion_model", "vectorized", "one_motion")
 
 #: The dispatchers called from Python, with numba's wrappers and cached on disk with all they call.
 ENTRY_POINTS = {
-    "contractors.pose_solutions", "motion.pair_kernel", "step.run_slot", "step.run_hypotheses_parallel",
+    "contractors.pose_solutions", "motion_model.pair_kernel", "step.run_slot", "step.run_hypotheses_parallel",
     "one_motion.dual_bound", "one_motion.taylor_rows",
     "vectorized._unary_loop", "vectorized._binary_loop", "vectorized._scalar_loop", "vectorized._scale_loop",
     "vectorized._pown_loop",
@@ -67,7 +67,7 @@ def test_a_kernel_compiled_as_a_callee_is_safe_to_call_from_python(tmp_path):
     of its own: numba refuses a function whose compilation re-enters itself."""
     script = (
         "from numba import njit\n"
-        "from crosscert.verifier.compiled import ops\n"
+        "from crosscert.verifier.compiled import interval as ops\n"
         "first = ops.pown(0.5, 3.0, -2)\n"  # the twin first: it compiles the kernel it calls, itself
         "@njit\n"
         "def caller(a, b):\n"
@@ -85,7 +85,7 @@ def test_a_kernel_compiled_as_a_callee_is_safe_to_call_from_python(tmp_path):
 
 
 def test_a_twin_computes_what_the_kernel_computes():
-    from crosscert.verifier.compiled import ops, vectorized
+    from crosscert.verifier.compiled import interval as ops, vectorized
 
     rng = np.random.default_rng(17)
     a = np.sort(rng.uniform(-3.0, 3.0, (2, 200)), axis=0)

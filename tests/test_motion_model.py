@@ -19,7 +19,7 @@ absorbed by the next operation's outward step (docs/soundness.md, "Window
 reasoning", step 8).
 
 The compiled pair contraction (``contract_tubes(compiled=True)``,
-verifier/compiled/motion.py) runs every containment test too and is compared
+verifier/compiled/motion_model.py) runs every containment test too and is compared
 with the reference bit for bit.  Removal checks on the kernel (2026-12-02):
 the remainder halved fails the containment tests; the remainder rounded to
 nearest, the ``l`` ends written before the ``k`` ends, the old ``v_k`` used
@@ -37,7 +37,7 @@ import pytest
 from crosscert.verifier.motion_model import MOTION_OFFSETS, _constants, _remainder, contract_tubes
 
 T_S = 0.001  # s (A6: the float itself)
-#: every containment test runs the numpy reference and the compiled kernel (verifier.compiled.motion)
+#: every containment test runs the numpy reference and the compiled kernel (verifier.compiled.motion_model)
 BOTH = pytest.mark.parametrize("compiled", [False, True], ids=["numpy", "compiled"])
 A_MAX = np.array([80.0, 60.0])  # m/s^2
 

@@ -14,7 +14,7 @@ of outward misses the exact value about half of the time:
   contain the exact solution (rational arithmetic with :class:`fractions.Fraction`).
 
 Removal checks (2026-12-02): without the one-ulp step of ``ops.add`` in
-``verifier/compiled/ops.py`` the tape test fails; without that of ``ops.mul``
+``verifier/compiled/interval.py`` the tape test fails; without that of ``ops.mul``
 the linear-enclosure test fails for n = 2 and 3 (the tapes' products have
 operands already a few ulp wide, which hide an unrounded corner product).
 """

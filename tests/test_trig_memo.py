@@ -16,7 +16,7 @@ import math
 import numpy as np
 import pytest
 
-from crosscert.verifier.compiled import ops
+from crosscert.verifier.compiled import interval as ops
 from crosscert.verifier.compiled.tape import MEMO_SIZE, trig, trig_memo
 from crosscert.verifier.tape import OPCODES
 

@@ -257,7 +257,7 @@ def test_the_one_motion_kernels_wait_for_a_finishing_child(monkeypatch):
 def test_the_pair_contraction_is_loaded_while_the_child_compiles(monkeypatch):
     """While a child compiles the driver, the parent compiles the window's pair contraction instead of waiting
     idle, with the argument types of the window's own calls (one compilation serves both)."""
-    import crosscert.verifier.compiled.motion as motion
+    import crosscert.verifier.compiled.motion_model as motion
     import crosscert.verifier.compiled.driver as step_module
     from crosscert.verifier.window import track_window
 

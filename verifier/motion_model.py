@@ -20,7 +20,7 @@ the pairs ``(k, k + j)``, ``j`` in :data:`MOTION_OFFSETS`, whose velocity
 boxes are disjoint in some row (elsewhere the square's lower bound is 0),
 vectorised over ``k``, with outward rounding (:mod:`verifier.interval`); with ``compiled=True``
 (the window's compiled backend) the pairs are contracted by the same operations compiled
-(:mod:`verifier.compiled.motion`), the same floats at a fraction of numpy's cost per call.  Shapes:
+(:mod:`verifier.compiled.motion_model`), the same floats at a fraction of numpy's cost per call.  Shapes:
 ``R`` rows, ``K`` samples, pose dimension ``n``; SI units.
 """
 
@@ -112,7 +112,7 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
     offsets : sequence of int
         Sample distances of the coupled pairs.
     compiled : bool
-        Contract the pairs with :func:`verifier.compiled.motion.pair_kernel`
+        Contract the pairs with :func:`verifier.compiled.motion_model.pair_kernel`
         (numba; the same floats bit for bit, without numpy's cost per call)
         instead of :func:`_pair`.
 
@@ -127,7 +127,7 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
     a = np.asarray(a_max, dtype=np.float64)
     empty = np.zeros(R, dtype=bool)
     if compiled:
-        from .compiled.motion import pair_kernel  # numba loaded on first use only
+        from .compiled.motion_model import pair_kernel  # numba loaded on first use only
     with I.quiet_fp():
         for j in offsets:
             if not 0 < j < K:

@@ -25,7 +25,7 @@ def _drop_stale_cache() -> None:
     """Delete cached kernels compiled from other sources than these.
 
     numba re-validates a cached function against its own file only: a kernel
-    in ``step.py`` cached before an edit of ``ops.py`` would keep the old
+    in ``step.py`` cached before an edit of ``interval.py`` would keep the old
     arithmetic.  The stamp covers every source the kernels are built from.
     A read-only install cannot be edited, so failing to write is harmless.
     """

@@ -16,9 +16,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import ops
+from . import interval as ops
 from .linalg import gauss_seidel, pmat_imat, pmat_ivec, point_inverse, precondition, solve_preconditioned
-from .ops import cached_jit, inline_jit, jit
+from .interval import cached_jit, inline_jit, jit
 from .tape import T_DET, T_F, T_JQ, T_JX, T_VEL, forward, hc4, output, trig_memo
 
 # slots of the scratch boxes ``Scratch.tb`` (width max(n, m)); the displacement

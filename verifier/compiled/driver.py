@@ -121,7 +121,7 @@ class CompiledStep:
 
 
 def _load_pair_kernel(n: int) -> None:
-    """Compile (or load) the window's pair contraction (:func:`verifier.compiled.motion.pair_kernel`) by
+    """Compile (or load) the window's pair contraction (:func:`verifier.compiled.motion_model.pair_kernel`) by
     contracting two samples of one row whose velocity boxes are disjoint: the argument types of every call
     (C-contiguous tubes of ``n`` pose coordinates)."""
     x = np.zeros((1, 2, 2, n))

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from . import ops
-from .ops import jit
+from . import interval as ops
+from .interval import jit
 
 
 @jit

@@ -6,7 +6,7 @@
   (the part of ``verifier.one_motion.loop_closure_rows`` after the tapes).
 
 Each computes what the numpy function computes, operation for operation, with the scalar interval
-operations of :mod:`verifier.compiled.ops` (numpy's floats bit for bit, docs/rounding.md): the same
+operations of :mod:`verifier.compiled.interval` (numpy's floats bit for bit, docs/rounding.md): the same
 products, the same pairwise sums over the same zero-padded blocks, in the same order
 (tests/test_one_motion.py compares the two bit for bit, and checks containment against exact rational
 arithmetic).  numpy's versions cost about a millisecond a call in array overheads on the window's
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 
-from .ops import add, cached_jit, dn0, jit, maxn, midpoint, mul, sub, up, up0
+from .interval import add, cached_jit, dn0, jit, maxn, midpoint, mul, sub, up, up0
 
 
 @jit

@@ -29,7 +29,7 @@ from numba.extending import overload
 
 from ..constants import JOINT_FD, PAPER, SOUND
 from ..state import ROW_FIELDS, SCENARIO_FIELDS
-from . import ops
+from . import interval as ops
 from .contractors import (
     TB_ACC,
     TB_DQ,
@@ -57,7 +57,7 @@ from .contractors import (
     velocity_gs,
 )
 from .linalg import linear_enclosure, solve_preconditioned
-from .ops import KERNEL_FLAGS, NO_WRAPPERS, inline_jit, jit
+from .interval import KERNEL_FLAGS, NO_WRAPPERS, inline_jit, jit
 from .tape import T_ACCEL, T_JQ, T_JX_XD, forward, output
 
 

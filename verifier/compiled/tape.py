@@ -10,7 +10,7 @@ programs, the interpreter of this module (:func:`interpret`,
 way the kernels are robot-independent and compiled once.  Semantics are those
 of :class:`verifier.tape.Tape`, operation for operation: the numpy reference,
 the interpreter and the straight-line code compute the same floats (see
-:mod:`verifier.compiled.ops`).
+:mod:`verifier.compiled.interval`).
 
 Kernels work on ONE scenario: node bounds in scratch arrays ``lo, hi`` of
 length ``n_nodes``; inputs in a concatenated vector ``in_lo, in_hi``; the
@@ -28,8 +28,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from ..tape import OPCODES
-from . import ops
-from .ops import jit
+from . import interval as ops
+from .interval import jit
 
 __all__ = ["C_SIGNATURE", "HC4_TAPES", "Program", "TAPES", "forward", "hc4", "interpret", "interpret_hc4", "trig_memo"]
 

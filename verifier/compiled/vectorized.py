@@ -1,4 +1,4 @@
-"""Array API over the compiled scalar operations of :mod:`verifier.compiled.ops`.
+"""Array API over the compiled scalar operations of :mod:`verifier.compiled.interval`.
 
 The functions have the names and signatures of :mod:`verifier.interval` and
 broadcast like numpy, but each element is computed by the scalar kernel that
@@ -7,7 +7,7 @@ the compiled tracker uses, inside an ``@njit`` loop (default flags, no
 the compiled arithmetic against the same exact oracles as the numpy core.
 
 numba's cache of these loops is keyed by this file only: after a change of
-``ops.py`` it may keep the old kernels (``tests/test_compiled_ops.py`` notices)
+``interval.py`` it may keep the old kernels (``tests/test_compiled_interval.py`` notices)
 until ``__pycache__/vectorized.*`` is removed.
 """
 
@@ -16,8 +16,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from . import ops
-from .ops import TRIG_ULPS
+from . import interval as ops
+from .interval import TRIG_ULPS
 
 __all__ = [
     "TRIG_ULPS", "add", "sub", "neg", "mul", "scale", "div", "sqr", "pown", "sqrt",

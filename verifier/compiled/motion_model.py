@@ -1,7 +1,7 @@
 """The pair contraction of :mod:`verifier.motion_model` compiled: one loop over rows, pose coordinates and pairs.
 
 :func:`pair_kernel` computes what ``verifier.motion_model._pair`` computes, operation for
-operation, with the scalar interval operations of :mod:`verifier.compiled.ops` (which
+operation, with the scalar interval operations of :mod:`verifier.compiled.interval` (which
 give numpy's floats bit for bit, docs/rounding.md), in the same order of reads and
 writes: every pair is read before any is written, the ``k`` ends are written, then
 each ``l`` end is intersected with what is there.  The same floats at a fraction of
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .ops import add, cached_jit, div, intersect, jit, mul, sqr, sub
+from .interval import add, cached_jit, div, intersect, jit, mul, sqr, sub
 
 #: Columns of ``new`` holding a pair's velocity and pose bounds (numpy scalars: a Python literal
 #: would compile :func:`_write_ends` once per value, tests/test_kernel_compilation.py).

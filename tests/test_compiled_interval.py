@@ -1,4 +1,4 @@
-"""The compiled scalar operations (:mod:`verifier.compiled.ops`) against the numpy core.
+"""The compiled scalar operations (:mod:`verifier.compiled.interval`) against the numpy core.
 
 * Every operation, called as a scalar function and through the array API of
   :mod:`verifier.compiled.vectorized`, gives the same floats as
@@ -27,7 +27,7 @@ from numba import njit
 
 from problems import libm_trig
 from crosscert.verifier import interval as I
-from crosscert.verifier.compiled import ops
+from crosscert.verifier.compiled import interval as ops
 from crosscert.verifier.compiled import vectorized as V
 
 INF = math.inf

@@ -263,7 +263,7 @@ def pmul(c, bl, bh):
     Its four corner products are two products computed twice (the same
     operands, the same rounding), so two suffice; the extremes, their
     rounding and the fallback are :func:`mul`'s.  The linear algebra's
-    products by a point matrix take this path (tests/test_compiled_ops.py).
+    products by a point matrix take this path (tests/test_compiled_interval.py).
     """
     if c != 0.0 and bl != 0.0 and bh != 0.0 and c == c and bl == bl and bh == bh:
         p1 = c * bl
