@@ -39,6 +39,7 @@ __all__ = [
     "distal_joints",
     "mode_by_cross_product",
     "singular_y",
+    "axis_singular_y",
     "BenchmarkCrossing",
     "benchmark_crossing",
     "dextar_mass_points",
@@ -194,18 +195,42 @@ def mode_by_cross_product(x, q, xi=None) -> np.ndarray:
     return np.sign(u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]).astype(int)
 
 
-def _det_on_axis(y, xi) -> np.ndarray:
+def _det_on_axis(kin: KinematicModel, y, xi) -> np.ndarray:
     y = np.atleast_1d(np.asarray(y, dtype=float))
     E = np.stack([np.zeros_like(y), y], axis=1)
-    return _model().det_batch(E, elbows_out_ik(E, xi), xi)
+    return kin.det_batch(E, elbows_out_ik(E, xi), xi)
+
+
+def axis_singular_y(kin: KinematicModel, xi, y_range: tuple[float, float], samples: int) -> float:
+    """Height ``y_s`` (m) where the line ``x = 0`` meets the Type 2 locus of a five-bar with this module's
+    loop closure (``kin``: its kinematic model), elbows out, for the geometry ``xi`` ``(7,)``.
+
+    Solves ``det J_x(E(y), IK(E(y)), xi) = 0`` with ``E(y) = (0, y)`` and the
+    elbows-out IK, by a scan of ``y_range`` (m) downwards at ``samples`` points and Brent's method on the
+    first sign change met (the one a benchmark going down crosses).
+
+    Raises
+    ------
+    ModelError
+        If ``det J_x`` does not change sign on the scanned range.
+    """
+    ys = np.linspace(y_range[1], y_range[0], samples)
+    det = _det_on_axis(kin, ys, xi)
+    sgn = np.sign(det)
+    change = np.nonzero(np.isfinite(det[:-1]) & np.isfinite(det[1:]) & (sgn[:-1] * sgn[1:] <= 0))[0]
+    if change.size == 0:
+        raise ModelError(f"{kin.robot.name}: no Type 2 singularity on x = 0 for y in {y_range} with "
+                         f"xi = {np.asarray(xi).tolist()}")
+    k = change[0]
+    if det[k] == 0.0:
+        return float(ys[k])
+    return float(brentq(lambda y: float(_det_on_axis(kin, y, xi)[0]), ys[k + 1], ys[k], xtol=1e-16, rtol=1e-15,
+                        maxiter=200))
 
 
 def singular_y(xi=None, *, y_range: tuple[float, float] = (0.02, 0.16), samples: int = 281) -> float:
-    """Height ``y_s`` (m) where the line ``x = 0`` meets the Type 2 locus, elbows out.
-
-    Solves ``det J_x(E(y), IK(E(y)), xi) = 0`` with ``E(y) = (0, y)`` and the
-    elbows-out IK, by a scan of ``y_range`` downwards and Brent's method on the
-    first sign change met (the one the benchmark crosses going down).
+    """Height ``y_s`` (m) where the line ``x = 0`` meets the DexTAR's Type 2 locus, elbows out
+    (:func:`axis_singular_y`).
 
     Parameters
     ----------
@@ -215,23 +240,8 @@ def singular_y(xi=None, *, y_range: tuple[float, float] = (0.02, 0.16), samples:
         Search interval, m.
     samples : int
         Scan points.
-
-    Raises
-    ------
-    ModelError
-        If ``det J_x`` does not change sign on the scanned range.
     """
-    xi = _xi_or_nominal(xi)
-    ys = np.linspace(y_range[1], y_range[0], samples)
-    det = _det_on_axis(ys, xi)
-    sgn = np.sign(det)
-    change = np.nonzero(np.isfinite(det[:-1]) & np.isfinite(det[1:]) & (sgn[:-1] * sgn[1:] <= 0))[0]
-    if change.size == 0:
-        raise ModelError(f"DexTAR: no Type 2 singularity on x = 0 for y in {y_range} with xi = {xi.tolist()}")
-    k = change[0]
-    if det[k] == 0.0:
-        return float(ys[k])
-    return float(brentq(lambda y: float(_det_on_axis(y, xi)[0]), ys[k + 1], ys[k], xtol=1e-16, rtol=1e-15, maxiter=200))
+    return axis_singular_y(_model(), _xi_or_nominal(xi), y_range, samples)
 
 
 def benchmark_crossing(xi=None) -> BenchmarkCrossing:

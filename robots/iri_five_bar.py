@@ -63,10 +63,9 @@ import functools
 import math
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .base import BenchmarkCrossing, Robot
-from .dextar import dextar_loop_closure, elbows_out_ik, mode_by_cross_product
+from .dextar import axis_singular_y, dextar_loop_closure, elbows_out_ik, mode_by_cross_product
 from .errors import ModelError
 from .kinematics import KinematicModel
 
@@ -137,17 +136,9 @@ def _xi_or_nominal(xi) -> np.ndarray:
     return xi
 
 
-def _det_on_axis(y, xi) -> np.ndarray:
-    y = np.atleast_1d(np.asarray(y, dtype=float))
-    E = np.stack([np.zeros_like(y), y], axis=1)
-    return _model().det_batch(E, elbows_out_ik(E, xi), xi)
-
-
 def iri_singular_y(xi=None, *, y_range: tuple[float, float] = _BENCH_Y_RANGE, samples: int = 201) -> float:
-    """Height ``y_s`` (m) where the line ``x = 0`` meets the Type 2 locus, elbows out.
-
-    Scans ``det J_x(E(y), IK(E(y)), xi)``, ``E(y) = (0, y)``, down ``y_range``
-    and refines the first sign change with Brent's method.
+    """Height ``y_s`` (m) where the line ``x = 0`` meets the Type 2 locus, elbows out
+    (:func:`robots.dextar.axis_singular_y`).
 
     Parameters
     ----------
@@ -157,23 +148,8 @@ def iri_singular_y(xi=None, *, y_range: tuple[float, float] = _BENCH_Y_RANGE, sa
         Search interval, m.
     samples : int
         Scan points.
-
-    Raises
-    ------
-    ModelError
-        If ``det J_x`` does not change sign on the scanned range.
     """
-    xi = _xi_or_nominal(xi)
-    ys = np.linspace(y_range[1], y_range[0], samples)
-    det = _det_on_axis(ys, xi)
-    sgn = np.sign(det)
-    change = np.nonzero(np.isfinite(det[:-1]) & np.isfinite(det[1:]) & (sgn[:-1] * sgn[1:] <= 0))[0]
-    if change.size == 0:
-        raise ModelError(f"iri-five-bar: no Type 2 singularity on x = 0 for y in {y_range} with xi = {xi.tolist()}")
-    k = change[0]
-    if det[k] == 0.0:
-        return float(ys[k])
-    return float(brentq(lambda y: float(_det_on_axis(y, xi)[0]), ys[k + 1], ys[k], xtol=1e-16, rtol=1e-15, maxiter=200))
+    return axis_singular_y(_model(), _xi_or_nominal(xi), y_range, samples)
 
 
 def iri_benchmark_crossing(xi=None) -> BenchmarkCrossing:
