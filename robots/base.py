@@ -141,7 +141,23 @@ class Robot:
     description: str = ""
 
     def __post_init__(self) -> None:
+        """Check every field and normalise it in place (the first bad one raises ModelError, naming the robot)."""
         set_ = object.__setattr__  # frozen: normalise fields in place once
+        n, m = self._check_sizes()
+        self._check_calibration_box(m)
+        self._check_ranges(n)
+        if not callable(self.loop_closure):
+            raise ModelError(f"Robot {self.name}: loop_closure must be callable")
+        set_(self, "pose_units", self._checked_units(n, "pose_units", self.pose_units))
+        set_(self, "joint_units", self._checked_units(n, "joint_units", self.joint_units))
+        self._check_accelerations(n)
+        set_(self, "xd0", floats("xd0", self.xd0, n, error=ModelError))
+        self._check_parameter_layout(n, m)
+        self._check_scalars()
+
+    def _check_sizes(self) -> tuple[int, int]:
+        """Check ``name``, ``n`` and ``param_names``; normalise the last two.  Returns ``(n, m)``."""
+        set_ = object.__setattr__
         if not isinstance(self.name, str) or not self.name:
             raise ModelError("Robot.name must be a non-empty string")
         if isinstance(self.n, bool) or not isinstance(self.n, (int, np.integer)) or self.n < 1:
@@ -155,10 +171,16 @@ class Robot:
             raise ModelError(f"Robot {self.name}: duplicate parameter names {names}")
         m = len(names)
         set_(self, "param_names", names)
+        return n, m
+
+    def _check_calibration_box(self, m: int) -> None:
+        """Check ``xi_nominal``, ``xi_lo`` and ``xi_hi`` (``m`` each, SI): non-empty intervals, each nominal
+        value within one interval width of its own; store them as float tuples."""
+        set_ = object.__setattr__
         nom = floats("xi_nominal", self.xi_nominal, m, error=ModelError)
         lo = floats("xi_lo", self.xi_lo, m, error=ModelError)
         hi = floats("xi_hi", self.xi_hi, m, error=ModelError)
-        for i, nm in enumerate(names):
+        for i, nm in enumerate(self.param_names):
             if lo[i] > hi[i]:
                 raise ModelError(f"Robot {self.name}: interval of {nm} is empty: [{lo[i]}, {hi[i]}]")
             w = hi[i] - lo[i]
@@ -170,6 +192,10 @@ class Robot:
         set_(self, "xi_nominal", nom)
         set_(self, "xi_lo", lo)
         set_(self, "xi_hi", hi)
+
+    def _check_ranges(self, n: int) -> None:
+        """Check the joint range ``q_lo < q_hi`` and the pose box ``x_bounds`` (``n`` each, SI); store them."""
+        set_ = object.__setattr__
         qlo = floats("q_lo", self.q_lo, n, error=ModelError)
         qhi = floats("q_hi", self.q_hi, n, error=ModelError)
         if any(a >= b for a, b in zip(qlo, qhi)):
@@ -185,10 +211,11 @@ class Robot:
         if any(a >= b for a, b in zip(xb_lo, xb_hi)):
             raise ModelError(f"Robot {self.name}: x_bounds lo must be < hi, got {xb_lo}, {xb_hi}")
         set_(self, "x_bounds", (xb_lo, xb_hi))
-        if not callable(self.loop_closure):
-            raise ModelError(f"Robot {self.name}: loop_closure must be callable")
-        set_(self, "pose_units", self._checked_units(n, "pose_units", self.pose_units))
-        set_(self, "joint_units", self._checked_units(n, "joint_units", self.joint_units))
+
+    def _check_accelerations(self, n: int) -> None:
+        """Check ``a_max`` and ``tracking_a_margin`` (``n`` each, per pose axis, m/s^2 or rad/s^2): the margin
+        positive and at most ``a_max``; store them."""
+        set_ = object.__setattr__
         amax = floats("a_max", self.a_max, n, error=ModelError)
         set_(self, "a_max", amax)
         if self.tracking_a_margin is not None:
@@ -202,7 +229,11 @@ class Robot:
                     "(or declare no margin: tracking_a_margin=None)"
                 )
             set_(self, "tracking_a_margin", margin)
-        set_(self, "xd0", floats("xd0", self.xd0, n, error=ModelError))
+
+    def _check_parameter_layout(self, n: int, m: int) -> None:
+        """Check ``xi_splits`` (a positive count per parameter) and ``joint_offsets`` (per joint, a distinct
+        parameter index in ``[0, m)`` or None); store them as int tuples."""
+        set_ = object.__setattr__
         if self.xi_splits is not None:
             splits = tuple(int(v) for v in self.xi_splits)
             if len(splits) != len(self.xi_nominal) or any(v < 1 for v in splits):
@@ -217,6 +248,11 @@ class Robot:
                     f"[0, {m}) or None, got {self.joint_offsets}"
                 )
             set_(self, "joint_offsets", offs)
+
+    def _check_scalars(self) -> None:
+        """Check ``eps_q``, ``t_s``, the default bounds (:class:`~robots.assumptions.Assumptions`),
+        ``mode_sign``, ``mode_reference`` and ``description``; normalise the numbers."""
+        set_ = object.__setattr__
         for attr in ("eps_q", "t_s"):
             try:
                 set_(self, attr, float(getattr(self, attr)))

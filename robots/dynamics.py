@@ -147,57 +147,17 @@ class LumpedDynamics:
     """
 
     def __init__(self, kin: KinematicModel, model: LumpedMassModel) -> None:
-        if not isinstance(kin, KinematicModel):
-            raise ModelError(f"LumpedDynamics needs a KinematicModel, got {type(kin).__name__}")
-        if not isinstance(model, LumpedMassModel):
-            raise ModelError(f"LumpedDynamics needs a LumpedMassModel, got {type(model).__name__}")
-        robot = kin.robot
-        if model.robot_name != robot.name:
-            raise ModelError(f"the dynamic model is for robot {model.robot_name!r}, the kinematics for {robot.name!r}")
+        pos = _checked_positions(kin, model)
         n = kin.n
-        if model.n != n:
-            raise ModelError(f"the dynamic model has {model.n} motor inertias, the robot {n} joints")
         x, q, xi = kin.sx_x, kin.sx_q, kin.sx_xi
-        try:
-            pos = model.positions(x, q, xi)
-        except Exception as exc:  # any failure of user code is a model defect
-            raise ModelError(f"{model.robot_name}: positions failed on CasADi symbols: {exc}") from exc
-        if isinstance(pos, ca.MX) or not isinstance(pos, (ca.SX, ca.DM)):
-            raise ModelError(f"{model.robot_name}: positions must return casadi.SX, got {type(pos).__name__}")
-        pos = ca.SX(pos)
-        P, d = len(model.masses), model.dim
-        if pos.shape != (d, P):
-            raise ModelError(f"{model.robot_name}: positions returned shape {pos.shape}, expected ({d}, {P}) "
-                             "(one column per mass point, one row per gravity component)")
-        try:
-            ca.Function("pos", [x, q, xi], [pos])
-        except RuntimeError as exc:
-            raise ModelError(f"{model.robot_name}: positions use symbols other than (x, q, xi)") from exc
-
         xd, qd = kin.sx_xd, kin.sx_qd
         xdd, qdd = ca.SX.sym("xdd", n), ca.SX.sym("qdd", n)
         xddd, qddd = ca.SX.sym("xddd", n), ca.SX.sym("qddd", n)
-        z, zd, zdd = ca.vertcat(x, q), ca.vertcat(xd, qd), ca.vertcat(xdd, qdd)
-        g = ca.DM(model.gravity)
-        w = ca.SX.zeros(2 * n, 1)
-        for j, mj in enumerate(model.masses):
-            pj = pos[:, j]
-            Pj = ca.jacobian(pj, z)
-            acc = ca.mtimes(Pj, zdd) + ca.jtimes(ca.mtimes(Pj, zd), z, zd)
-            w += mj * ca.mtimes(Pj.T, acc - g)
-        w += ca.vertcat(ca.SX.zeros(n, 1), ca.DM(model.motor_inertia) * qdd)
+        w = _wrench(kin, model, pos, xdd, qdd)
         w_x, w_q = w[:n], w[n:]
 
         jx, jq = kin.sx_jx, kin.sx_jq
-        # joint rates: J_x xd + J_q qd = 0 and its time derivative
-        qd_e = -ca.solve(jq, ca.mtimes(jx, xd))
-        h = ca.substitute(kin.sx_jdot, qd, qd_e)
-        qdd_e = -ca.solve(jq, ca.mtimes(jx, xdd) + h)
-        # third order: d/dt (J_x xdd + J_q qdd + jdot) = 0, linear in qddd with J_q
-        G = ca.mtimes(jx, xdd) + ca.mtimes(jq, qdd) + kin.sx_jdot
-        allv = ca.vertcat(x, q, xd, qd, xdd, qdd)
-        Gd = ca.jtimes(G, allv, ca.vertcat(xd, qd, xdd, qdd, xddd, ca.SX.zeros(n, 1)))
-        qddd_e = -ca.solve(jq, Gd)
+        qd_e, qdd_e, qddd_e, allv = _joint_rates(kin, xdd, qdd, xddd)
 
         def reduce(expr):
             """Eliminate qd, qdd (and qddd) in favour of pose rates."""
@@ -210,14 +170,7 @@ class LumpedDynamics:
         tau = w_q_r - ca.mtimes(jq.T, lam)
 
         # eq. (3): finite multipliers at the singular instant
-        t = ca.SX.sym("t", n)
-        wd = ca.jtimes(w, allv, ca.vertcat(xd, qd, xdd, qdd, xddd, qddd))
-        wd_x = reduce(wd[:n])
-        jdt = reduce(ca.jtimes(ca.mtimes(jx, t), ca.vertcat(x, q), ca.vertcat(xd, qd)))  # Jd_x t
-        S = jx.T + ca.mtimes(t, jdt.T)
-        rhs = w_x_r - t * ca.dot(t, w_x_r) + t * ca.dot(t, wd_x)
-        lam_s = ca.solve(S, rhs)
-        tau_s = w_q_r - ca.mtimes(jq.T, lam_s)
+        t, tau_s, lam_s = _singular_torque(kin, w, w_x_r, w_q_r, reduce, allv, xdd, qdd, xddd, qddd)
 
         names = ["x", "q", "xd", "xdd", "xi"]
         dct = self.__dict__
@@ -362,6 +315,106 @@ class LumpedDynamics:
         if not np.all(np.isfinite(tau)):
             raise InputError("singular_torques: the motion does not cross the Type 2 locus transversally here")
         return tau[0]
+
+
+
+def _checked_positions(kin: KinematicModel, model: LumpedMassModel):
+    """The mass points' positions ``(dim, P)`` as CasADi SX in ``(x, q, xi)``, m, once the model is checked
+    against the kinematics (types, robot, joints; the positions' type, shape and symbols).
+
+    Raises
+    ------
+    ModelError
+        On the first defect (the messages of :class:`LumpedDynamics`).
+    """
+    if not isinstance(kin, KinematicModel):
+        raise ModelError(f"LumpedDynamics needs a KinematicModel, got {type(kin).__name__}")
+    if not isinstance(model, LumpedMassModel):
+        raise ModelError(f"LumpedDynamics needs a LumpedMassModel, got {type(model).__name__}")
+    robot = kin.robot
+    if model.robot_name != robot.name:
+        raise ModelError(f"the dynamic model is for robot {model.robot_name!r}, the kinematics for {robot.name!r}")
+    n = kin.n
+    if model.n != n:
+        raise ModelError(f"the dynamic model has {model.n} motor inertias, the robot {n} joints")
+    x, q, xi = kin.sx_x, kin.sx_q, kin.sx_xi
+    try:
+        pos = model.positions(x, q, xi)
+    except Exception as exc:  # any failure of user code is a model defect
+        raise ModelError(f"{model.robot_name}: positions failed on CasADi symbols: {exc}") from exc
+    if isinstance(pos, ca.MX) or not isinstance(pos, (ca.SX, ca.DM)):
+        raise ModelError(f"{model.robot_name}: positions must return casadi.SX, got {type(pos).__name__}")
+    pos = ca.SX(pos)
+    P, d = len(model.masses), model.dim
+    if pos.shape != (d, P):
+        raise ModelError(f"{model.robot_name}: positions returned shape {pos.shape}, expected ({d}, {P}) "
+                         "(one column per mass point, one row per gravity component)")
+    try:
+        ca.Function("pos", [x, q, xi], [pos])
+    except RuntimeError as exc:
+        raise ModelError(f"{model.robot_name}: positions use symbols other than (x, q, xi)") from exc
+    return pos
+
+
+def _wrench(kin: KinematicModel, model: LumpedMassModel, pos, xdd, qdd):
+    """The generalised inertial-plus-gravity forces ``w = [w_x; w_q]`` ``(2n, 1)`` in ``(x, q, xd, qd, xdd,
+    qdd)``: each mass point's ``m_j P_j^T (a_j - g)`` with ``P_j = d p_j / d(x, q)``, plus the motors'
+    inertia times ``qdd``; N (per unit of ``x``) and N m (per rad of ``q``)."""
+    n = kin.n
+    x, q = kin.sx_x, kin.sx_q
+    xd, qd = kin.sx_xd, kin.sx_qd
+    z, zd, zdd = ca.vertcat(x, q), ca.vertcat(xd, qd), ca.vertcat(xdd, qdd)
+    g = ca.DM(model.gravity)
+    w = ca.SX.zeros(2 * n, 1)
+    for j, mj in enumerate(model.masses):
+        pj = pos[:, j]
+        Pj = ca.jacobian(pj, z)
+        acc = ca.mtimes(Pj, zdd) + ca.jtimes(ca.mtimes(Pj, zd), z, zd)
+        w += mj * ca.mtimes(Pj.T, acc - g)
+    w += ca.vertcat(ca.SX.zeros(n, 1), ca.DM(model.motor_inertia) * qdd)
+    return w
+
+
+def _joint_rates(kin: KinematicModel, xdd, qdd, xddd) -> tuple:
+    """The joint rates in terms of pose rates: ``qd``, ``qdd`` and ``qddd`` from eq. (2) and its first two
+    time derivatives (``J_q`` inverted), and ``(x, q, xd, qd, xdd, qdd)`` stacked.
+
+    Returns ``(qd_e, qdd_e, qddd_e, allv)``; ``qddd_e`` still reads ``qd`` and ``qdd`` (eliminated by
+    substitution in :class:`LumpedDynamics`).
+    """
+    n = kin.n
+    x, q = kin.sx_x, kin.sx_q
+    xd, qd = kin.sx_xd, kin.sx_qd
+    jx, jq = kin.sx_jx, kin.sx_jq
+    # joint rates: J_x xd + J_q qd = 0 and its time derivative
+    qd_e = -ca.solve(jq, ca.mtimes(jx, xd))
+    h = ca.substitute(kin.sx_jdot, qd, qd_e)
+    qdd_e = -ca.solve(jq, ca.mtimes(jx, xdd) + h)
+    # third order: d/dt (J_x xdd + J_q qdd + jdot) = 0, linear in qddd with J_q
+    G = ca.mtimes(jx, xdd) + ca.mtimes(jq, qdd) + kin.sx_jdot
+    allv = ca.vertcat(x, q, xd, qd, xdd, qdd)
+    Gd = ca.jtimes(G, allv, ca.vertcat(xd, qd, xdd, qdd, xddd, ca.SX.zeros(n, 1)))
+    qddd_e = -ca.solve(jq, Gd)
+    return qd_e, qdd_e, qddd_e, allv
+
+
+def _singular_torque(kin: KinematicModel, w, w_x_r, w_q_r, reduce, allv, xdd, qdd, xddd, qddd) -> tuple:
+    """Eq. (3): the finite multipliers and torques at the singular instant with the uncontrolled direction
+    ``t`` as a symbol.  ``reduce`` eliminates the joint rates; returns ``(t, tau_s, lam_s)`` (N m and the
+    multipliers)."""
+    n = kin.n
+    x, q = kin.sx_x, kin.sx_q
+    xd, qd = kin.sx_xd, kin.sx_qd
+    jx, jq = kin.sx_jx, kin.sx_jq
+    t = ca.SX.sym("t", n)
+    wd = ca.jtimes(w, allv, ca.vertcat(xd, qd, xdd, qdd, xddd, qddd))
+    wd_x = reduce(wd[:n])
+    jdt = reduce(ca.jtimes(ca.mtimes(jx, t), ca.vertcat(x, q), ca.vertcat(xd, qd)))  # Jd_x t
+    S = jx.T + ca.mtimes(t, jdt.T)
+    rhs = w_x_r - t * ca.dot(t, w_x_r) + t * ca.dot(t, wd_x)
+    lam_s = ca.solve(S, rhs)
+    tau_s = w_q_r - ca.mtimes(jq.T, lam_s)
+    return t, tau_s, lam_s
 
 
 def criterion_residual(dynamics: LumpedDynamics, x, q, xd, xdd, xi=None, *, direction=None) -> np.ndarray:

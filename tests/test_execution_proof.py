@@ -9,7 +9,7 @@ import pytest
 
 from crosscert.planner import execution_class, plan_crossing
 from crosscert.planner.execution import cartesian_class, effective_deviation, in_class
-from crosscert.planner import execution_proof
+from crosscert.planner import execution_proof, execution_search
 from crosscert.planner.execution_proof import describe, offset_split, prove_cartesian_class, proved_class
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR, KinematicModel, get_entry
@@ -207,14 +207,14 @@ def test_a_krawczyk_image_touching_the_box_is_not_a_proof():
 
 def test_a_bound_that_is_not_finite_is_not_a_proof(plan, monkeypatch):
     """A NaN leaf bound would vanish in the maximum over the leaves: the proof is refused instead."""
-    real = execution_proof._Path.evaluate
+    real = execution_search._Path.evaluate
 
     def nan_drift(self, *args, **kwargs):
         ev = real(self, *args, **kwargs)
         ev["e"] = np.full_like(ev["e"], np.nan)
         return ev
 
-    monkeypatch.setattr(execution_proof._Path, "evaluate", nan_drift)
+    monkeypatch.setattr(execution_search._Path, "evaluate", nan_drift)
     pr = prove_cartesian_class(DEXTAR, plan.x, plan.q, plan.xi_plan)
     assert not pr.proved and "not finite" in pr.reason
 
@@ -222,14 +222,14 @@ def test_a_bound_that_is_not_finite_is_not_a_proof(plan, monkeypatch):
 def test_the_planned_joints_enter_as_an_outward_enclosure(plan, monkeypatch):
     """The deviation is taken from an enclosure of planned joints + planning offsets that brackets the exact sum."""
     seen = []
-    real = execution_proof._setup_path
+    real = execution_proof.setup_path
 
     def spy(tapes, numeric, robot, free, x, u_plan, remainder):
         seen.append(u_plan)
         return real(tapes, numeric, robot, free, x, u_plan, remainder)
 
-    monkeypatch.setattr(execution_proof, "_setup_path", spy)
-    offs = execution_proof._offsets(DEXTAR)
+    monkeypatch.setattr(execution_proof, "setup_path", spy)
+    offs = execution_search.offset_joints(DEXTAR)
     xi = plan.xi_plan.copy()
     xi[list(offs.values())] = 1e-3  # planning offsets whose sums with the joints are not floats
     assert prove_cartesian_class(DEXTAR, plan.x, plan.q, xi).proved
@@ -265,18 +265,18 @@ def test_joints_searched_in_lockstep_give_the_bounds_of_one_search_at_a_time(nam
     else:
         robot = get_entry(name).robot
         p = plan_crossing(KinematicModel(robot), problems.PLANNING["3rpr_benchmark"].task(), 1.0, PlanningBounds())
-    (tapes, free, numeric), _ = execution_proof._tapes(robot)
-    offs = execution_proof._offsets(robot)
+    (tapes, free, numeric), _ = execution_search.loop_closure_tapes(robot)
+    offs = execution_search.offset_joints(robot)
     off = np.array([p.xi_plan[offs[i]] if i in offs else 0.0 for i in range(robot.n)])
     from crosscert.verifier import interval as I
 
     with I.quiet_fp():
-        path = execution_proof._setup_path(tapes, numeric, robot, free, p.x, I.add(p.q, p.q, off, off), True)
-        together = execution_proof._branch_and_bound_joints(path, 0.05, 16, range(robot.n))
-        alone = [execution_proof._branch_and_bound(path, 0.05, 16, i) for i in range(robot.n)]
+        path = execution_search.setup_path(tapes, numeric, robot, free, p.x, I.add(p.q, p.q, off, off), True)
+        together = execution_search.branch_and_bound_joints(path, 0.05, 16, range(robot.n))
+        alone = [execution_search._branch_and_bound(path, 0.05, 16, i) for i in range(robot.n)]
     assert all(_same_result(a, b) for a, b in zip(together, alone))
     # a budget that stops the searches after different rounds: still the same
     with I.quiet_fp():
-        together = execution_proof._branch_and_bound_joints(path, 0.0, 9, range(robot.n))
-        alone = [execution_proof._branch_and_bound(path, 0.0, 9, i) for i in range(robot.n)]
+        together = execution_search.branch_and_bound_joints(path, 0.0, 9, range(robot.n))
+        alone = [execution_search._branch_and_bound(path, 0.0, 9, i) for i in range(robot.n)]
     assert all(_same_result(a, b) for a, b in zip(together, alone))

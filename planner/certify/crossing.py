@@ -148,36 +148,49 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     refuter, starts = _start_refuter(job, opts, seed)
     clock = _Clock({"setup": time.perf_counter() - t0})
     try:
-        t1 = time.perf_counter()
-        search = _search(job, refuter, progress)
-        t1 = clock.lap("search", t1)
-        # the search certified each speed alone, on its own plan, class and a_max: its run at v_min is the
-        # certificate (no re-run)
-        run = None if search.v_min is None else search.runs[search.v_min]
-        t1 = clock.lap("certificate", t1)
-        top = search.v_min if search.v_min is not None else max(t.v_sing for t in search.trials)
-        ref_job = _refute_below(refuter, top, opts.tol, opts.in_background)
-        bounces = None
-        # the bounces of a task turn back along its straight segment: a given curved path has none of its own
-        if refuter is not None and search.v_min is not None and opts.bounce and not isinstance(task, PathTask):
-            bounces = _start_bounces(job, search.v_min, refuter, starts)
-            t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
-        mc = _confirm(job, run, monte_carlo_runs, seed, progress, None if refuter is None else refuter.executor)
-        t1 = clock.lap("monte_carlo", t1)
-        if refuter is not None:
-            enter(progress, Phase.REFUTATION, unit="")
-        ref_bound, ref = _refutation(refuter, ref_job, top, opts.tol)
-        t1 = clock.lap("refutation", t1)
-        if bounces is not None:
-            enter(progress, Phase.BOUNCE, unit="")
-        gap, ran = _bounce_gap(job, bounces, starts)
-        clock.lap("bounce", t1)
-        if gap is not None:  # its own run time: the tracker's side here plus the crossing searches
-            clock.times["bounce"] = bounces[1] + ran
+        search, run, mc, ref_bound, ref, gap = _phases(job, task, opts, refuter, starts, monte_carlo_runs, seed,
+                                                       progress, clock)
     finally:
         if refuter is not None:
             refuter.close()
     return _certificate(job, search, run, mc, ref_bound, ref, gap, clock.times, t0)
+
+
+def _phases(job: _Job, task, opts: RefuteOptions, refuter, starts, monte_carlo_runs: int, seed, progress,
+            clock: _Clock) -> tuple:
+    """The phases of :func:`certify_crossing` once the refuter is started, each timed on ``clock`` (s).
+
+    The speed search, whose run at ``v_min`` is the certificate; the counterexample searches below it and the
+    bounces at ``v_min`` started; the Monte Carlo confirmation; then the refutation bound and the bounce gap
+    collected.  Returns ``(search, run, mc, ref_bound, ref, gap)`` for :func:`_certificate`.
+    """
+    t1 = time.perf_counter()
+    search = _search(job, refuter, progress)
+    t1 = clock.lap("search", t1)
+    # the search certified each speed alone, on its own plan, class and a_max: its run at v_min is the
+    # certificate (no re-run)
+    run = None if search.v_min is None else search.runs[search.v_min]
+    t1 = clock.lap("certificate", t1)
+    top = search.v_min if search.v_min is not None else max(t.v_sing for t in search.trials)
+    ref_job = _refute_below(refuter, top, opts.tol, opts.in_background)
+    bounces = None
+    # the bounces of a task turn back along its straight segment: a given curved path has none of its own
+    if refuter is not None and search.v_min is not None and opts.bounce and not isinstance(task, PathTask):
+        bounces = _start_bounces(job, search.v_min, refuter, starts)
+        t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
+    mc = _confirm(job, run, monte_carlo_runs, seed, progress, None if refuter is None else refuter.executor)
+    t1 = clock.lap("monte_carlo", t1)
+    if refuter is not None:
+        enter(progress, Phase.REFUTATION, unit="")
+    ref_bound, ref = _refutation(refuter, ref_job, top, opts.tol)
+    t1 = clock.lap("refutation", t1)
+    if bounces is not None:
+        enter(progress, Phase.BOUNCE, unit="")
+    gap, ran = _bounce_gap(job, bounces, starts)
+    clock.lap("bounce", t1)
+    if gap is not None:  # its own run time: the tracker's side here plus the crossing searches
+        clock.times["bounce"] = bounces[1] + ran
+    return search, run, mc, ref_bound, ref, gap
 
 
 class _Clock:

@@ -127,6 +127,43 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
         raise InputError(f"{name}: a plan needs at least 3 samples, got {K}")
     t_s = float(traj.t_s)
     _in_range(name, q, robot.q_lo_array, robot.q_hi_array, "joint", robot.joint_units)
+    x, poses = _plan_poses(kin, traj, t, q, xi, initial_mode, name)
+    _in_range(name, x, robot.x_lo_array, robot.x_hi_array, "pose", robot.pose_units)
+    xd = np.gradient(x, t_s, axis=0)
+    xdd = np.gradient(xd, t_s, axis=0)
+    qd = np.gradient(q, t_s, axis=0)
+    qdd = np.gradient(qd, t_s, axis=0)
+    _check_start(robot, x, t_s, xd0, name)
+    k_sing, point = _crossing_sample(kin, x, q, xi, initial_mode, name)
+    v = _velocity_at(x, k_sing, t_s)
+    lengths = [i for i, u in enumerate(robot.pose_units) if u.value == "m"] or list(range(n))
+    v_sing = float(np.linalg.norm(v[lengths]))
+    for a in (t, q, x, xd, xdd, qd, qdd):
+        a.setflags(write=False)
+    plan = PlannedTrajectory(t=t, q=q, qd=qd, qdd=qdd, x=x, xd=xd, xdd=xdd, t_s=t_s, k_sing=k_sing, v_sing=v_sing,
+                             crossing_point=point, xi_plan=xi)
+    source = PlanSource(name, digest if digest is not None else _arrays_digest(t, q, traj.x), K, t_s, poses)
+    return plan, source
+
+
+def _plan_poses(kin, traj: Trajectory, t, q, xi, initial_mode: int | None, name: str) -> tuple[np.ndarray, str]:
+    """The plan's poses and how they were obtained: the given ones, checked to close the loop with the joints
+    ``q`` (K, n) at ``xi``, else forward kinematics by continuation from ``initial_mode``.
+
+    Returns
+    -------
+    x : ndarray, shape (K, n)
+        The poses, SI.
+    poses : str
+        ``"given"`` or ``"forward kinematics"``.
+
+    Raises
+    ------
+    InputError
+        Poses that do not close the loop (the first such sample is named), or joints only without an
+        initial mode.
+    """
+    robot = kin.robot
     if traj.x is not None:
         x = np.asarray(traj.x, float)
         residual = np.max(np.abs(kin.f_batch(x, q, xi)), axis=1)
@@ -136,18 +173,25 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
             raise InputError(f"{name}: sample {k} (t = {t[k]:g} s): the poses x do not close the loop with the joints "
                              f"q of robot {robot.name} (|f| = {residual[k]:.3g} > {POSE_RESIDUAL_TOL:g}): a file of "
                              "another robot, or poses of another plan")
-        poses = "given"
-    else:
-        if initial_mode not in (1, -1):
-            raise InputError(f"{name}: the plan gives joints only: state its initial assembly mode (+1 or -1; "
-                             "CLI --initial-mode), or give the poses as columns x1..xn")
-        x = _poses_by_continuation(kin, q, xi, initial_mode, name)
-        poses = "forward kinematics"
-    _in_range(name, x, robot.x_lo_array, robot.x_hi_array, "pose", robot.pose_units)
-    xd = np.gradient(x, t_s, axis=0)
-    xdd = np.gradient(xd, t_s, axis=0)
-    qd = np.gradient(q, t_s, axis=0)
-    qdd = np.gradient(qd, t_s, axis=0)
+        return x, "given"
+    if initial_mode not in (1, -1):
+        raise InputError(f"{name}: the plan gives joints only: state its initial assembly mode (+1 or -1; "
+                         "CLI --initial-mode), or give the poses as columns x1..xn")
+    return _poses_by_continuation(kin, q, xi, initial_mode, name), "forward kinematics"
+
+
+def _check_start(robot, x, t_s: float, xd0, name: str) -> None:
+    """InputError when the plan's first step moves a pose axis faster than the initial speed bound.
+
+    Parameters
+    ----------
+    x : ndarray, shape (K, n)
+        The poses, SI.
+    t_s : float
+        Sampling period, s.
+    xd0 : array (n,) or None
+        The stated initial speed bound per pose axis (its unit per s); None: the robot's ``xd0``.
+    """
     first = (x[1] - x[0]) / t_s
     start = np.asarray(robot.xd0 if xd0 is None else xd0, float)
     fast = np.flatnonzero(np.abs(first) > start)
@@ -157,6 +201,21 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
         raise InputError(f"{name}: the plan does not start at rest: its first step moves pose axis {i + 1} at "
                          f"{abs(first[i]):.4g} {unit}, above the initial speed bound {start[i]:g} {unit}; start at rest "
                          "or state the initial speed (PlanningBounds.xd0, CLI --xd0)")
+
+
+def _crossing_sample(kin, x, q, xi, initial_mode: int | None, name: str) -> tuple[int, np.ndarray]:
+    """The plan's one crossing of the Type 2 locus: the sample ``k_sing`` nearest it and the crossing point.
+
+    A sample on the locus (up to rounding) when there is one, else the zero of the normalised mode between
+    the last sample before and the first after, rounded to the nearer sample; the point is that sample's pose,
+    or the linear interpolation at the zero (SI).
+
+    Raises
+    ------
+    InputError
+        A plan starting on the locus, one whose first mode contradicts ``initial_mode``, one that never
+        crosses or crosses more than once.
+    """
     nm = kin.normalised_mode_batch(x, q, xi)
     modes = kin.mode_batch(x, q, xi)
     m0 = int(modes[0])
@@ -183,15 +242,7 @@ def plan_from_trajectory(kin, traj: Trajectory, *, initial_mode: int | None = No
     else:
         k_sing = ka if w <= 0.5 else kb
         point = x[ka] + w * (x[kb] - x[ka])
-    v = _velocity_at(x, k_sing, t_s)
-    lengths = [i for i, u in enumerate(robot.pose_units) if u.value == "m"] or list(range(n))
-    v_sing = float(np.linalg.norm(v[lengths]))
-    for a in (t, q, x, xd, xdd, qd, qdd):
-        a.setflags(write=False)
-    plan = PlannedTrajectory(t=t, q=q, qd=qd, qdd=qdd, x=x, xd=xd, xdd=xdd, t_s=t_s, k_sing=k_sing, v_sing=v_sing,
-                             crossing_point=point, xi_plan=xi)
-    source = PlanSource(name, digest if digest is not None else _arrays_digest(t, q, traj.x), K, t_s, poses)
-    return plan, source
+    return k_sing, point
 
 
 def _velocity_at(x, k: int, t_s: float) -> np.ndarray:
@@ -276,17 +327,7 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
     b = bounds or PlanningBounds()
-    if isinstance(plan, (str, Path)):
-        traj, digest = read_plan(plan, robot)
-        given_x = traj.x is not None
-        plan, src = plan_from_trajectory(kin, traj, initial_mode=initial_mode, xd0=_xd0(b, robot), name=str(plan),
-                                         digest=digest)
-    elif isinstance(plan, PlannedTrajectory):
-        given_x = True
-        src = PlanSource("<arrays>", _arrays_digest(plan.t, plan.q, plan.x), len(plan.t), float(plan.t_s), "given")
-    else:
-        given_x = plan.x is not None
-        plan, src = plan_from_trajectory(kin, plan, initial_mode=initial_mode, xd0=_xd0(b, robot))
+    plan, src, given_x = _complete_plan(kin, robot, plan, b, initial_mode)
     source = source or src
     kind = (ExecutionKind.CARTESIAN if given_x else ExecutionKind.JOINT) if execution is None else execution
     b = replace(b, t_s=float(plan.t_s), execution=kind).for_robot(robot)
@@ -310,13 +351,50 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
     clock["monte_carlo"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     if refute_plan and not certified and run.verdict is not Verdict.INCONSISTENT:
-        enter(progress, Phase.REFUTATION, unit="")
-        starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
-        found = refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [plan.v_sing], m0=m0, xi_starts=starts,
-                                        bounds=refute_overrides(b, derived_a_max(plan, b, robot)),
-                                        max_cpu_time=REFUTE_CPU_TIME, cap_variables=REFUTE_CAP_VARIABLES)
-        rows = found.rows
+        rows = _refute_plan(kin, robot, plan, b, m0, seed, progress)
     clock["refutation"] = time.perf_counter() - t1
+    return _trajectory_certificate(robot, plan, b, run, certified, mc, rows, clock, source, t0)
+
+
+def _complete_plan(kin, robot, plan, b: PlanningBounds, initial_mode: int | None):
+    """The plan given to :func:`certify_trajectory` completed: ``(plan, source, given_x)``.
+
+    ``plan`` a :class:`PlannedTrajectory`, ``source`` its :class:`PlanSource` (file and sha256, or the
+    arrays' digest), ``given_x`` whether its poses were given (not computed by forward kinematics).
+    """
+    if isinstance(plan, (str, Path)):
+        traj, digest = read_plan(plan, robot)
+        given_x = traj.x is not None
+        plan, src = plan_from_trajectory(kin, traj, initial_mode=initial_mode, xd0=_xd0(b, robot), name=str(plan),
+                                         digest=digest)
+    elif isinstance(plan, PlannedTrajectory):
+        given_x = True
+        src = PlanSource("<arrays>", _arrays_digest(plan.t, plan.q, plan.x), len(plan.t), float(plan.t_s), "given")
+    else:
+        given_x = plan.x is not None
+        plan, src = plan_from_trajectory(kin, plan, initial_mode=initial_mode, xd0=_xd0(b, robot))
+    return plan, src, given_x
+
+
+def _refute_plan(kin, robot, plan: PlannedTrajectory, b: PlanningBounds, m0: int, seed: int, progress):
+    """The counterexample search on the readings of a plan that is not certified: the refutation's rows.
+
+    Started at the centre of ``[xi]`` and at one seeded random geometry (corners included), at the plan's own
+    speed at the singularity and the acceleration it derives.
+    """
+    enter(progress, Phase.REFUTATION, unit="")
+    starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
+    found = refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [plan.v_sing], m0=m0, xi_starts=starts,
+                                    bounds=refute_overrides(b, derived_a_max(plan, b, robot)),
+                                    max_cpu_time=REFUTE_CPU_TIME, cap_variables=REFUTE_CAP_VARIABLES)
+    return found.rows
+
+
+def _trajectory_certificate(robot, plan: PlannedTrajectory, b: PlanningBounds, run, certified: bool, mc, rows,
+                            clock: dict, source: PlanSource, t0: float) -> CrossingCertificate:
+    """The certificate of a given plan from its run (:func:`~planner.certify.plan.certify_planned`), Monte
+    Carlo confirmation ``mc``, refutation ``rows`` (None: not run) and phase times ``clock`` (s); ``t0`` the
+    start of :func:`certify_trajectory` (``time.perf_counter``, s)."""
     return CrossingCertificate(
         verdict=run.verdict,
         v_min=plan.v_sing if certified else None,

@@ -231,38 +231,14 @@ def check_command(a, entry) -> None:
             get_entry(a.validate)  # an unknown name fails here, listing the known ones
         return
     if cmd in ("check", "monitor"):
-        _tracker(a, robot)
-        _recording(a, robot)
-        _in("--horizon", a.horizon, 2, MAX_HORIZON, lo_open=False, unit=" samples")
-        if cmd == "check" and a.plot is not None:
-            _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
+        _check_options(a, robot)
         return
     if cmd in ("simulate", "plan", "certify"):
         _in("--a-peak", a.a_peak, 0.0, 1e6, unit=" m/s^2")
     if cmd in ("simulate", "plan"):
         _in("--v-sing", a.v_sing, 0.0, MAX_SPEED, unit=" m/s")
     if cmd == "simulate":
-        _in("--t-rest", a.t_rest, 0.0, 600.0, lo_open=False, unit=" s")
-        if entry.benchmark is None and entry.motion is not None:
-            if a.bounce:
-                raise InputError(f"robot {entry.name!r} ships no crossing, so there is no bounce to simulate; "
-                                 "drop --bounce to simulate its reference motion")
-            if a.start_distance is not None:
-                raise InputError(f"robot {entry.name!r} ships no crossing, so there is no locus to start away from; "
-                                 "drop --start-distance to simulate its reference motion")
-            m = entry.reference_motion()
-            direction = m.goal - m.start
-        else:
-            direction = entry.benchmark_crossing().direction
-        if a.start_distance is not None:
-            _in("--start-distance", a.start_distance, 0.0, MAX_START_DISTANCE, unit=" m")
-        _a_peak_within_robot(a.a_peak, direction, robot)
-        T = ramp_length(a.v_sing, a.a_peak)[0]
-        # a bounce runs its ramps and cruise twice (there and back)
-        duration = a.t_rest + (2 if a.bounce else 1) * (2 * T + 2 * simulation_cruise(a) / a.v_sing) + REST_END
-        _budget(f"simulate at --v-sing {a.v_sing:g} m/s, --a-peak {a.a_peak:g} m/s^2, --t-rest {a.t_rest:g} s",
-                duration / robot.t_s, robot.n)
-        _output_file(a.output, "--output", (".csv",))
+        _simulate_options(a, entry, robot)
         return
     if cmd == "certify" and a.plan is not None:
         _given_plan(a, robot)
@@ -273,36 +249,88 @@ def check_command(a, entry) -> None:
         direction, length = _task_segment(a, entry)
         _a_peak_within_robot(a.a_peak, direction, robot)
     if cmd == "plan":
-        T = ramp_length(a.v_sing, a.a_peak)[0]
-        duration = 2 * PlanningBounds.t_rest + 2 * T + length / a.v_sing  # rests, ramps, the whole segment at v_sing at most
-        _budget(f"plan at --v-sing {a.v_sing:g} m/s", duration / robot.t_s, robot.n)
-        _output_file(a.output, "--output", (".csv",))
+        _plan_options(a, robot, length)
         return
     if cmd == "certify":
-        _certify_bounds(a, robot)
-        _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
-        _in("--v-high", a.v_high, a.v_low, MAX_SPEED, unit=" m/s")
-        _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")
-        _in("--refute-tol", a.refute_tol, MIN_TOL / 10, 1.0, lo_open=False, unit=" m/s")
-        _in("--monte-carlo", a.monte_carlo, 0, MAX_MONTE_CARLO, lo_open=False)
-        # the slowest plan bounds every batch: samples of a crossing at v_low
-        T = ramp_length(a.v_low, a.a_peak)[0]
-        samples = (2 * PlanningBounds.t_rest + 2 * T + length / a.v_low) / robot.t_s
-        _budget(f"certify down to --v-low {a.v_low:g} m/s with --monte-carlo {a.monte_carlo}", samples, robot.n,
-                scenarios=max(a.monte_carlo, 1), tracked=True, hint="raise --v-low or lower --monte-carlo")
-        _output_folder(a.out, "--out", ("certificate.json",))
+        _certify_options(a, robot, length)
         return
     if cmd == "sweep":
-        a.speeds_list = tuple(floats_option(a.speeds, None, "--speeds")) if a.speeds else TABLE2_SPEEDS
-        for v in a.speeds_list:
-            _in("--speeds", v, 0.0, MAX_SPEED, unit=" m/s")
-        if len(a.speeds_list) > 100:
-            raise InputError(f"--speeds: {len(a.speeds_list)} speeds; at most 100")
-        slowest = min(a.speeds_list)
-        T = ramp_length(slowest, SIM_A_PEAK)[0]
-        _budget(f"sweep at {slowest:g} m/s", (SWEEP_T_REST + 2 * T + 0.07 / slowest + REST_END) / robot.t_s, robot.n,
-                scenarios=2 * len(a.speeds_list), tracked=True, hint="drop the slowest speeds")
-        _output_folder(a.out, "--out", ())
+        _sweep_options(a, robot)
+
+
+def _check_options(a, robot) -> None:
+    """``check`` and ``monitor``: the tracker's options, the recording, ``--horizon`` and ``--plot``."""
+    cmd = a.command
+    _tracker(a, robot)
+    _recording(a, robot)
+    _in("--horizon", a.horizon, 2, MAX_HORIZON, lo_open=False, unit=" samples")
+    if cmd == "check" and a.plot is not None:
+        _output_file(a.plot, "--plot", (".png",), inputs=(a.trajectory,))
+
+
+def _simulate_options(a, entry, robot) -> None:
+    """``simulate`` (after ``--a-peak`` and ``--v-sing``): ``--t-rest``, the bounce or reference motion, the
+    start distance (m), the ramp's acceleration along the motion, the run's size and ``--output``."""
+    _in("--t-rest", a.t_rest, 0.0, 600.0, lo_open=False, unit=" s")
+    if entry.benchmark is None and entry.motion is not None:
+        if a.bounce:
+            raise InputError(f"robot {entry.name!r} ships no crossing, so there is no bounce to simulate; "
+                             "drop --bounce to simulate its reference motion")
+        if a.start_distance is not None:
+            raise InputError(f"robot {entry.name!r} ships no crossing, so there is no locus to start away from; "
+                             "drop --start-distance to simulate its reference motion")
+        m = entry.reference_motion()
+        direction = m.goal - m.start
+    else:
+        direction = entry.benchmark_crossing().direction
+    if a.start_distance is not None:
+        _in("--start-distance", a.start_distance, 0.0, MAX_START_DISTANCE, unit=" m")
+    _a_peak_within_robot(a.a_peak, direction, robot)
+    T = ramp_length(a.v_sing, a.a_peak)[0]
+    # a bounce runs its ramps and cruise twice (there and back)
+    duration = a.t_rest + (2 if a.bounce else 1) * (2 * T + 2 * simulation_cruise(a) / a.v_sing) + REST_END
+    _budget(f"simulate at --v-sing {a.v_sing:g} m/s, --a-peak {a.a_peak:g} m/s^2, --t-rest {a.t_rest:g} s",
+            duration / robot.t_s, robot.n)
+    _output_file(a.output, "--output", (".csv",))
+
+
+def _plan_options(a, robot, length: float) -> None:
+    """``plan`` (after the task's segment, ``length`` m): the plan's size and ``--output``."""
+    T = ramp_length(a.v_sing, a.a_peak)[0]
+    duration = 2 * PlanningBounds.t_rest + 2 * T + length / a.v_sing  # rests, ramps, the whole segment at v_sing at most
+    _budget(f"plan at --v-sing {a.v_sing:g} m/s", duration / robot.t_s, robot.n)
+    _output_file(a.output, "--output", (".csv",))
+
+
+def _certify_options(a, robot, length: float) -> None:
+    """``certify`` of a task (after its segment, ``length`` m): the bounds, the speed bracket and tolerances
+    (m/s), ``--monte-carlo``, the slowest plan's size and ``--out``."""
+    _certify_bounds(a, robot)
+    _in("--v-low", a.v_low, 0.0, MAX_SPEED, unit=" m/s")
+    _in("--v-high", a.v_high, a.v_low, MAX_SPEED, unit=" m/s")
+    _in("--tol", a.tol, MIN_TOL, 1.0, lo_open=False, unit=" m/s")
+    _in("--refute-tol", a.refute_tol, MIN_TOL / 10, 1.0, lo_open=False, unit=" m/s")
+    _in("--monte-carlo", a.monte_carlo, 0, MAX_MONTE_CARLO, lo_open=False)
+    # the slowest plan bounds every batch: samples of a crossing at v_low
+    T = ramp_length(a.v_low, a.a_peak)[0]
+    samples = (2 * PlanningBounds.t_rest + 2 * T + length / a.v_low) / robot.t_s
+    _budget(f"certify down to --v-low {a.v_low:g} m/s with --monte-carlo {a.monte_carlo}", samples, robot.n,
+            scenarios=max(a.monte_carlo, 1), tracked=True, hint="raise --v-low or lower --monte-carlo")
+    _output_folder(a.out, "--out", ("certificate.json",))
+
+
+def _sweep_options(a, robot) -> None:
+    """``sweep``: ``--speeds`` (m/s; parsed into ``a.speeds_list``), the slowest run's size and ``--out``."""
+    a.speeds_list = tuple(floats_option(a.speeds, None, "--speeds")) if a.speeds else TABLE2_SPEEDS
+    for v in a.speeds_list:
+        _in("--speeds", v, 0.0, MAX_SPEED, unit=" m/s")
+    if len(a.speeds_list) > 100:
+        raise InputError(f"--speeds: {len(a.speeds_list)} speeds; at most 100")
+    slowest = min(a.speeds_list)
+    T = ramp_length(slowest, SIM_A_PEAK)[0]
+    _budget(f"sweep at {slowest:g} m/s", (SWEEP_T_REST + 2 * T + 0.07 / slowest + REST_END) / robot.t_s, robot.n,
+            scenarios=2 * len(a.speeds_list), tracked=True, hint="drop the slowest speeds")
+    _output_folder(a.out, "--out", ())
 
 
 def _study_output(path) -> None:

@@ -52,6 +52,30 @@ def certify(a) -> int:
     out = Path(a.out)
     joint_unit = _joint_unit(robot)
     bar = phase_bar(not a.no_progress, "certify")
+    cert, figure, files, drawing = _certify_twice(a, robot, task, bounds, kin, out, joint_unit, bar)
+    report = cert.summary()
+    report["command_line"] = ["crosscert", *a.argv]
+    out.mkdir(parents=True, exist_ok=True)
+    if cert.trajectory is not None:
+        # the certified plan beside its certificate: what `monitor --certificate` holds a run against
+        files.append(out / CERTIFIED_PLAN)
+        report["plan"] = _write_plan(files[-1], cert.trajectory)
+    if figure is not None and drawing is None:
+        fn, *args, kwargs = figure[1]
+        fn(*args, **kwargs)
+    if _write_report(out, report, files, a.json):
+        return 0
+    _print_certify(a, cert, files, joint_unit)
+    return 0
+
+
+def _certify_twice(a, robot, task, bounds: PlanningBounds, kin, out: Path, joint_unit: str, bar) -> tuple:
+    """The two certifications of ``crosscert certify``: under the stated bounds, then at the robot's own a_max.
+
+    Returns ``(cert, figure, files, drawing)``: the certificate (the second run's comparison attached), the
+    figure to draw (None: none), the files written so far, and the worker's drawing of the figure (None when
+    it is to be drawn here).
+    """
     # one worker process for both certifications' counterexample searches: the second reuses the
     # first's imports and NLP solvers (planner.refute builds one per sample count)
     pool = None if a.no_refute else SubprocessExecutor()
@@ -78,18 +102,11 @@ def certify(a) -> int:
                 drawing = None
     finally:
         _close(pool, bar)
-    report = cert.summary()
-    report["command_line"] = ["crosscert", *a.argv]
-    out.mkdir(parents=True, exist_ok=True)
-    if cert.trajectory is not None:
-        # the certified plan beside its certificate: what `monitor --certificate` holds a run against
-        files.append(out / CERTIFIED_PLAN)
-        report["plan"] = _write_plan(files[-1], cert.trajectory)
-    if figure is not None and drawing is None:
-        fn, *args, kwargs = figure[1]
-        fn(*args, **kwargs)
-    if _write_report(out, report, files, a.json):
-        return 0
+    return cert, figure, files, drawing
+
+
+def _print_certify(a, cert, files: list, joint_unit: str) -> None:
+    """The table and lines ``crosscert certify`` prints without ``--json``."""
     # widths are the forward tracker's boxes (the paper's Table II); the verdict includes the window passes
     print(f"{'v_sing (m/s)':>12} {'m_x (mm)':>10} {'m_xd (m/s)':>11} {'forward':>15} {'verdict':>15}")
     for r in cert.trials:
@@ -129,7 +146,6 @@ def certify(a) -> int:
     print(f"elapsed {cert.elapsed_s:.1f} s ({phases}){more}")
     for f in files:
         print(f"wrote {f}")
-    return 0
 
 
 #: The file ``certify`` writes the certified plan of a task to, in ``--out`` (its certificate names it).
