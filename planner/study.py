@@ -299,55 +299,17 @@ def run_study(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | Non
     """
     import pandas as pd
 
-    out = Path(out)
-    if out.suffix.lower() != ".csv":
-        raise InputError(f"a study writes CSV: {out} must end in .csv")
-    if not out.parent.is_dir():
-        raise InputError(f"folder {out.parent} does not exist")
+    out = _output(out)
     per_task = int(V.number("cases_per_task", cases_per_task, lo=1))
     settings = {"robot": robot, "bounds": dict(bounds or {}), "certify": dict(certify or {})}
     cases = study_cases(grid)
-    torn = repair_results(out)
-    if torn is not None:
-        log.warning("%s", torn)
-    done = {r["case_id"] for r in read_results(out)}
-    todo = [c for c in cases if c.case_id not in done]
-    log.info("study: %d cases, %d already in %s", len(cases), len(cases) - len(todo), out)
+    todo = _pending(cases, out)
     batches = [todo[i:i + per_task] for i in range(0, len(todo), per_task)]
-    own = None
     if batches:
+        own = None
         if executor is None:
-            if client is None:
-                from dask.distributed import Client, LocalCluster
-
-                if scheduler is not None:
-                    try:
-                        client = own = Client(scheduler)
-                    except ValueError as exc:  # a malformed address
-                        raise InputError(f"scheduler {scheduler!r}: {exc}") from None
-                    except OSError as exc:  # nobody answers there (after distributed.comm.timeouts.connect)
-                        raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc}); start it "
-                                         "(dask scheduler) or check the address") from None
-                else:
-                    # dashboard on a free port: a second study on the machine must not collide
-                    cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                                           processes=True, dashboard_address=":0")
-                    client = own = Client(cluster)
-            executor = client.get_executor(pure=False)
-        try:
-            futures = [executor.submit(run_cases, b, settings) for b in batches]
-            for f in as_completed(futures):
-                rows = f.result()
-                _append(out, rows)
-                for r in rows:
-                    if progress is not None:
-                        progress(r)
-        finally:
-            if own is not None:
-                cluster = getattr(own, "cluster", None)
-                own.close()
-                if cluster is not None:
-                    cluster.close()
+            executor, own = _dask_executor(client, scheduler, workers)
+        _run_batches(executor, batches, settings, out, progress, own)
     text = io.StringIO()
     w = csv.DictWriter(text, fieldnames=COLUMNS)
     w.writeheader()
@@ -357,3 +319,80 @@ def run_study(grid: dict, *, out, robot: str = DEFAULT_ROBOT, bounds: dict | Non
     table = table[table["case_id"].isin({c.case_id for c in cases})]
     return table.drop_duplicates("case_id", keep="last").reset_index(drop=True)
 
+
+def _output(out) -> Path:
+    """The study's CSV path, checked: it ends in ``.csv`` and its folder exists (else :class:`InputError`)."""
+    out = Path(out)
+    if out.suffix.lower() != ".csv":
+        raise InputError(f"a study writes CSV: {out} must end in .csv")
+    if not out.parent.is_dir():
+        raise InputError(f"folder {out.parent} does not exist")
+    return out
+
+
+def _pending(cases: list[StudyCase], out: Path) -> list[StudyCase]:
+    """The cases not yet in ``out``, after cutting a torn last row off it (logged as a warning)."""
+    torn = repair_results(out)
+    if torn is not None:
+        log.warning("%s", torn)
+    done = {r["case_id"] for r in read_results(out)}
+    todo = [c for c in cases if c.case_id not in done]
+    log.info("study: %d cases, %d already in %s", len(cases), len(cases) - len(todo), out)
+    return todo
+
+
+def _dask_executor(client, scheduler: str | None, workers: int | None):
+    """An executor of the Dask client, connected to ``scheduler`` or a new ``LocalCluster`` if there is none.
+
+    Returns
+    -------
+    executor : concurrent.futures.Executor
+    own : dask.distributed.Client or None
+        The client made here (to be closed at the end), None for the caller's ``client``.
+
+    Raises
+    ------
+    InputError
+        A malformed scheduler address, or no scheduler answering there.
+    """
+    own = None
+    if client is None:
+        from dask.distributed import Client, LocalCluster
+
+        if scheduler is not None:
+            try:
+                client = own = Client(scheduler)
+            except ValueError as exc:  # a malformed address
+                raise InputError(f"scheduler {scheduler!r}: {exc}") from None
+            except OSError as exc:  # nobody answers there (after distributed.comm.timeouts.connect)
+                raise InputError(f"cannot reach the Dask scheduler at {scheduler} ({exc}); start it "
+                                 "(dask scheduler) or check the address") from None
+        else:
+            # dashboard on a free port: a second study on the machine must not collide
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                                   processes=True, dashboard_address=":0")
+            client = own = Client(cluster)
+    return client.get_executor(pure=False), own
+
+
+def _run_batches(executor: Executor, batches: list[list[StudyCase]], settings: dict, out: Path,
+                 progress: Callable[[dict], None] | None, own) -> None:
+    """Run the batches on ``executor``, appending each one's rows to ``out`` as it finishes.
+
+    ``own``, a Dask client made for the study (or None), is closed at the
+    end with its cluster, whatever happens.
+    """
+    try:
+        futures = [executor.submit(run_cases, b, settings) for b in batches]
+        for f in as_completed(futures):
+            rows = f.result()
+            _append(out, rows)
+            for r in rows:
+                if progress is not None:
+                    progress(r)
+    finally:
+        if own is not None:
+            cluster = getattr(own, "cluster", None)
+            own.close()
+            if cluster is not None:
+                cluster.close()

@@ -87,13 +87,45 @@ def check_plan(kin, dyn, task, point, m0, v_sing, lim, torque, xi, samples: Samp
         exceeded by more than :data:`LIMIT_RTOL`.
     """
     t, X, XD, XDD, XDDD, k_sing = samples.t, samples.x, samples.xd, samples.xdd, samples.xddd, samples.k_sing
-    node_t = samples.node_t
+    Q, QD, QDD = _joints(kin, task, xi, X, XD, XDD)
+    modes = _check_motion(kin, task, point, m0, v_sing, xi, samples, Q)
+    _check_branch(t, samples.node_t, node_q, Q, lim["qd_max"])
+    # t_s recomputed from the sampled configuration (SVD of J_x), not taken from the NLP
+    crit = float(dyn.criterion_residual(X[k_sing], Q[k_sing], XD[k_sing], XDD[k_sing], xi)[0])
+    _check(abs(crit) <= criterion_tol, f"criterion residual {crit:.3g} N > {criterion_tol:.3g} N")
+    tau = np.empty_like(QD)
+    reg = np.arange(t.size) != k_sing
+    tau[reg] = dyn.torques(X[reg], Q[reg], XD[reg], XDD[reg], xi)
+    tau[k_sing] = dyn.singular_torques(X[k_sing], Q[k_sing], XD[k_sing], XDD[k_sing], XDDD[k_sing], xi)
+    _check(np.all(np.isfinite(tau)), "torques finite")
+    peak = _peaks(dyn, lim, torque, QD, QDD, tau, XDD, XDDD)
+    return Q, QD, QDD, tau, crit, (int(modes[0]), int(modes[-1])), peak
+
+
+def _joints(kin, task, xi, X, XD, XDD):
+    """Joints (rad) by IK continuation along the sampled poses ``X`` (m), and their rates (rad/s, rad/s^2).
+
+    Raises
+    ------
+    CheckFailed
+        If the IK continuation fails.
+    """
     try:
         Q = kin.ik_path(X, xi, task.working_guess)
     except SimulationError as exc:
         raise CheckFailed("IK continuation", f"generated trajectory failed the independent check: {exc}") from None
     QD = kin.joint_velocity(X, Q, xi, XD)
     QDD = kin.joint_acceleration(X, Q, xi, XD, QD, XDD)
+    return Q, QD, QDD
+
+
+def _check_motion(kin, task, point, m0, v_sing, xi, samples: Samples, Q) -> np.ndarray:
+    """Check loop closure, start and goal at rest, the crossing sample's pose and speed, the modes and Type 1.
+
+    Returns the assembly modes at the samples; raises :class:`CheckFailed` on
+    the first failed requirement.
+    """
+    X, XD, k_sing = samples.x, samples.xd, samples.k_sing
     _check(np.abs(kin.f_batch(X, Q, xi)).max() <= _LOOP_CLOSURE_TOL, "loop closure")
     _check(np.allclose(X[0], task.start, atol=_START_ATOL, rtol=0)
            and np.allclose(X[-1], task.goal, atol=_GOAL_ATOL, rtol=0), "start/goal poses")
@@ -106,19 +138,23 @@ def check_plan(kin, dyn, task, point, m0, v_sing, lim, torque, xi, samples: Samp
            f"assembly mode {m0:+d} before and {-m0:+d} after the crossing sample")
     detq = np.linalg.det(kin.jac_q_batch(X, Q, xi))
     _check(np.all(np.sign(detq) == np.sign(detq[0])) and np.all(detq != 0), "working mode of the legs (Type 1)")
-    # NLP joints on the same branch as the continuation (within one sample of motion)
+    return modes
+
+
+def _check_branch(t, node_t, node_q, Q, qd_max) -> None:
+    """Check the NLP joints ``node_q`` (rad) at times ``node_t`` (s) lie on the continuation's branch ``Q``.
+
+    Each must be within one sample of motion at ``qd_max`` (rad/s) of the
+    continuation's joints at the nearest sample, else :class:`CheckFailed`.
+    """
     idx = np.clip(np.searchsorted(t, node_t), 0, t.size - 1)
     step = float(t[1] - t[0]) if t.size > 1 else 0.0
-    reach = lim["qd_max"] * (step + np.abs(t[idx] - node_t))[:, None] + _BRANCH_SLACK
+    reach = qd_max * (step + np.abs(t[idx] - node_t))[:, None] + _BRANCH_SLACK
     _check(np.all(np.abs(node_q - Q[idx]) <= reach), "NLP joints off the IK-continuation branch")
-    # t_s recomputed from the sampled configuration (SVD of J_x), not taken from the NLP
-    crit = float(dyn.criterion_residual(X[k_sing], Q[k_sing], XD[k_sing], XDD[k_sing], xi)[0])
-    _check(abs(crit) <= criterion_tol, f"criterion residual {crit:.3g} N > {criterion_tol:.3g} N")
-    tau = np.empty_like(QD)
-    reg = np.arange(t.size) != k_sing
-    tau[reg] = dyn.torques(X[reg], Q[reg], XD[reg], XDD[reg], xi)
-    tau[k_sing] = dyn.singular_torques(X[k_sing], Q[k_sing], XD[k_sing], XDD[k_sing], XDDD[k_sing], xi)
-    _check(np.all(np.isfinite(tau)), "torques finite")
+
+
+def _peaks(dyn, lim, torque, QD, QDD, tau, XDD, XDDD) -> dict:
+    """Largest ``|value| / limit`` of every imposed limit; :class:`LimitExceeded` above ``1 + LIMIT_RTOL``."""
     peak = {"qd": float(np.max(np.abs(QD) / lim["qd_max"])), "qdd": float(np.max(np.abs(QDD) / lim["qdd_max"]))}
     if torque:
         peak["tau"] = float(np.max(np.abs(tau) / dyn.model.tau_max_array))
@@ -129,4 +165,4 @@ def check_plan(kin, dyn, task, point, m0, v_sing, lim, torque, xi, samples: Samp
     worst = max(peak, key=peak.get)
     if peak[worst] > 1.0 + LIMIT_RTOL:
         raise LimitExceeded(worst, peak[worst])
-    return Q, QD, QDD, tau, crit, (int(modes[0]), int(modes[-1])), peak
+    return peak

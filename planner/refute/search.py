@@ -199,27 +199,47 @@ def crossing_floor(kin: KinematicModel, make_recording: Callable[[float], tuple]
     if tol is not None:
         tol = V.positive("tol", tol)
     rows: dict[float, RecordingRefutation] = {}
-
-    def run(d: float) -> None:
-        row = RecordingRefutation(parameter=d, unit="m", kind=CounterexampleKind.CROSSING, **_search_recording(
-            kin, make_recording, d, CounterexampleKind.CROSSING, m0=m0, xi_starts=xi_starts, bounds=bounds,
-            max_iter=max_iter, max_cpu_time=max_cpu_time, dense=dense))
-        rows[d] = row
-        if progress is not None:
-            progress(row)
-
+    search = {"m0": m0, "xi_starts": xi_starts, "bounds": bounds, "max_iter": max_iter,
+              "max_cpu_time": max_cpu_time, "dense": dense}
     for d in ds:
         if d not in rows:
-            run(d)
+            rows[d] = _floor_row(kin, make_recording, d, search, progress)
     if upper is not None:
         upper = V.positive("upper", upper, allow_zero=True)
-    while tol is not None:
+    if tol is not None:
+        _bisect_floor(rows, lambda d: _floor_row(kin, make_recording, d, search, progress), tol, upper)
+    refuted = [d for d in rows if rows[d].verified]
+    return CrossingFloor(tuple(rows[d] for d in sorted(rows)), max(refuted) if refuted else None)
+
+
+def _floor_row(kin, make_recording, d: float, search: dict, progress) -> RecordingRefutation:
+    """The crossing search on the bounce turning back ``d`` (m) before the locus, passed to ``progress``.
+
+    ``search`` holds the keyword arguments of :func:`_search_recording`
+    (``m0``, ``xi_starts``, ``bounds``, ``max_iter``, ``max_cpu_time``, ``dense``).
+    """
+    row = RecordingRefutation(parameter=d, unit="m", kind=CounterexampleKind.CROSSING, **_search_recording(
+        kin, make_recording, d, CounterexampleKind.CROSSING, **search))
+    if progress is not None:
+        progress(row)
+    return row
+
+
+def _bisect_floor(rows: dict, row_at: Callable[[float], RecordingRefutation], tol: float,
+                  upper: float | None) -> None:
+    """Bisect between the largest refuted distance and the smallest unrefuted one above it (m).
+
+    ``rows`` (by distance) gets the row ``row_at(d)`` of each midpoint ``d``
+    until the two ends are ``tol`` (m) apart.  ``upper`` (m), known
+    unrefuted, serves as the upper end when no tried distance above the
+    largest refuted one is unrefuted.  Nothing runs while no distance is refuted.
+    """
+    while True:
         refuted = [d for d in rows if rows[d].verified]
         above = [d for d in rows if refuted and d > max(refuted) and not rows[d].verified]
         if upper is not None and refuted and upper > max(refuted):
             above.append(upper)
         if not refuted or not above or min(above) - max(refuted) <= tol:
             break
-        run(0.5 * (max(refuted) + min(above)))
-    refuted = [d for d in rows if rows[d].verified]
-    return CrossingFloor(tuple(rows[d] for d in sorted(rows)), max(refuted) if refuted else None)
+        d = 0.5 * (max(refuted) + min(above))
+        rows[d] = row_at(d)

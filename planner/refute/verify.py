@@ -155,6 +155,38 @@ def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: Recording
         If ``ce`` is not a Counterexample, its arrays do not match the
         recording's shape, or ``kind`` is not a :class:`CounterexampleKind`.
     """
+    kind, (xi, x, v, u, q) = _candidate(kin, ce, rb, kind)
+    K = rb.n_samples
+    if not all(np.all(np.isfinite(a)) for a in (xi, x, v, u, q)):
+        return Verification(False, ("non-finite values",), math.inf, math.inf, math.inf, -math.inf,
+                            K * dense, K * dense, math.inf)
+    fails: list[str] = []
+    if ce.m0 != rb.m0 or abs(ce.t_s - rb.t_s) > 0:
+        fails.append("mode or sampling period differs from the recording's")
+    if ce.kind is not kind:
+        fails.append(f"candidate is a {ce.kind.value}, checked as a {kind.value}")
+    xi_excess, accel_ratio, xs, vs, mismatch = _check_bounds(rb, xi, x, v, u, fails)
+    q_ik, ok, joint_ratio = _check_joints(kin, rb, xs, xi, q, fails)
+    mode_margin = _check_sample_modes(kin, rb, kind, xs, q_ik, xi, fails)
+    dense_mode = require_dense_mode and kind is CounterexampleKind.BOUNCE
+    dense_mode_bad = dense_ik_bad = 0
+    if dense > 0 and ok.all():
+        dense_mode_bad, dense_ik_bad = _check_dense(kin, rb, xs, vs, u, q_ik, xi, dense, dense_mode, fails)
+    elif dense > 0:
+        dense_ik_bad = K - 1
+    return Verification(not fails, tuple(fails), joint_ratio, accel_ratio, xi_excess, mode_margin,
+                        dense_mode_bad, dense_ik_bad, mismatch)
+
+
+def _candidate(kin: KinematicModel, ce: Counterexample, rb: RecordingBounds, kind):
+    """The checked ``kind`` and the candidate's arrays ``(xi, x, v, u, q)`` as float ndarrays (SI).
+
+    Raises
+    ------
+    InputError
+        If ``kind`` is not a :class:`CounterexampleKind`, ``ce`` is not a
+        Counterexample, or its arrays do not match the recording's shape.
+    """
     try:
         kind = CounterexampleKind(kind)
     except ValueError:
@@ -162,20 +194,29 @@ def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: Recording
     if not isinstance(ce, Counterexample):
         raise InputError(f"ce must be a Counterexample, got {type(ce).__name__}")
     K, n = rb.n_samples, kin.n
-    fails: list[str] = []
     xi = np.asarray(ce.xi, dtype=float)
     x, v, u, q = (np.asarray(a, dtype=float) for a in (ce.x, ce.v, ce.u, ce.q))
     if x.shape != (K, n) or v.shape != (K, n) or q.shape != (K, n) or u.shape != (K - 1, n) or xi.shape != (kin.m,):
         raise InputError("counterexample arrays do not match the recording's shape")
-    if not all(np.all(np.isfinite(a)) for a in (xi, x, v, u, q)):
-        return Verification(False, ("non-finite values",), math.inf, math.inf, math.inf, -math.inf,
-                            K * dense, K * dense, math.inf)
-    if ce.m0 != rb.m0 or abs(ce.t_s - rb.t_s) > 0:
-        fails.append("mode or sampling period differs from the recording's")
-    if ce.kind is not kind:
-        fails.append(f"candidate is a {ce.kind.value}, checked as a {kind.value}")
+    return kind, (xi, x, v, u, q)
 
-    # 1. geometry, acceleration, velocity and workspace bounds.
+
+def _check_bounds(rb: RecordingBounds, xi, x, v, u, fails: list[str]):
+    """Check 1: geometry, acceleration, velocity and workspace bounds, on the re-integrated motion.
+
+    Appends a message to ``fails`` for each failed bound.
+
+    Returns
+    -------
+    xi_excess : float
+        Largest distance (SI) of ``xi`` outside ``[xi_lo, xi_hi]``.
+    accel_ratio : float
+        ``max |u| / a_max``.
+    xs, vs : ndarray, shape (K, n)
+        Poses (m) and velocities (m/s) re-integrated from ``x[0]``, ``v[0]`` and ``u``.
+    mismatch : float
+        Largest disagreement of the candidate's states with them, m.
+    """
     xi_excess = float(max(np.max(rb.xi_lo - xi), np.max(xi - rb.xi_hi), 0.0))
     if xi_excess > 0:
         fails.append(f"geometry outside the calibration box by {xi_excess:.3g}")
@@ -193,8 +234,23 @@ def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: Recording
         fails.append("velocity above v_max")
     if rb.x_lo is not None and (np.any(xs < rb.x_lo) or np.any(xs > rb.x_hi)):
         fails.append("pose outside the workspace box at a sample")
+    return xi_excess, accel_ratio, xs, vs, mismatch
 
-    # 2. joints: IK of the integrated poses, branch picked by the measurement.
+
+def _check_joints(kin: KinematicModel, rb: RecordingBounds, xs, xi, q, fails: list[str]):
+    """Check 2: the IK of the poses ``xs`` (m), leg branch picked by the measurement, against the intervals.
+
+    Appends a message to ``fails`` for each failed requirement.
+
+    Returns
+    -------
+    q_ik : ndarray, shape (K, n)
+        Re-solved joints, rad.
+    ok : ndarray of bool, shape (K,)
+        Samples where the IK converged.
+    joint_ratio : float
+        ``max (|q_ik - q_meas| + |Newton correction|) / eps_q``.
+    """
     q_ik, ok = kin.ik_batch(xs, xi, rb.q_meas)
     if not ok.all():
         fails.append(f"IK fails at {int(np.count_nonzero(~ok))} samples")
@@ -210,8 +266,16 @@ def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: Recording
         fails.append(f"candidate joints leave their intervals: max |q - q_meas| = {q_ratio:.6g} eps_q")
     if np.max(np.abs(q - q_ik)) > BRANCH_TOL:
         fails.append("candidate joints are not the IK of its poses")
+    return q_ik, ok, joint_ratio
 
-    # 3. mode at the samples: every sample's for a bounce, the first and last for a crossing.
+
+def _check_sample_modes(kin: KinematicModel, rb: RecordingBounds, kind: CounterexampleKind, xs, q_ik, xi,
+                        fails: list[str]) -> float:
+    """Check 3: the modes at the samples, every sample's for a bounce, the first and last for a crossing.
+
+    Appends a message to ``fails`` for each failed requirement; returns the
+    mode margin (:attr:`Verification.mode_margin`).
+    """
     modes = kin.mode_batch(xs, q_ik, xi)
     signed = rb.m0 * kin.normalised_mode_batch(xs, q_ik, xi)
     if kind is CounterexampleKind.BOUNCE:
@@ -224,31 +288,42 @@ def verify_counterexample(kin: KinematicModel, ce: Counterexample, rb: Recording
             fails.append(f"mode at the first sample is {int(modes[0]):+d}, not {rb.m0:+d}")
         if modes[-1] != -rb.m0:
             fails.append(f"mode at the last sample is {int(modes[-1]):+d}, not {-rb.m0:+d}")
-    dense_mode = require_dense_mode and kind is CounterexampleKind.BOUNCE
+    return mode_margin
 
-    # 4. dense continuation between samples (all intervals advance together).
-    dense_mode_bad = dense_ik_bad = 0
-    if dense > 0 and ok.all():
-        qc = q_ik[:-1].copy()
-        live = np.ones(K - 1, dtype=bool)
-        for j in range(1, dense + 1):
-            tau = rb.t_s * j / dense
-            xd = xs[:-1] + tau * vs[:-1] + 0.5 * tau * tau * u
-            qn, okj = kin.ik_batch(xd, xi, qc)
-            if rb.x_lo is not None:
-                okj &= np.all((xd >= rb.x_lo) & (xd <= rb.x_hi), axis=1)
-            live &= okj
-            qc = np.where(okj[:, None], qn, qc)
-            if dense_mode and j < dense:
-                mj = kin.mode_batch(xd, qc, xi)
-                dense_mode_bad += int(np.count_nonzero(live & (mj != rb.m0)))
-        live &= np.max(np.abs(qc - q_ik[1:]), axis=1) <= BRANCH_TOL
-        dense_ik_bad = int(np.count_nonzero(~live))
-        if dense_ik_bad:
-            fails.append(f"IK continuation fails or switches branch in {dense_ik_bad} intervals")
-        if dense_mode_bad:
-            fails.append(f"mode differs from {rb.m0:+d} at {dense_mode_bad} points between samples")
-    elif dense > 0:
-        dense_ik_bad = K - 1
-    return Verification(not fails, tuple(fails), joint_ratio, accel_ratio, xi_excess, mode_margin,
-                        dense_mode_bad, dense_ik_bad, mismatch)
+
+def _check_dense(kin: KinematicModel, rb: RecordingBounds, xs, vs, u, q_ik, xi, dense: int, dense_mode: bool,
+                 fails: list[str]) -> tuple[int, int]:
+    """Check 4: IK continuation at ``dense`` points per interval, all intervals advancing together.
+
+    Appends a message to ``fails`` for each failed requirement.
+
+    Returns
+    -------
+    dense_mode_bad : int
+        Dense points whose mode is not ``m0`` (counted only if ``dense_mode``).
+    dense_ik_bad : int
+        Intervals where the continuation failed, left the workspace box or
+        switched leg branch.
+    """
+    K = xs.shape[0]
+    dense_mode_bad = 0
+    qc = q_ik[:-1].copy()
+    live = np.ones(K - 1, dtype=bool)
+    for j in range(1, dense + 1):
+        tau = rb.t_s * j / dense
+        xd = xs[:-1] + tau * vs[:-1] + 0.5 * tau * tau * u
+        qn, okj = kin.ik_batch(xd, xi, qc)
+        if rb.x_lo is not None:
+            okj &= np.all((xd >= rb.x_lo) & (xd <= rb.x_hi), axis=1)
+        live &= okj
+        qc = np.where(okj[:, None], qn, qc)
+        if dense_mode and j < dense:
+            mj = kin.mode_batch(xd, qc, xi)
+            dense_mode_bad += int(np.count_nonzero(live & (mj != rb.m0)))
+    live &= np.max(np.abs(qc - q_ik[1:]), axis=1) <= BRANCH_TOL
+    dense_ik_bad = int(np.count_nonzero(~live))
+    if dense_ik_bad:
+        fails.append(f"IK continuation fails or switches branch in {dense_ik_bad} intervals")
+    if dense_mode_bad:
+        fails.append(f"mode differs from {rb.m0:+d} at {dense_mode_bad} points between samples")
+    return dense_mode_bad, dense_ik_bad

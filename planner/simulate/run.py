@@ -5,6 +5,7 @@ See :mod:`planner.simulate` for the model of the motion.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -180,6 +181,7 @@ def _aligned(law_fn, t_sing_rel: float, t_rest: float, t_s: float):
 
 def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s, eps_q, t_rest,
               t_rest_end, a_peak, cruise, working_guess, seed, quantisation, strict_xi, short=0.0):
+    """A simulated crossing (:func:`simulate_crossing`) or, if ``bounce``, bounce (:func:`simulate_bounce`)."""
     p, u, v_sing, a_peak, cruise, t_rest, t_rest_end, t_s, eps_q, xi, qg = _prepare(
         model, crossing_point, direction, v_sing, xi_true, t_s, eps_q, t_rest, t_rest_end,
         a_peak, cruise, working_guess, quantisation, strict_xi)
@@ -187,30 +189,82 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
     name = model.robot.name
     T, D = ramp_length(v_sing, a_peak)
     h = _scan_step(model.robot)
-    # Scan exactly the arc lengths the motion needs (grid ends on the path ends);
-    # a bounce starts 2 (D + cruise) before its turning point, short before the
-    # true locus (found first).
+    scan = _scan(model, p, u, xi, qg, bounce=bounce, short=short, cruise=cruise, D=D, h=h)
+    too_fast = functools.partial(_too_fast, model, p, u, xi, qg, bounce=bounce, short=short, v_sing=v_sing,
+                                 a_peak=a_peak, cruise=cruise, h=h)
+    s_true = _check_scan(model, p, u, xi, scan, bounce=bounce, short=short, cruise=cruise, D=D,
+                         too_fast=too_fast)
+    s_turn = s_true - short  # a bounce turns back here (on the locus when short = 0)
+    if bounce:
+        law, k_sing, n_samp = _aligned(
+            lambda tr: bounce_time_law(v_sing, a_peak, cruise, tr, t_rest_end, s_turn),
+            2.0 * T + 2.0 * cruise / v_sing, t_rest, t_s)
+    else:
+        law, k_sing, n_samp = _aligned(
+            lambda tr: crossing_time_law(v_sing, a_peak, cruise, tr, t_rest_end),
+            T + (s_true + cruise) / v_sing, t_rest, t_s)
+    t = np.arange(n_samp) * t_s
+    s, v, a = law.evaluate(t)
+    s[k_sing] = s_turn if bounce else s_true  # the singular sample: exactly on the locus, or short of it
+    if bounce:
+        v[k_sing] = a[k_sing] = 0.0  # the touching instant, exactly
+    X, XD, XDD, Q, QD, QDD, modes = _sampled_motion(model, p, u, xi, scan, t, s, v, a, bounce=bounce,
+                                                    too_fast=too_fast)
+    rng = np.random.default_rng(seed)
+    q_meas = quantise(Q, eps_q, quantisation, rng)
+    return SimulatedRun(
+        robot_name=name, t=t, q_meas=q_meas, q=Q, x=X, xd=XD, xdd=XDD,
+        qd=QD, qdd=QDD, mode_true=modes, xi_true=np.array(xi), k_sing=int(k_sing),
+        t_sing=float(t[k_sing]), x_sing=p + s_true * u, s_sing=float(s_true), v_sing=v_sing,
+        bounce=bounce, crossing_point=p, direction=u, t_s=t_s, eps_q=eps_q, a_peak=a_peak,
+        quantisation=quantisation, time_law=law, short=short if bounce else 0.0,
+    )
+
+
+def _scan(model, p, u, xi, qg, *, bounce, short, cruise, D, h):
+    """IK continuation along the line ``p + s u`` over exactly the arc lengths (m) the motion needs.
+
+    The grid ends on the path ends: ``[-(D + cruise), D + cruise]`` for a
+    crossing (``D`` the ramp length, m); a bounce starts ``2 (D + cruise)``
+    before its turning point, ``short`` before the true locus (found first).
+
+    Raises
+    ------
+    SimulationError
+        For a bounce, no valid IK next to the crossing point.
+    """
     if bounce:
         near = scan_line(model, p, u, xi, qg, -cruise, cruise, h)
         if near.s.size < 2:
-            raise SimulationError(f"{name}: no valid IK next to the crossing point {p.tolist()}")
+            raise SimulationError(f"{model.robot.name}: no valid IK next to the crossing point {p.tolist()}")
         s_touch, _j = nearest_crossing(model, p, u, xi, near, cruise)
-        scan = scan_line(model, p, u, xi, qg, s_touch - short - 2.0 * (D + cruise), cruise, h)
+        return scan_line(model, p, u, xi, qg, s_touch - short - 2.0 * (D + cruise), cruise, h)
+    return scan_line(model, p, u, xi, qg, -(D + cruise), D + cruise, h)
+
+
+def _too_fast(model, p, u, xi, qg, reason: str, *, bounce, short, v_sing, a_peak, cruise, h) -> SimulationError:
+    """The error of a ``v_sing`` (m/s) whose path needs ``reason``, with the largest feasible ``v_sing``."""
+    s_true, e_lo, e_hi = valid_extent(model, p, u, xi, qg, cruise, h)
+    if bounce:
+        vmax = _v_from_distance((s_true - short - e_lo) / 2.0 - cruise, a_peak)
     else:
-        scan = scan_line(model, p, u, xi, qg, -(D + cruise), D + cruise, h)
+        vmax = _v_from_distance(min(-e_lo, e_hi) - cruise, a_peak)
+    return SimulationError(
+        f"{model.robot.name}: v_sing = {v_sing:.4g} m/s needs {reason}; the valid path around the "
+        f"crossing point spans [{e_lo * 1e3:.1f}, {e_hi * 1e3:.1f}] mm, so v_sing <= "
+        f"{vmax:.4g} m/s at a_peak = {a_peak:g} m/s^2 and cruise = {cruise * 1e3:g} mm"
+    )
 
-    def too_fast(reason: str):
-        s_true, e_lo, e_hi = valid_extent(model, p, u, xi, qg, cruise, h)
-        if bounce:
-            vmax = _v_from_distance((s_true - short - e_lo) / 2.0 - cruise, a_peak)
-        else:
-            vmax = _v_from_distance(min(-e_lo, e_hi) - cruise, a_peak)
-        return SimulationError(
-            f"{name}: v_sing = {v_sing:.4g} m/s needs {reason}; the valid path around the "
-            f"crossing point spans [{e_lo * 1e3:.1f}, {e_hi * 1e3:.1f}] mm, so v_sing <= "
-            f"{vmax:.4g} m/s at a_peak = {a_peak:g} m/s^2 and cruise = {cruise * 1e3:g} mm"
-        )
 
+def _check_scan(model, p, u, xi, scan, *, bounce, short, cruise, D, too_fast):
+    """The arc length (m) of the true crossing; the scan must span the whole path, meeting no other locus.
+
+    Raises
+    ------
+    SimulationError
+        ``too_fast(reason)`` when the path leaves the valid segment or meets
+        another Type 2 singularity; no true crossing within the cruise zone.
+    """
     if scan.s.size < 2:
         raise too_fast("poses beyond the reachable/valid segment")
     s_true, j = nearest_crossing(model, p, u, xi, scan, cruise)
@@ -228,20 +282,29 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
     inside[j] = False  # the locus the path is meant to meet (at s_true, beyond a short bounce's end)
     if inside.any():
         raise too_fast("a path that meets another Type 2 singularity")
+    return s_true
 
-    if bounce:
-        law, k_sing, n_samp = _aligned(
-            lambda tr: bounce_time_law(v_sing, a_peak, cruise, tr, t_rest_end, s_turn),
-            2.0 * T + 2.0 * cruise / v_sing, t_rest, t_s)
-    else:
-        law, k_sing, n_samp = _aligned(
-            lambda tr: crossing_time_law(v_sing, a_peak, cruise, tr, t_rest_end),
-            T + (s_true + cruise) / v_sing, t_rest, t_s)
-    t = np.arange(n_samp) * t_s
-    s, v, a = law.evaluate(t)
-    s[k_sing] = s_turn if bounce else s_true  # the singular sample: exactly on the locus, or short of it
-    if bounce:
-        v[k_sing] = a[k_sing] = 0.0  # the touching instant, exactly
+
+def _sampled_motion(model, p, u, xi, scan, t, s, v, a, *, bounce, too_fast):
+    """Poses, joints and their rates at the samples of the arc length law ``s, v, a`` (m, m/s, m/s^2).
+
+    Returns
+    -------
+    X, XD, XDD : ndarray, shape (K, n)
+        Pose (m), velocity (m/s), acceleration (m/s^2).
+    Q, QD, QDD : ndarray, shape (K, n)
+        Joints (rad), their velocities (rad/s) and accelerations (rad/s^2).
+    modes : ndarray of int, shape (K,)
+        Assembly modes.
+
+    Raises
+    ------
+    SimulationError
+        IK fails or leaves the working branch at a sample (``too_fast``: the
+        message gives the largest feasible ``v_sing``); the mode changes other
+        than once for a crossing, at all for a bounce.
+    """
+    name = model.robot.name
     X = p + s[:, None] * u
     XD = v[:, None] * u
     XDD = a[:, None] * u
@@ -259,15 +322,7 @@ def _simulate(bounce, model, crossing_point, direction, v_sing, *, xi_true, t_s,
     flips = int(np.count_nonzero(nz[1:] != nz[:-1]))
     if flips != (0 if bounce else 1):
         raise SimulationError(f"{name}: simulated mode changed {flips} times (expected {0 if bounce else 1})")
-    rng = np.random.default_rng(seed)
-    q_meas = quantise(Q, eps_q, quantisation, rng)
-    return SimulatedRun(
-        robot_name=name, t=t, q_meas=q_meas, q=Q, x=X, xd=XD, xdd=XDD,
-        qd=QD, qdd=QDD, mode_true=modes, xi_true=np.array(xi), k_sing=int(k_sing),
-        t_sing=float(t[k_sing]), x_sing=p + s_true * u, s_sing=float(s_true), v_sing=v_sing,
-        bounce=bounce, crossing_point=p, direction=u, t_s=t_s, eps_q=eps_q, a_peak=a_peak,
-        quantisation=quantisation, time_law=law, short=short if bounce else 0.0,
-    )
+    return X, XD, XDD, Q, QD, QDD, modes
 
 
 def simulate_crossing(model: KinematicModel, crossing_point, direction, v_sing: float, *,

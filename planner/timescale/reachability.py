@@ -135,8 +135,41 @@ def max_speed_at(samples: PathSamples, limits: ScalingLimits, s_star: float, *,
     if not isinstance(limits, ScalingLimits):
         raise InputError(f"limits must be ScalingLimits, got {type(limits).__name__}")
     k = node_index(samples, s_star, exact=False)
-    n, N, ds, s = samples.q.shape[1], samples.n_intervals, samples.ds, samples.s
+    N, s = samples.n_intervals, samples.s
     path = HermitePath(s, samples.q, samples.q_s, samples.q_ss)
+    cons = _limit_constraints(samples, limits)
+    if criterion:
+        cons.append(_criterion_constraint(samples, k, criterion_direction))
+    if not cons:
+        raise InputError("max_speed_at needs at least one limit")
+    algo = toppra.algorithm.TOPPRA(cons, path, gridpoints=np.array(s), solver_wrapper="seidel")
+    if rest_to_rest:
+        K = algo.compute_controllable_sets(0.0, 0.0)
+        Lr = algo.compute_reachable_sets(0.0, 0.0)
+    else:
+        X = algo.compute_feasible_sets()
+        K = algo.compute_controllable_sets(0.0, math.sqrt(max(X[N, 1], 0.0)))
+        Lr = algo.compute_reachable_sets(0.0, math.sqrt(max(X[0, 1], 0.0)))
+    top = min(K[k, 1], Lr[k, 1])
+    if not (np.isfinite(top) and K[k, 0] <= K[k, 1] and Lr[k, 0] <= Lr[k, 1]):
+        raise SimulationError(
+            f"no admissible scaling of the path reaches s* = {s[k]:.6g} m under the limits")
+    return math.sqrt(max(float(top), 0.0))
+
+
+def _limit_constraints(samples: PathSamples, limits: ScalingLimits) -> list:
+    """toppra constraints of the limits: joint velocity and acceleration, end-effector acceleration, extra rows.
+
+    The end-effector acceleration ``|x' sddot + x'' sdot^2| <= a_max`` (m/s^2)
+    and each ``limits.extra`` row are canonical linear constraints on the
+    samples' grid (interpolation scheme).
+
+    Raises
+    ------
+    InputError
+        Malformed limits.
+    """
+    n, N, s = samples.q.shape[1], samples.n_intervals, samples.s
     cons = []
     qd = per_joint(limits.qd_max, n, "qd_max")
     qdd = per_joint(limits.qdd_max, n, "qdd_max")
@@ -154,27 +187,23 @@ def max_speed_at(samples: PathSamples, limits: ScalingLimits, s_star: float, *,
         kk = e.A.shape[1]
         F = np.broadcast_to(np.eye(kk), (N + 1, kk, kk)).copy()
         cons.append(_GridConstraint(s, e.A, e.B, np.zeros_like(e.A), F, np.array(e.C), interpolate=True))
-    if criterion:
-        cx, cxx = criterion_coeffs(samples, k, crossing_direction(samples, k, criterion_direction))
-        ca_, cb_ = np.zeros((N + 1, 1)), np.zeros((N + 1, 1))
-        if k < N:  # stage k: cx u_k + cxx x_k = 0
-            ca_[k, 0], cb_[k, 0] = cx, cxx
-        if k > 0:  # stage k-1, written on x_k = x_{k-1} + 2 ds u_{k-1}
-            ca_[k - 1, 0], cb_[k - 1, 0] = cx + 2.0 * ds * cxx, cxx
-        cons.append(_GridConstraint(s, ca_, cb_, np.zeros((N + 1, 1)), np.array([[1.0], [-1.0]]),
-                                    np.zeros(2), interpolate=False))
-    if not cons:
-        raise InputError("max_speed_at needs at least one limit")
-    algo = toppra.algorithm.TOPPRA(cons, path, gridpoints=np.array(s), solver_wrapper="seidel")
-    if rest_to_rest:
-        K = algo.compute_controllable_sets(0.0, 0.0)
-        Lr = algo.compute_reachable_sets(0.0, 0.0)
-    else:
-        X = algo.compute_feasible_sets()
-        K = algo.compute_controllable_sets(0.0, math.sqrt(max(X[N, 1], 0.0)))
-        Lr = algo.compute_reachable_sets(0.0, math.sqrt(max(X[0, 1], 0.0)))
-    top = min(K[k, 1], Lr[k, 1])
-    if not (np.isfinite(top) and K[k, 0] <= K[k, 1] and Lr[k, 0] <= Lr[k, 1]):
-        raise SimulationError(
-            f"no admissible scaling of the path reaches s* = {s[k]:.6g} m under the limits")
-    return math.sqrt(max(float(top), 0.0))
+    return cons
+
+
+def _criterion_constraint(samples: PathSamples, k: int, criterion_direction) -> _GridConstraint:
+    """The crossing criterion at node ``k`` as an equality on the two adjacent stages (collocation).
+
+    Raises
+    ------
+    InputError
+        A malformed criterion direction, or one normal to the path.
+    """
+    N, ds = samples.n_intervals, samples.ds
+    cx, cxx = criterion_coeffs(samples, k, crossing_direction(samples, k, criterion_direction))
+    ca_, cb_ = np.zeros((N + 1, 1)), np.zeros((N + 1, 1))
+    if k < N:  # stage k: cx u_k + cxx x_k = 0
+        ca_[k, 0], cb_[k, 0] = cx, cxx
+    if k > 0:  # stage k-1, written on x_k = x_{k-1} + 2 ds u_{k-1}
+        ca_[k - 1, 0], cb_[k - 1, 0] = cx + 2.0 * ds * cxx, cxx
+    return _GridConstraint(samples.s, ca_, cb_, np.zeros((N + 1, 1)), np.array([[1.0], [-1.0]]),
+                           np.zeros(2), interpolate=False)

@@ -109,6 +109,32 @@ def resample(scaling: TimeScaling, samples: PathSamples, t_s: float, *, t_rest: 
     SimulationError
         IK fails at a sample.
     """
+    t_s, t_rest, t_rest_end = _checked_arguments(scaling, samples, t_s, t_rest, t_rest_end)
+    t_anchor, j_lo, j_hi = _sample_range(scaling, t_s, t_rest, t_rest_end)
+    j = np.arange(j_lo, j_hi + 1)
+    tau = t_anchor + j * t_s
+    s, sd, sdd = _evaluate(scaling, tau)
+    X, d1, d2 = samples.poses(s)
+    XD = d1 * sd[:, None]
+    XDD = d1 * sdd[:, None] + d2 * (sd * sd)[:, None]
+    if scaling.k_star is not None:  # the crossing sample lies exactly on the node
+        X[-j_lo] = samples.x[scaling.k_star]
+    Q, QD, QDD = _joints(samples, s, X, XD, XDD)
+    return TimedTrajectory(
+        t=(j - j_lo) * t_s, s=s, sd=sd, sdd=sdd, x=X, xd=XD, xdd=XDD, q=Q, qd=QD, qdd=QDD,
+        t_s=t_s, t_start=float(-(t_anchor + j_lo * t_s)),
+        k_star=None if scaling.k_star is None else int(-j_lo),
+    )
+
+
+def _checked_arguments(scaling, samples, t_s, t_rest, t_rest_end) -> tuple[float, float, float]:
+    """The arguments of :func:`resample` checked: ``t_s``, ``t_rest`` and ``t_rest_end`` (s) as floats.
+
+    Raises
+    ------
+    InputError
+        As :func:`resample`.
+    """
     if not isinstance(scaling, TimeScaling) or not isinstance(samples, PathSamples):
         raise InputError("resample needs a TimeScaling and the PathSamples it was computed on")
     if scaling.s.shape != samples.s.shape or np.any(scaling.s != samples.s):
@@ -118,23 +144,39 @@ def resample(scaling: TimeScaling, samples: PathSamples, t_s: float, *, t_rest: 
     t_rest_end = V.positive("t_rest_end", t_rest_end, allow_zero=True)
     if (t_rest > 0 and scaling.b[0] != 0.0) or (t_rest_end > 0 and scaling.b[-1] != 0.0):
         raise InputError("t_rest/t_rest_end need a scaling that starts/ends at rest")
+    return t_s, t_rest, t_rest_end
+
+
+def _sample_range(scaling: TimeScaling, t_s: float, t_rest: float, t_rest_end: float) -> tuple[float, int, int]:
+    """The anchor ``t_anchor`` (s) of the sample clock and the first and last sample indices ``j_lo, j_hi``.
+
+    Samples lie at motion times ``tau_j = t_anchor + j t_s``, ``t_anchor`` the
+    crossing instant (0 without one).  At a resting end, samples cover at
+    least the requested rest (``t_rest``, ``t_rest_end``, s; held state); at
+    a moving end none lies outside ``[0, T]``.
+    """
     T = scaling.total_time
     t_anchor = 0.0 if scaling.k_star is None else float(scaling.t[scaling.k_star])
-    # Motion time tau_j = t_anchor + j t_s.  At a resting end, samples cover at
-    # least the requested rest (held state); at a moving end none lies outside [0, T].
     # (planner.sampling.align_to_samples rounds the end down, so it is not used here.)
     lo, hi = (t_anchor + t_rest) / t_s, (T + t_rest_end - t_anchor) / t_s
     j_lo = -(math.ceil(lo - ALIGN_TOL) if scaling.b[0] == 0.0 else math.floor(lo + ALIGN_TOL))
     j_hi = math.ceil(hi - ALIGN_TOL) if scaling.b[-1] == 0.0 else math.floor(hi + ALIGN_TOL)
-    j = np.arange(j_lo, j_hi + 1)
-    tau = t_anchor + j * t_s
-    s, sd, sdd = _evaluate(scaling, tau)
+    return t_anchor, j_lo, j_hi
+
+
+def _joints(samples: PathSamples, s: np.ndarray, X: np.ndarray, XD: np.ndarray, XDD: np.ndarray):
+    """Joints (rad) by Newton IK at the poses ``X`` (m), started on the samples' branch; their rates (eq. (2)).
+
+    The IK starts from the quintic Hermite interpolation of the samples' joints
+    at the arc lengths ``s`` (m); ``XD``, ``XDD`` are the pose's velocity (m/s)
+    and acceleration (m/s^2).  Returns ``Q, QD, QDD`` (rad, rad/s, rad/s^2).
+
+    Raises
+    ------
+    SimulationError
+        IK fails at a sample, or lands on another branch.
+    """
     n = samples.x.shape[1]
-    X, d1, d2 = samples.poses(s)
-    XD = d1 * sd[:, None]
-    XDD = d1 * sdd[:, None] + d2 * (sd * sd)[:, None]
-    if scaling.k_star is not None:  # the crossing sample lies exactly on the node
-        X[-j_lo] = samples.x[scaling.k_star]
     path = HermitePath(samples.s, samples.q, samples.q_s, samples.q_ss)
     kin = samples.kin
     Qg = path(np.clip(s, 0.0, samples.length), 0).reshape(-1, n)
@@ -146,11 +188,7 @@ def resample(scaling: TimeScaling, samples: PathSamples, t_s: float, *, t_rest: 
         raise SimulationError("resample: IK left the samples' branch (grid too coarse?)")
     QD = kin.joint_velocity(X, Q, samples.xi, XD)
     QDD = kin.joint_acceleration(X, Q, samples.xi, XD, QD, XDD)
-    return TimedTrajectory(
-        t=(j - j_lo) * t_s, s=s, sd=sd, sdd=sdd, x=X, xd=XD, xdd=XDD, q=Q, qd=QD, qdd=QDD,
-        t_s=t_s, t_start=float(-(t_anchor + j_lo * t_s)),
-        k_star=None if scaling.k_star is None else int(-j_lo),
-    )
+    return Q, QD, QDD
 
 
 def _evaluate(scaling: TimeScaling, tau: np.ndarray):

@@ -270,6 +270,40 @@ def time_optimal_scaling(samples: PathSamples, limits: ScalingLimits, v_sing: fl
         largest feasible speed at ``s*`` (same discretisation, by an LP);
         solver failure; a solution that fails the a-posteriori check.
     """
+    k_star, v_sing, cdir, crit = _crossing(samples, limits, v_sing, s_star, rest_to_rest,
+                                           criterion, criterion_direction)
+    rows = path_rows(samples, limits)
+    kw = {"k_star": k_star, "crit": crit, "rest_to_rest": rest_to_rest}
+    status, b_sol, solve_time = _solve_time_optimal(samples, rows, v_sing, solver, kw)
+    b = _polish(b_sol, rows, samples.ds, v_sing=v_sing, **kw)
+    viol = _violation(b, rows, samples.ds)
+    if viol > FEAS_RTOL:
+        raise SimulationError(
+            f"time scaling: the {status} solution violates a bound by {viol:.3g} (relative) "
+            f"after polishing; the problem is badly scaled or at the edge of feasibility")
+    return _scaling(samples, b, k_star=k_star, crit=crit, cdir=cdir, v_sing=v_sing, status=status,
+                    solver=solver, solve_time=solve_time, max_violation=viol)
+
+
+def _crossing(samples, limits, v_sing, s_star, rest_to_rest, criterion, criterion_direction):
+    """Check the arguments of :func:`time_optimal_scaling`; the crossing they describe.
+
+    Returns
+    -------
+    k_star : int or None
+        Index of the crossing node ``s_star``.
+    v_sing : float or None
+        The checked crossing speed, m/s.
+    cdir : ndarray, shape (n,), or None
+        Unit direction ``c`` of the criterion (None without one).
+    crit : (float, float) or None
+        Coefficients ``(c . x', c . x'')`` of the criterion at ``k_star`` (None without one).
+
+    Raises
+    ------
+    InputError
+        As :func:`time_optimal_scaling`.
+    """
     if not isinstance(samples, PathSamples):
         raise InputError(f"samples must be PathSamples, got {type(samples).__name__}")
     if not isinstance(limits, ScalingLimits):
@@ -283,12 +317,23 @@ def time_optimal_scaling(samples: PathSamples, limits: ScalingLimits, v_sing: fl
     if k_star is not None and criterion:
         cdir = crossing_direction(samples, k_star, criterion_direction)
         crit = criterion_coeffs(samples, k_star, cdir)
-    N, ds = samples.n_intervals, samples.ds
-    if rest_to_rest and v_sing is not None and k_star in (0, N):
+    if rest_to_rest and v_sing is not None and k_star in (0, samples.n_intervals):
         raise InputError("s_star must be an interior node for a rest-to-rest crossing at v_sing > 0")
-    rows = path_rows(samples, limits)
-    kw = {"k_star": k_star, "crit": crit, "rest_to_rest": rest_to_rest}
+    return k_star, v_sing, cdir, crit
 
+
+def _solve_time_optimal(samples, rows, v_sing, solver, kw):
+    """Solve the minimum-time SOCP; its status, the solver's ``b`` (m^2/s^2) and the solve time (s).
+
+    ``kw`` holds ``k_star``, ``crit`` and ``rest_to_rest`` of :func:`_problem`.
+
+    Raises
+    ------
+    SimulationError
+        Infeasible (with the largest feasible speed at the crossing, by the
+        LP of :func:`_max_speed_lp`), or any other status without a solution.
+    """
+    k_star = kw["k_star"]
     t0 = time.perf_counter()
     prob, bvar = _problem(samples, rows, v_sing=v_sing, objective="time", **kw)
     _solve(prob, solver)
@@ -303,13 +348,19 @@ def time_optimal_scaling(samples: PathSamples, limits: ScalingLimits, v_sing: fl
             f"speed at s* = {samples.s[k_star]:.6g} m is {at})")
     if prob.status not in SOLVED or bvar.value is None:
         raise SimulationError(f"time scaling: solver {solver} ended with status {prob.status!r}")
+    return prob.status, bvar.value, solve_time
 
-    b = _polish(bvar.value, rows, ds, v_sing=v_sing, **kw)
-    viol = _violation(b, rows, ds)
-    if viol > FEAS_RTOL:
-        raise SimulationError(
-            f"time scaling: the {prob.status} solution violates a bound by {viol:.3g} (relative) "
-            f"after polishing; the problem is badly scaled or at the edge of feasibility")
+
+def _scaling(samples, b, *, k_star, crit, cdir, v_sing, status, solver, solve_time,
+             max_violation) -> TimeScaling:
+    """The :class:`TimeScaling` of the polished ``b`` (m^2/s^2): speeds, times and criterion residual.
+
+    Raises
+    ------
+    SimulationError
+        If the path stops inside (``b = 0`` at both ends of an interval).
+    """
+    N, ds = samples.n_intervals, samples.ds
     sd = np.sqrt(b)
     den = sd[:-1] + sd[1:]
     if np.any(den <= 0.0):
@@ -322,8 +373,8 @@ def time_optimal_scaling(samples: PathSamples, limits: ScalingLimits, v_sing: fl
         adj = [a[j] for j in (k_star - 1, k_star) if 0 <= j < N]
         res = max(abs(cx * aj + cxx * b[k_star]) for aj in adj)
     return TimeScaling(
-        s=np.array(samples.s), b=b, a=a, sd=sd, t=t, total_time=float(t[-1]), status=prob.status,
+        s=np.array(samples.s), b=b, a=a, sd=sd, t=t, total_time=float(t[-1]), status=status,
         solver=solver, solve_time=solve_time, v_sing=v_sing,
         s_star=None if k_star is None else float(samples.s[k_star]), k_star=k_star,
-        criterion_direction=cdir, criterion_residual=float(res), max_violation=viol,
+        criterion_direction=cdir, criterion_residual=float(res), max_violation=max_violation,
     )
