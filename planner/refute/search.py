@@ -191,21 +191,21 @@ def crossing_floor(kin: KinematicModel, make_recording: Callable[[float], tuple]
     ------
     InputError
         If ``kin`` is not a KinematicModel, ``make_recording`` is not callable,
-        a distance is negative, ``tol`` is not positive, or a recording does
-        not fit the robot.
+        a distance or ``upper`` is negative, ``tol`` is not positive (all
+        checked before any search), or a recording does not fit the robot.
     """
     _check(kin, make_recording, "distance")
     ds = [V.positive("distance", d, allow_zero=True) for d in distances]
     if tol is not None:
         tol = V.positive("tol", tol)
+    if upper is not None:  # checked with the others, before any search
+        upper = V.positive("upper", upper, allow_zero=True)
     rows: dict[float, RecordingRefutation] = {}
     search = {"m0": m0, "xi_starts": xi_starts, "bounds": bounds, "max_iter": max_iter,
               "max_cpu_time": max_cpu_time, "dense": dense}
     for d in ds:
         if d not in rows:
             rows[d] = _floor_row(kin, make_recording, d, search, progress)
-    if upper is not None:
-        upper = V.positive("upper", upper, allow_zero=True)
     if tol is not None:
         _bisect_floor(rows, lambda d: _floor_row(kin, make_recording, d, search, progress), tol, upper)
     refuted = [d for d in rows if rows[d].verified]
