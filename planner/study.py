@@ -371,8 +371,25 @@ def _dask_executor(client, scheduler: str | None, workers: int | None):
             # dashboard on a free port: a second study on the machine must not collide
             cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
                                    processes=True, dashboard_address=":0")
-            client = own = Client(cluster)
-    return client.get_executor(pure=False), own
+            try:
+                client = own = Client(cluster)
+            except BaseException:
+                cluster.close()  # no client to close it with
+                raise
+    try:
+        return client.get_executor(pure=False), own
+    except BaseException:
+        _close(own)
+        raise
+
+
+def _close(own) -> None:
+    """Close ``own``, a Dask client made for the study, and its cluster (nothing for None)."""
+    if own is not None:
+        cluster = getattr(own, "cluster", None)
+        own.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def _run_batches(executor: Executor, batches: list[list[StudyCase]], settings: dict, out: Path,
@@ -391,8 +408,4 @@ def _run_batches(executor: Executor, batches: list[list[StudyCase]], settings: d
                 if progress is not None:
                     progress(r)
     finally:
-        if own is not None:
-            cluster = getattr(own, "cluster", None)
-            own.close()
-            if cluster is not None:
-                cluster.close()
+        _close(own)
