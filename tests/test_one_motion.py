@@ -26,6 +26,7 @@ import pytest
 from adversarial import near_scenarios
 from problems import FARKAS, MARGIN, ONE_MOTION_PLAN, interval_model
 from crosscert.robots import DEXTAR
+from crosscert.verifier import certified_lp as LP
 from crosscert.verifier import one_motion as OM
 from crosscert.verifier.settings import TrackerSettings
 
@@ -55,7 +56,7 @@ def test_a_true_certificate_is_proved(compiled):
     """``z <= 0.4`` and ``z >= 0.6``: the hand-made multipliers and those of the solver both prove it."""
     system, y = _system("infeasible")
     assert OM.prove_infeasible(system, y, compiled=compiled)
-    found = OM._phase_one(system)
+    found = LP._phase_one(system)
     assert found is not None and OM.prove_infeasible(system, found, compiled=compiled)
 
 
@@ -68,7 +69,7 @@ def test_a_feasible_system_is_never_proved(compiled):
     for y in [np.ones(2), np.array([1.0, 0.0]), np.array([np.inf, 1.0]), np.array([-1.0, 2.0])] + \
             [rng.uniform(0, 10, 2) for _ in range(50)]:
         assert not OM.prove_infeasible(feasible, y, compiled=compiled)
-    assert OM._phase_one(feasible) is None
+    assert LP._phase_one(feasible) is None
 
 
 @pytest.mark.parametrize("compiled", [False, True])
@@ -117,13 +118,13 @@ def test_a_system_tight_at_a_corner_with_exact_zeros_is_never_proved(compiled):
         ys = [np.ones(M), 10.0 ** rng.uniform(-300, 300, M), rng.uniform(0, 1, M) * (rng.random(M) > 0.5),
               np.where(rng.random(M) > 0.7, -1.0, rng.uniform(0, 5, M)),
               np.where(rng.random(M) > 0.7, np.inf, rng.uniform(0, 5, M))]
-        found = OM._phase_one(system)
+        found = LP._phase_one(system)
         if found is not None:
             ys.append(found)
         for y in ys:
             assert not OM.prove_infeasible(system, y, compiled=compiled), (system, y)
             if np.any(np.isfinite(y) & (y > 0)):
-                left, yb = OM._dual_bound(system, y, compiled=compiled)
+                left, yb = LP._dual_bound(system, y, compiled=compiled)
                 tight += bool(left == 0.0 and yb == 0.0)
                 tried += 1
     assert tight > 0.5 * tried, (tight, tried)
@@ -347,7 +348,7 @@ def test_the_interval_sum_is_outward():
     """The pairwise sum of the check encloses the exact sum of many terms (odd counts padded with exact 0)."""
     rng = np.random.default_rng(1)
     v = rng.uniform(-1, 1, (3, 37)) * 10.0 ** rng.integers(-8, 3, (3, 37))
-    lo, hi = OM._tree_sum(v, v)
+    lo, hi = LP.tree_sum(v, v)
     for r in range(3):
         exact = sum(Fraction(float(t)) for t in v[r])
         assert Fraction(float(lo[r])) <= exact <= Fraction(float(hi[r]))
@@ -366,7 +367,7 @@ def test_a_certified_minimum_is_below_the_true_minimum(compiled):
         assert Fraction(low) <= exact, (cost, low)
     tie = OM.LinearSystem(np.array([0, 0]), np.array([0, 1]), np.array([-1.0, -1.0]), np.array([-0.7]),
                           np.zeros(2), np.ones(2))
-    solver = OM._Solver(compiled)
+    solver = LP.HighsSolver(compiled)
     assert solver.phase_one(tie) is None and solver.feasible
     lo2, hi2 = solver.bounds(tie, [0, 1])  # each in [0, 1]: z_0 >= 0.7 - 1 < 0, no narrowing
     assert np.all(lo2 <= 0.0) and np.all(hi2 >= 1.0)
@@ -422,7 +423,7 @@ def test_the_contractor_skips_only_the_sides_a_point_attains():
     not run (fewer than the four), the same bounds come out.  Fails when the skip takes the other side."""
     system = OM.LinearSystem(np.array([0, 0]), np.array([0, 1]), np.array([-1.0, -1.0]), np.array([-1.5]),
                              np.zeros(2), np.ones(2))
-    solver = OM._Solver()
+    solver = LP.HighsSolver()
     runs = []
     real = solver.highs
 

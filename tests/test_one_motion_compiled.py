@@ -27,6 +27,7 @@ import pytest
 from adversarial import near_scenarios
 from problems import interval_model
 from crosscert.robots import available_robots, get_entry
+from crosscert.verifier import certified_lp as LP
 from crosscert.verifier import one_motion as OM
 from crosscert.verifier.model import IntervalModel
 
@@ -75,8 +76,8 @@ def test_dual_bound_is_numpys_bit_for_bit(seed):
             for cost in (None, rng.normal(size=N), rng.normal(size=(B, N))):
                 if B == 1:  # one multiplier vector: (M,) and a cost (N,)
                     y, cost = y[0] if y.ndim == 2 else y, cost[0] if cost is not None and cost.ndim == 2 else cost
-                want = OM._dual_bound(system, y, cost)
-                got = OM._dual_bound(system, y, cost, compiled=True)
+                want = LP._dual_bound(system, y, cost)
+                got = LP._dual_bound(system, y, cost, compiled=True)
                 assert _bits_equal(got[0], want[0]) and _bits_equal(got[1], want[1]), (seed, M, N, B)
 
 
@@ -85,9 +86,9 @@ def test_dual_bound_agrees_where_the_arithmetic_overflows_or_has_no_multiplier()
     rng = np.random.default_rng(11)
     system = _random_system(rng, 30, 12, 0.3, scale=1e300)
     for y in (_multipliers(rng, 2, 30) * 1e10, np.zeros((2, 30)), np.full((1, 30), np.nan)):
-        want, got = OM._dual_bound(system, y), OM._dual_bound(system, y, compiled=True)
+        want, got = LP._dual_bound(system, y), LP._dual_bound(system, y, compiled=True)
         assert _bits_equal(got[0], want[0]) and _bits_equal(got[1], want[1])
-    assert not np.all(np.isfinite(OM._dual_bound(system, _multipliers(rng, 2, 30, special=False) * 1e10)[0]))
+    assert not np.all(np.isfinite(LP._dual_bound(system, _multipliers(rng, 2, 30, special=False) * 1e10)[0]))
 
 
 def _exact_dual(system, y, cost):
@@ -113,7 +114,7 @@ def test_dual_bound_encloses_the_exact_value(compiled):
         system = _random_system(rng, M, N, 0.4)
         y = _multipliers(rng, 1, M, special=False)[0]
         cost = rng.normal(size=N) * 10.0 ** rng.integers(-3, 3, N)
-        left, yb = OM._dual_bound(system, y, cost, compiled=compiled)
+        left, yb = LP._dual_bound(system, y, cost, compiled=compiled)
         ex_left, ex_yb = _exact_dual(system, y, cost)
         assert Fraction(float(left)) <= ex_left, t
         assert Fraction(float(yb)) >= ex_yb, t
@@ -140,7 +141,7 @@ def test_a_column_sum_cancelling_to_zero_keeps_its_products_rounding(compiled):
         side = 1.0 if err < 0 else -1.0  # left = cl (z = 1) or -ch (z = -1): the bound the error is beyond
         system = OM.LinearSystem(np.array([0]), np.array([0]), np.array([v]), np.array([0.0]), np.array([side]),
                                  np.array([side]))
-        left, _ = OM._dual_bound(system, np.array([y]), np.array([-(y * v)]), compiled=compiled)
+        left, _ = LP._dual_bound(system, np.array([y]), np.array([-(y * v)]), compiled=compiled)
         assert Fraction(float(left)) <= side * err, (y, v)
         seen.add(side)
     assert seen == {1.0, -1.0}
@@ -162,7 +163,7 @@ def test_a_sum_of_yb_cancelling_to_zero_keeps_its_products_rounding(compiled):
         assert exact > 0
         system = OM.LinearSystem(np.array([0, 1]), np.array([0, 0]), np.array([1.0, -1.0]), np.array([b1, b2]),
                                  np.zeros(1), np.ones(1))
-        _, yb = OM._dual_bound(system, np.array([y, y]), compiled=compiled)
+        _, yb = LP._dual_bound(system, np.array([y, y]), compiled=compiled)
         assert Fraction(float(yb)) >= exact, (y, b1)
         found += 1
 

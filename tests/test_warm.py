@@ -242,11 +242,11 @@ def test_the_one_motion_kernels_wait_for_a_finishing_child(monkeypatch):
     """A child whose driver is cached is still compiling the one-motion kernels: their first call here waits
     for it (then loads them) instead of compiling them beside it; a child that does not end in time is
     stopped."""
-    from crosscert.verifier import one_motion
+    from crosscert.verifier import certified_lp
 
     quick = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(0.5)"])
     monkeypatch.setattr(warm, "_FINISHING", [quick])
-    kernels = one_motion._compiled_kernels()
+    kernels = certified_lp.one_motion_kernels()
     assert quick.poll() == 0 and warm._FINISHING == [] and callable(kernels.dual_bound)
     slow = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
     monkeypatch.setattr(warm, "_FINISHING", [slow])

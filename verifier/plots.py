@@ -35,6 +35,34 @@ def _pose_boxes(ax, lo, hi, step, color_of, ls="-"):
                                    (hi[k, -1] - lo[k, -1]) * 1e3, fill=False, lw=0.5, ec=color_of(k), ls=ls))
 
 
+def _pyplot():
+    """matplotlib's pyplot on the non-interactive Agg backend."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _fit_pose_axes(a, ref):
+    """Fit the pose plane's limits (mm, 5 mm margin) to the finite boxes of the bands ``ref``, ``[(lo, hi)]``
+    of shape ``(K, n)``, m; left as they are when none is finite."""
+    fin = np.concatenate([np.isfinite(lo).all(1) & np.isfinite(hi).all(1) for lo, hi in ref])
+    lo_all, hi_all = np.concatenate([lo for lo, _ in ref]), np.concatenate([hi for _, hi in ref])
+    if fin.any():
+        a.set_xlim(lo_all[fin, 0].min() * 1e3 - 5, hi_all[fin, 0].max() * 1e3 + 5)
+        a.set_ylim(lo_all[fin, -1].min() * 1e3 - 5, hi_all[fin, -1].max() * 1e3 + 5)
+
+
+def _save(plt, fig, path, title, bounds):
+    """Title the figure (``bounds`` on a second line), write it to ``path`` as a PNG and close it."""
+    fig.suptitle(title + (f"\n{bounds}" if bounds else ""))
+    fig.tight_layout()
+    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")
+    plt.close(fig)
+
+
 def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="", bounds="", truth="true"):
     """Write a 2x2 figure: pose boxes in the plane, velocity enclosure of the last
     coordinate and its integral, the displacement enclosure ``[Δ]`` (Fig. 4),
@@ -59,31 +87,43 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
     truth : str
         What ``x_true``/``xd_true`` are, for the legend (``"true"``, ``"planned"``).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     xl, xh, vl, vh = (np.asarray(boxes[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = xl.shape
     t = np.arange(K) * t_s
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
-    a = ax[0, 0]
+    _run_pose_panel(ax[0, 0], xl, xh, boxes["mode"], x_true, truth)
+    _run_velocity_panel(ax[0, 1], t, vl, vh, xd_true, truth)
+    _run_displacement_panel(ax[1, 0], t, t_s, vl, vh, x_true, truth)
+    _run_width_panel(ax[1, 1], t, xl, xh, vl, vh)
+    for a in (ax[0, 1], ax[1, 0], ax[1, 1]):
+        if k_sing is not None:
+            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
+    if k_sing is not None:
+        ax[0, 1].legend(loc="best", fontsize=8)
+        ax[1, 0].legend(loc="best", fontsize=8)
+    _save(plt, fig, path, title, bounds)
+
+
+def _run_pose_panel(a, xl, xh, mode, x_true, truth):
+    """:func:`plot_run`'s pose boxes ``(K, n)``, m, in the plane, coloured by their ``mode`` ``(K,)``."""
+    K, n = xl.shape
     step = max(1, K // 400)
-    _pose_boxes(a, xl, xh, step, lambda k: {1: "tab:blue", -1: "tab:red"}.get(int(boxes["mode"][k]), "0.6"))
+    _pose_boxes(a, xl, xh, step, lambda k: {1: "tab:blue", -1: "tab:red"}.get(int(mode[k]), "0.6"))
     for label, color in (("mode +1", "tab:blue"), ("mode -1", "tab:red"), ("undecided", "0.6")):
         a.plot([], [], color=color, lw=1, label=f"pose box, {label}")
     if x_true is not None:
         a.plot(x_true[:, 0] * 1e3, x_true[:, -1] * 1e3, "k-", lw=0.8, label=f"{truth} pose")
     a.legend(loc="best", fontsize=8)
-    fin = np.isfinite(xl).all(1) & np.isfinite(xh).all(1)
-    if fin.any():
-        a.set_xlim(xl[fin, 0].min() * 1e3 - 5, xh[fin, 0].max() * 1e3 + 5)
-        a.set_ylim(xl[fin, -1].min() * 1e3 - 5, xh[fin, -1].max() * 1e3 + 5)
+    _fit_pose_axes(a, [(xl, xh)])
     a.set_xlabel("x1 (mm)")
     a.set_ylabel(f"x{n} (mm)")
     a.set_title(f"pose boxes, every {step} sample(s)")
-    a = ax[0, 1]
+
+
+def _run_velocity_panel(a, t, vl, vh, xd_true, truth):
+    """:func:`plot_run`'s velocity enclosure (m/s) of the last coordinate over the times ``t``, s."""
+    n = vl.shape[1]
     lo, hi, cut = _clip(vl[:, -1], vh[:, -1], VELOCITY_CLIP)
     a.fill_between(t, lo, hi, color="tab:orange", alpha=0.4, label=f"velocity enclosure of x{n}")
     if xd_true is not None:
@@ -92,7 +132,11 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
     a.set_xlabel("t (s)")
     a.set_title(f"velocity (clipped at ±{VELOCITY_CLIP:g} m/s)" if cut else "velocity")
     a.legend(loc="best", fontsize=8)
-    a = ax[1, 0]
+
+
+def _run_displacement_panel(a, t, t_s, vl, vh, x_true, truth):
+    """:func:`plot_run`'s displacement enclosure ``[Δ]`` (mm) of the last coordinate since the first sample."""
+    n = vl.shape[1]
     # displacement enclosure: sum of t_s * velocity over each step (eq. 8)
     dl = np.concatenate([[0.0], np.cumsum(t_s * vl[1:, -1])])
     dh = np.concatenate([[0.0], np.cumsum(t_s * vh[1:, -1])])
@@ -104,7 +148,11 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
     a.set_xlabel("t (s)")
     a.set_title(f"displacement (clipped at ±{DISPLACEMENT_CLIP * 1e3:g} mm)" if cut else "displacement")
     a.legend(loc="best", fontsize=8)
-    a = ax[1, 1]
+
+
+def _run_width_panel(a, t, xl, xh, vl, vh):
+    """:func:`plot_run`'s widths of the pose (mm, solid) and velocity (m/s, dashed, right axis) boxes."""
+    n = xl.shape[1]
     av = a.twinx()
     for i in range(n):
         a.semilogy(t, np.maximum(xh[:, i] - xl[:, i], 1e-9) * 1e3, label=f"pose x{i + 1}")
@@ -116,16 +164,6 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
     handles = a.get_legend_handles_labels()
     more = av.get_legend_handles_labels()
     a.legend(handles[0] + more[0], handles[1] + more[1], loc="best", fontsize=8)
-    for a in (ax[0, 1], ax[1, 0], ax[1, 1]):
-        if k_sing is not None:
-            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
-    if k_sing is not None:
-        ax[0, 1].legend(loc="best", fontsize=8)
-        ax[1, 0].legend(loc="best", fontsize=8)
-    fig.suptitle(title + (f"\n{bounds}" if bounds else ""))
-    fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")
-    plt.close(fig)
 
 
 #: Colours of the final-mode hypotheses of window reasoning.
@@ -160,11 +198,7 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     forward_label : str
         What ``forward`` is (e.g. the online monitor's boxes: the tracker, re-seeded in the decided mode).
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     fl, fh, fvl, fvh = (np.asarray(forward[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = fl.shape
     t = np.arange(K) * t_s
@@ -172,9 +206,22 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     # not drawn as a window tube; ``forward`` shows the run (e.g. the decided mode's boxes after a decision)
     alive = [h for h in window.hypotheses if h.x_lo is not None and h.passes > 0]
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
+    _certificate_pose_panel(ax[0, 0], fl, fh, alive, x_plan, forward_label)
+    _certificate_velocity_panel(ax[0, 1], t, fvl, fvh, alive, xd_plan, forward_label)
+    _certificate_width_panel(ax[1, 0], t, fl, fh, fvl, fvh, alive, forward_label)
+    for a in (ax[0, 1], ax[1, 0]):
+        if k_sing is not None:
+            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
+        a.legend(loc="best", fontsize=8)
+    _reasoning_panel(ax[1, 1], window)
+    _save(plt, fig, path, title, bounds)
+
+
+def _certificate_pose_panel(a, fl, fh, alive, x_plan, forward_label):
+    """:func:`plot_certificate`'s pose boxes in the plane: the tubes of the hypotheses ``alive``, each in its
+    colour, and the forward pass's boxes ``(K, n)``, m, in grey."""
+    K, n = fl.shape
     step = max(1, K // 300)
-    # pose: the forward pass in grey, each surviving hypothesis' tube in its colour
-    a = ax[0, 0]
     # the forward pass last, dotted, so that it shows where a tube coincides with it
     layers = [(f"window tube, final mode {h.final_mode:+d}", _HYPOTHESIS_COLOR.get(h.final_mode, "k"), "-", h.x_lo, h.x_hi)
               for h in alive] + [(forward_label, "0.35", ":" if alive else "-", fl, fh)]
@@ -183,18 +230,17 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
         a.plot([], [], color=color, lw=1, ls=ls, label=label)
     if x_plan is not None:
         a.plot(x_plan[:, 0] * 1e3, x_plan[:, -1] * 1e3, "k-", lw=0.8, label="planned pose")
-    ref = [(h.x_lo, h.x_hi) for h in alive] or [(fl, fh)]
-    fin = np.concatenate([np.isfinite(lo).all(1) & np.isfinite(hi).all(1) for lo, hi in ref])
-    lo_all, hi_all = np.concatenate([lo for lo, _ in ref]), np.concatenate([hi for _, hi in ref])
-    if fin.any():
-        a.set_xlim(lo_all[fin, 0].min() * 1e3 - 5, hi_all[fin, 0].max() * 1e3 + 5)
-        a.set_ylim(lo_all[fin, -1].min() * 1e3 - 5, hi_all[fin, -1].max() * 1e3 + 5)
+    _fit_pose_axes(a, [(h.x_lo, h.x_hi) for h in alive] or [(fl, fh)])
     a.set_xlabel("x1 (mm)")
     a.set_ylabel(f"x{n} (mm)")
     a.set_title(f"pose boxes, every {step} sample(s)")
     a.legend(loc="best", fontsize=8)
-    # velocity of the last coordinate
-    a = ax[0, 1]
+
+
+def _certificate_velocity_panel(a, t, fvl, fvh, alive, xd_plan, forward_label):
+    """:func:`plot_certificate`'s velocity (m/s) of the last coordinate: the hypotheses' tubes and the forward
+    pass's bounds over the times ``t``, s."""
+    n = fvl.shape[1]
     cut = False
     for h in alive:
         lo, hi, c = _clip(h.xd_lo[:, -1], h.xd_hi[:, -1], VELOCITY_CLIP)
@@ -210,8 +256,11 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     a.set_ylabel(f"velocity of x{n} (m/s)")
     a.set_xlabel("t (s)")
     a.set_title(f"velocity (clipped at ±{VELOCITY_CLIP:g} m/s)" if cut else "velocity")
-    # widths: what each reasoning leaves
-    a = ax[1, 0]
+
+
+def _certificate_width_panel(a, t, fl, fh, fvl, fvh, alive, forward_label):
+    """:func:`plot_certificate`'s largest box sides, pose (mm, solid) and velocity (m/s, dashed): what each
+    reasoning leaves."""
     a.semilogy(t, np.maximum((fh - fl).max(axis=1), 1e-9) * 1e3, color="0.6", label=f"pose, {forward_label}")
     a.semilogy(t, np.maximum((fvh - fvl).max(axis=1), 1e-9), color="0.6", ls="--",
                label=f"velocity, {forward_label}")
@@ -224,12 +273,10 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     a.set_xlabel("t (s)")
     a.set_ylabel("largest box side (mm solid, m/s dashed)")
     a.set_title("box widths")
-    for a in (ax[0, 1], ax[1, 0]):
-        if k_sing is not None:
-            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
-        a.legend(loc="best", fontsize=8)
-    # the reasoning, hypothesis by hypothesis
-    a = ax[1, 1]
+
+
+def _reasoning_panel(a, window):
+    """:func:`plot_certificate`'s text panel: the window's verdict and the reasoning, hypothesis by hypothesis."""
     a.axis("off")
     lines = [f"verdict: {window.verdict.value} (forward pass alone: {window.forward_verdict.value})", ""]
     for h in window.hypotheses:
@@ -241,7 +288,3 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     lines += ["", "A hypothesis is refuted when no admissible motion ends in", "its final mode: the run's mode is the other one."]
     a.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", fontsize=9, family="monospace", transform=a.transAxes)
     a.set_title("window reasoning")
-    fig.suptitle(title + (f"\n{bounds}" if bounds else ""))
-    fig.tight_layout()
-    atomic_write(path, lambda fh: fig.savefig(fh, format="png", dpi=110), binary=True, what="--plot")
-    plt.close(fig)

@@ -309,6 +309,16 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
     st.past_q[:, slot] = st.q
     st.past_r[:, slot] = qk
     # combine the geometry hypotheses of each scenario
+    _numpy_combine(st, alive, mode, QDD, k)
+
+
+def _numpy_combine(st: TrackerState, alive, mode, QDD, k: int) -> None:
+    """Combine the geometry hypotheses of each scenario at sample ``k``, in place (the numpy twin of the compiled
+    ``_combine``): the scenario's first inconsistent sample, its mode (the rows' common one, 0 if they differ),
+    the hulls of its live rows' pose (m) and velocity (m/s) boxes and of their joint acceleration bounds
+    ``QDD`` (joint units per s²), its certified streak and widest boxes.  ``alive`` ``(R,)`` and ``mode`` ``(R,)`` are
+    the rows' after the step."""
+    B, P, n = st.batch, st.hypotheses, st.x.shape[-1]
     live = alive.reshape(B, P)
     scen_alive = live.any(1)
     st.bad_at[:] = np.where(~scen_alive & (st.bad_at < 0), k, st.bad_at)

@@ -295,54 +295,21 @@ class Tape:
         lo, hi = self._forward(inputs, bs)
         lo = [None if v is None else np.array(v, dtype=np.float64) for v in lo]
         hi = [None if v is None else np.array(v, dtype=np.float64) for v in hi]
+        self._constrain_output(lo, hi, out_index, target, bs)
+        for ins in reversed(self._instrs):
+            _project_back(ins, lo, hi)
+        return self._contracted_inputs(inputs, lo, hi, bs)
+
+    def _constrain_output(self, lo, hi, out_index, target, bs):
+        """Intersect the nodes of output ``out_index`` with ``target`` (broadcast to ``bs + (nnz,)``), in place."""
         tl = np.broadcast_to(np.asarray(target[0], dtype=np.float64), bs + (max(1, self._nnz_out(out_index)),))
         th = np.broadcast_to(np.asarray(target[1], dtype=np.float64), tl.shape)
         for node, j, nz in self._outputs:
             if j == out_index:
                 lo[node], hi[node] = I.intersect(lo[node], hi[node], tl[..., nz], th[..., nz])
-        for ins in reversed(self._instrs):
-            op = ins.op
-            if op in ("OP_INPUT", "OP_CONST"):
-                continue
-            zl, zh = lo[ins.out], hi[ins.out]
-            a = ins.a
-            al, ah = lo[a], hi[a]
-            if op == "OP_ADD":
-                b = ins.b
-                bl, bh = lo[b], hi[b]
-                lo[a], hi[a] = I.intersect(al, ah, *I.sub(zl, zh, bl, bh))
-                lo[b], hi[b] = I.intersect(bl, bh, *I.sub(zl, zh, lo[a], hi[a]))
-            elif op == "OP_SUB":
-                b = ins.b
-                bl, bh = lo[b], hi[b]
-                lo[a], hi[a] = I.intersect(al, ah, *I.add(zl, zh, bl, bh))
-                lo[b], hi[b] = I.intersect(bl, bh, *I.sub(lo[a], hi[a], zl, zh))
-            elif op == "OP_MUL":
-                b = ins.b
-                bl, bh = lo[b], hi[b]
-                lo[a], hi[a] = _project_factor(al, ah, zl, zh, bl, bh)
-                lo[b], hi[b] = _project_factor(bl, bh, zl, zh, lo[a], hi[a])
-            elif op == "OP_DIV":
-                b = ins.b
-                bl, bh = lo[b], hi[b]
-                # z = a / b  =>  a = z * b  and  b = a / z
-                lo[a], hi[a] = I.intersect(al, ah, *I.mul(zl, zh, bl, bh))
-                lo[b], hi[b] = _project_factor(bl, bh, lo[a], hi[a], zl, zh)
-            elif op == "OP_NEG":
-                lo[a], hi[a] = I.intersect(al, ah, -zh, -zl)
-            elif op == "OP_TWICE":
-                lo[a], hi[a] = I.intersect(al, ah, *I.scale(0.5, zl, zh))
-            elif op == "OP_SQ" or (op == "OP_CONSTPOW" and ins.value == 2.0):
-                lo[a], hi[a] = _project_square(al, ah, zl, zh)
-            elif op == "OP_SQRT":
-                zl0 = np.maximum(zl, 0.0)
-                lo[a], hi[a] = I.intersect(al, ah, *I.sqr(zl0, np.maximum(zh, zl0)))
-                lo[a] = np.where(zh < 0.0, np.inf, lo[a])  # sqrt never negative
-            elif op == "OP_INV":
-                lo[a], hi[a] = _project_factor(al, ah, 1.0, 1.0, zl, zh)
-            elif op == "OP_ASSIGN":
-                lo[a], hi[a] = I.intersect(al, ah, zl, zh)
-            # sin, cos, fabs, other powers: no projection (sound, just weaker)
+
+    def _contracted_inputs(self, inputs, lo, hi, bs):
+        """The input boxes batched to ``bs`` and intersected with their nodes' contracted bounds ``lo, hi``."""
         result = []
         for il, ih in inputs:
             nl = np.array(np.broadcast_to(il, bs + il.shape[-1:]), dtype=np.float64)
@@ -355,6 +322,54 @@ class Tape:
 
     def _nnz_out(self, j):
         return len(self._out_rc[j][0])
+
+
+def _project_back(ins, lo, hi):
+    """Project the bounds of the node ``ins.out`` onto its operands' bounds ``lo, hi``, in place (one
+    HC4Revise step, :meth:`Tape.contract`); sin, cos, fabs and other powers are not projected (sound, just
+    weaker)."""
+    op = ins.op
+    if op in ("OP_INPUT", "OP_CONST"):
+        return
+    zl, zh = lo[ins.out], hi[ins.out]
+    a = ins.a
+    al, ah = lo[a], hi[a]
+    if op == "OP_ADD":
+        b = ins.b
+        bl, bh = lo[b], hi[b]
+        lo[a], hi[a] = I.intersect(al, ah, *I.sub(zl, zh, bl, bh))
+        lo[b], hi[b] = I.intersect(bl, bh, *I.sub(zl, zh, lo[a], hi[a]))
+    elif op == "OP_SUB":
+        b = ins.b
+        bl, bh = lo[b], hi[b]
+        lo[a], hi[a] = I.intersect(al, ah, *I.add(zl, zh, bl, bh))
+        lo[b], hi[b] = I.intersect(bl, bh, *I.sub(lo[a], hi[a], zl, zh))
+    elif op == "OP_MUL":
+        b = ins.b
+        bl, bh = lo[b], hi[b]
+        lo[a], hi[a] = _project_factor(al, ah, zl, zh, bl, bh)
+        lo[b], hi[b] = _project_factor(bl, bh, zl, zh, lo[a], hi[a])
+    elif op == "OP_DIV":
+        b = ins.b
+        bl, bh = lo[b], hi[b]
+        # z = a / b  =>  a = z * b  and  b = a / z
+        lo[a], hi[a] = I.intersect(al, ah, *I.mul(zl, zh, bl, bh))
+        lo[b], hi[b] = _project_factor(bl, bh, lo[a], hi[a], zl, zh)
+    elif op == "OP_NEG":
+        lo[a], hi[a] = I.intersect(al, ah, -zh, -zl)
+    elif op == "OP_TWICE":
+        lo[a], hi[a] = I.intersect(al, ah, *I.scale(0.5, zl, zh))
+    elif op == "OP_SQ" or (op == "OP_CONSTPOW" and ins.value == 2.0):
+        lo[a], hi[a] = _project_square(al, ah, zl, zh)
+    elif op == "OP_SQRT":
+        zl0 = np.maximum(zl, 0.0)
+        lo[a], hi[a] = I.intersect(al, ah, *I.sqr(zl0, np.maximum(zh, zl0)))
+        lo[a] = np.where(zh < 0.0, np.inf, lo[a])  # sqrt never negative
+    elif op == "OP_INV":
+        lo[a], hi[a] = _project_factor(al, ah, 1.0, 1.0, zl, zh)
+    elif op == "OP_ASSIGN":
+        lo[a], hi[a] = I.intersect(al, ah, zl, zh)
+    # sin, cos, fabs, other powers: no projection (sound, just weaker)
 
 
 def _project_factor(al, ah, zl, zh, bl, bh):

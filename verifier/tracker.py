@@ -247,17 +247,39 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     """
     t0 = time.perf_counter()
     config = configure(model, settings, backend, parallel=parallel, spread_hypotheses=spread_hypotheses)
+    q_meas = _sample_stream(model, q_meas)
+    B, K, n = q_meas.batch, q_meas.steps, model.n
+    state = init_state(config, x0, batch=B, xi_box=xi_box)
+    rec = _record_arrays(B, K, n) if record else None
+    _run_blocks(config, state, q_meas, n, rec, progress)
+    res = _batch_result(state, B, K, t0)
+    return (res, rec) if record else res
+
+
+def _sample_stream(model, q_meas) -> SampleStream:
+    """``q_meas`` as a :class:`SampleStream`: a stream as given, an array checked to be ``(B, K, n)``, rad."""
     if not isinstance(q_meas, SampleStream):
         q_meas = np.asarray(q_meas, dtype=np.float64)
         if q_meas.ndim != 3 or q_meas.shape[2] != model.n:
             raise InputError(f"q_meas must have shape (B, K, {model.n}), got {q_meas.shape}")
         q_meas = SampleStream.from_array(q_meas)
-    B, K, n = q_meas.batch, q_meas.steps, model.n
-    state = init_state(config, x0, batch=B, xi_box=xi_box)
-    rec = None
-    if record:
-        rec = {k: np.full((B, K, n), np.nan) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "qdd_hi")}
-        rec["mode"] = np.zeros((B, K), np.int8)
+    return q_meas
+
+
+def _record_arrays(B: int, K: int, n: int) -> dict:
+    """The arrays :func:`track_batch` records every box in: ``x_lo, x_hi, xd_lo, xd_hi, qdd_hi`` ``(B, K, n)``
+    filled with NaN and ``mode`` ``(B, K)`` with 0."""
+    rec = {k: np.full((B, K, n), np.nan) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi", "qdd_hi")}
+    rec["mode"] = np.zeros((B, K), np.int8)
+    return rec
+
+
+def _run_blocks(config, state, q_meas: SampleStream, n: int, rec, progress) -> None:
+    """Advance ``state`` (pose dimension ``n``) over every sample of ``q_meas``, a block of :data:`_BLOCK`
+    samples per call with the compiled backend (one sample with numpy), writing the boxes into ``rec`` (unless
+    ``None``) and calling ``progress(k)`` for each sample after its block."""
+    B, K = q_meas.batch, q_meas.steps
+    record = rec is not None
     chunk = _BLOCK if config.backend is Backend.COMPILED else 1
     for k0 in range(0, K, chunk):
         k1 = min(K, k0 + chunk)
@@ -275,6 +297,11 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         if progress is not None:
             for k in range(k0, k1):
                 progress(k)
+
+
+def _batch_result(state, B: int, K: int, t0: float) -> BatchResult:
+    """The :class:`BatchResult` of the state of ``B`` scenarios after ``K`` samples; ``t0`` is the run's start
+    (:func:`time.perf_counter`, s)."""
     bad_at = state.bad_at.copy()
     init_mode = state.init_mode.astype(np.int8)
     final = np.where(bad_at < 0, state.mode, 0).astype(np.int8)
@@ -282,7 +309,7 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     verdict = np.empty(B, dtype=object)
     for b in range(B):
         verdict[b] = verdict_of(init_mode[b], final[b], bad_at[b] >= 0)
-    res = BatchResult(
+    return BatchResult(
         verdict=verdict,
         initial_mode=init_mode,
         final_mode=final,
@@ -293,7 +320,6 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         steps=K,
         elapsed_s=time.perf_counter() - t0,
     )
-    return (res, rec) if record else res
 
 
 #: Samples per kernel call of the compiled backend (progress is reported per block).

@@ -181,6 +181,55 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     WindowResult
     """
     t0 = time.perf_counter()
+    req = _checked_request(model, q_meas, settings, x0=x0, initial_mode=initial_mode, xi_box=xi_box,
+                           max_passes=max_passes, rel_tol=rel_tol, max_geometries=max_geometries, backend=backend,
+                           parallel=parallel, goal=goal, one_motion=one_motion, explainer=explainer, start=start,
+                           final_search=final_search, fk_tol=fk_tol)
+    return _run_window(req, t0)
+
+
+@dataclass(frozen=True, eq=False)
+class _Request:
+    """The checked arguments of one :func:`track_window` call (see its parameters).
+
+    Attributes
+    ----------
+    s : TrackerSettings
+        The settings validated for the model.
+    q : ndarray, shape (K, n)
+        The readings, rad, contiguous float64.
+    one_motion : int
+        Samples of the one-motion step, checked.
+    final_search : (lo, hi) or None
+        The search box of the last pose, float64 arrays ``(n,)``, m.
+    goal : Verdict or None
+        The goal as a :class:`Verdict`.
+
+    The other attributes are :func:`track_window`'s arguments as given.
+    """
+
+    model: object
+    q: np.ndarray = field(repr=False)
+    s: TrackerSettings
+    x0: object
+    initial_mode: object
+    xi_box: object
+    max_passes: int
+    rel_tol: float
+    max_geometries: int
+    backend: object
+    parallel: bool
+    goal: Verdict | None
+    one_motion: int
+    explainer: object
+    start: WindowStart | None
+    final_search: object
+    fk_tol: float
+
+
+def _checked_request(model, q_meas, settings, *, x0, initial_mode, xi_box, max_passes, rel_tol, max_geometries,
+                     backend, parallel, goal, one_motion, explainer, start, final_search, fk_tol) -> _Request:
+    """Check :func:`track_window`'s arguments (raising :class:`InputError`) and convert them: a :class:`_Request`."""
     s = settings.validated(model.n)
     q = np.ascontiguousarray(np.asarray(q_meas, dtype=np.float64))
     n = model.n
@@ -206,12 +255,24 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     goal = _goal(goal)
     if sum(v is not None for v in (x0, initial_mode, start)) != 1:
         raise InputError("give exactly one of x0, initial_mode and start")
-    K = q.shape[0]
-    XI = model.xi_box() if xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in xi_box)
+    return _Request(model, q, s, x0, initial_mode, xi_box, max_passes, rel_tol, max_geometries, backend, parallel,
+                    goal, one_motion, explainer, start, final_search, fk_tol)
+
+
+def _start_rows(req: _Request, XI):
+    """The rows of the first forward pass: ``(xi_rows, x0, flat, first_prior)``.
+
+    ``xi_rows`` are the geometry sub-boxes ``(P, m)`` (the start's, or ``settings.xi_splits``' partition of the
+    calibration box ``XI``), ``x0`` the initial pose boxes ``(P, n)``, m, ``flat`` the settings of one row per
+    sub-box, and ``first_prior`` the start's prior tubes (``None`` without a start).
+    """
+    model, q, s, start = req.model, req.q, req.s, req.start
+    n, K = model.n, q.shape[0]
+    x0 = req.x0
     flat = replace(s, xi_splits=None)
     first_prior = None
     if start is not None:
-        if xi_box is not None:
+        if req.xi_box is not None:
             raise InputError("a window start carries its geometry sub-boxes: give start or xi_box, not both")
         if start.rows == 0 or start.x.shape[1:] != (2, n) or start.xi_lo.shape != (start.rows, model.m):
             raise InputError(f"a window start needs at least one row of {model.m} parameters and (2, {n}) boxes")
@@ -226,15 +287,53 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         xi_rows = (np.ascontiguousarray(sub_lo[0]), np.ascontiguousarray(sub_hi[0]))
     P = xi_rows[0].shape[0]
     if x0 is None:
-        x0 = initial_box_from_mode(model, q[0], initial_mode, s, xi_box=XI, backend=str(Backend(backend)))
+        x0 = initial_box_from_mode(model, q[0], req.initial_mode, s, xi_box=XI, backend=str(Backend(req.backend)))
     x0 = tuple(np.broadcast_to(np.asarray(v, dtype=np.float64), (P, n)).copy() for v in x0)
+    return xi_rows, x0, flat, first_prior
+
+
+def _pass_configs(req: _Request, flat):
+    """The step configurations of the passes: ``(first forward, window forward, backward)``."""
+    model, backend, parallel = req.model, req.backend, req.parallel
     cfg_f = configure(model, flat, backend, parallel=parallel)
     # the window's passes carry each row's calibration sub-box from sample to sample (keep_xi), and the
     # rows keep it from pass to pass: the true geometry satisfies every sample's loop closure
     cfg_wf = configure(model, replace(flat, keep_xi=True), backend, parallel=parallel)
     cfg_b = configure(model, replace(flat, xd0=None, keep_xi=True), backend, parallel=parallel)  # final velocity: from the tubes
+    return cfg_f, cfg_wf, cfg_b
 
-    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, q, x0, xi_rows, first_prior)
+
+@dataclass(frozen=True, eq=False)
+class _Forward:
+    """The first forward pass (the tracker's) over the window.
+
+    Attributes
+    ----------
+    x, xd : ndarray, shape (R, K, 2, n)
+        Pose (m) and velocity (m/s) tubes of the rows.
+    xi_rows : (lo, hi)
+        The rows' geometry sub-boxes ``(R, m)`` after the pass.
+    alive : ndarray of bool, shape (R,)
+        The rows the pass did not refute.
+    m0, mf : int
+        Mode common to the live rows at the first and last samples (0: none), ``m0`` the start's when known.
+    verdict : Verdict
+        The forward pass' verdict.
+    """
+
+    x: np.ndarray = field(repr=False)
+    xd: np.ndarray = field(repr=False)
+    xi_rows: tuple = field(repr=False)
+    alive: np.ndarray = field(repr=False)
+    m0: int
+    mf: int
+    verdict: Verdict
+
+
+def _forward_pass(req: _Request, cfg_f, x0, xi_rows, first_prior) -> _Forward:
+    """Run the first forward pass from the boxes ``x0`` of the rows ``xi_rows`` and read its modes and verdict."""
+    start, K = req.start, req.q.shape[0]
+    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, req.q, x0, xi_rows, first_prior)
     # the rows' sub-boxes after the tracker (contracted only when the settings keep them, keep_xi)
     xi_rows = (np.maximum(xi_rows[0], fxi[0]), np.minimum(xi_rows[1], fxi[1]))
     f_alive = fbad < 0
@@ -245,53 +344,87 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     if start is not None and start.mode and f_alive.any():
         m0 = start.mode
     mf = _combined_mode(fmode[:, K - 1], f_alive)
-    forward_verdict = verdict_of(m0, mf, not f_alive.any())
-    tubes, results = [], []
-    if forward_verdict is Verdict.INCONSISTENT or m0 == 0:
-        results = ()
-        verdict = forward_verdict
-        reason = VerdictReason.INCONSISTENT if verdict is Verdict.INCONSISTENT else VerdictReason.NO_INITIAL_MODE
-        tubes = [(fx[f_alive], fxd[f_alive])]
-    elif mf != 0:
-        # the forward pass decided: the other final mode is refuted by its certified boxes
-        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
-                                    *tube_hull(fx[f_alive], fxd[f_alive]), xi_rows[0][f_alive], xi_rows[1][f_alive]),
-                   HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
-        verdict, reason = forward_verdict, VerdictReason.CERTIFIED
-        tubes = [(fx[f_alive], fxd[f_alive])]
-    else:
-        finals = FinalBoxes(model, q[K - 1], s, str(Backend(backend)), final_search, fk_tol)
-        keep = np.nonzero(f_alive)[0]
-        hyps = [Hypothesis(finals, xi_rows[0][keep], xi_rows[1][keep], fx[keep], fxd[keep], m0, m)
-                for m in (m0, -m0)]
-        if not any(h.refuted for h in hyps):
-            full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
-            ask = None
-            if explainer is not None:
-                x0_given = None if initial_mode is not None else (x0[0].min(0), x0[1].max(0))
+    return _Forward(fx, fxd, xi_rows, f_alive, m0, mf, verdict_of(m0, mf, not f_alive.any()))
 
-                def ask(h):
-                    return explainer(ExplainRequest(model, q, s, XI, x0_given, m0, h.m, h.xlo.copy(), h.xhi.copy(),
-                                                    *(a.copy() for a in tube_hull(h.tx, h.txd)[:2])))
-            decide(hyps, Passes(q, cfg_wf, cfg_b), max_passes, rel_tol, max_geometries, full_w,
-                    _targets(hyps, m0, goal), int(one_motion), ask)
-        else:  # refuted by the last reading alone: the other ran no pass
-            for h in hyps:
-                h.complete = h.refuted
-        results = tuple(h.result() for h in hyps)
-        tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
-        alive = [h.final_mode for h in results if h.status is not HypothesisStatus.REFUTED]
-        if not alive:
-            verdict, reason = Verdict.INCONSISTENT, VerdictReason.INCONSISTENT
-        elif len(alive) == 2:
-            verdict = Verdict.UNKNOWN
-            asked = _targets(hyps, m0, goal)
-            # the early stop: every hypothesis asked about explained (a wrong claim only costs a verdict)
-            undecidable = all(h.explained for h in asked)
-            reason = VerdictReason.UNDECIDABLE if undecidable else VerdictReason.BUDGET
-        else:
-            verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
-            reason = VerdictReason.CERTIFIED
+
+def _run_window(req: _Request, t0: float) -> WindowResult:
+    """The window of a checked request: the first forward pass, then the hypotheses' passes when it leaves the
+    final mode open; ``t0`` is the call's start (:func:`time.perf_counter`, s)."""
+    XI = req.model.xi_box() if req.xi_box is None else tuple(np.asarray(v, dtype=np.float64) for v in req.xi_box)
+    xi_rows, x0, flat, first_prior = _start_rows(req, XI)
+    cfg_f, cfg_wf, cfg_b = _pass_configs(req, flat)
+    fwd = _forward_pass(req, cfg_f, x0, xi_rows, first_prior)
+    f_alive, xi_rows = fwd.alive, fwd.xi_rows
+    if fwd.verdict is Verdict.INCONSISTENT or fwd.m0 == 0:
+        results = ()
+        verdict = fwd.verdict
+        reason = VerdictReason.INCONSISTENT if verdict is Verdict.INCONSISTENT else VerdictReason.NO_INITIAL_MODE
+        tubes = [(fwd.x[f_alive], fwd.xd[f_alive])]
+    elif fwd.mf != 0:
+        # the forward pass decided: the other final mode is refuted by its certified boxes
+        mf = fwd.mf
+        results = (HypothesisResult(mf, HypothesisStatus.CONSISTENT, Refutation.NONE, 0, int(f_alive.sum()), False,
+                                    *tube_hull(fwd.x[f_alive], fwd.xd[f_alive]), xi_rows[0][f_alive],
+                                    xi_rows[1][f_alive]),
+                   HypothesisResult(-mf, HypothesisStatus.REFUTED, Refutation.FORWARD, 0, 0))
+        verdict, reason = fwd.verdict, VerdictReason.CERTIFIED
+        tubes = [(fwd.x[f_alive], fwd.xd[f_alive])]
+    else:
+        results, verdict, reason, tubes = _hypotheses_verdict(req, XI, x0, fwd, cfg_wf, cfg_b)
+    return _window_result(req, fwd, results, verdict, reason, tubes, t0)
+
+
+def _asker(req: _Request, XI, x0, m0):
+    """The question :func:`decide` asks the explainer about a hypothesis, ``None`` without an explainer."""
+    explainer = req.explainer
+    if explainer is None:
+        return None
+    model, q, s = req.model, req.q, req.s
+    x0_given = None if req.initial_mode is not None else (x0[0].min(0), x0[1].max(0))
+
+    def ask(h):
+        return explainer(ExplainRequest(model, q, s, XI, x0_given, m0, h.m, h.xlo.copy(), h.xhi.copy(),
+                                        *(a.copy() for a in tube_hull(h.tx, h.txd)[:2])))
+    return ask
+
+
+def _hypotheses_verdict(req: _Request, XI, x0, fwd: _Forward, cfg_wf, cfg_b):
+    """Decide the final mode left open by the forward pass with the two hypotheses' window passes:
+    ``(results, verdict, reason, tubes)``."""
+    q, K, m0 = req.q, req.q.shape[0], fwd.m0
+    finals = FinalBoxes(req.model, q[K - 1], req.s, str(Backend(req.backend)), req.final_search, req.fk_tol)
+    keep = np.nonzero(fwd.alive)[0]
+    hyps = [Hypothesis(finals, fwd.xi_rows[0][keep], fwd.xi_rows[1][keep], fwd.x[keep], fwd.xd[keep], m0, m)
+            for m in (m0, -m0)]
+    if not any(h.refuted for h in hyps):
+        full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
+        ask = _asker(req, XI, x0, m0)
+        decide(hyps, Passes(q, cfg_wf, cfg_b), req.max_passes, req.rel_tol, req.max_geometries, full_w,
+               _targets(hyps, m0, req.goal), int(req.one_motion), ask)
+    else:  # refuted by the last reading alone: the other ran no pass
+        for h in hyps:
+            h.complete = h.refuted
+    results = tuple(h.result() for h in hyps)
+    tubes = [(h.tx, h.txd) for h in hyps if not h.refuted]
+    alive = [h.final_mode for h in results if h.status is not HypothesisStatus.REFUTED]
+    if not alive:
+        verdict, reason = Verdict.INCONSISTENT, VerdictReason.INCONSISTENT
+    elif len(alive) == 2:
+        verdict = Verdict.UNKNOWN
+        asked = _targets(hyps, m0, req.goal)
+        # the early stop: every hypothesis asked about explained (a wrong claim only costs a verdict)
+        undecidable = all(h.explained for h in asked)
+        reason = VerdictReason.UNDECIDABLE if undecidable else VerdictReason.BUDGET
+    else:
+        verdict = Verdict.MODE_UNCHANGED if alive[0] == m0 else Verdict.MODE_CHANGED
+        reason = VerdictReason.CERTIFIED
+    return results, verdict, reason, tubes
+
+
+def _window_result(req: _Request, fwd: _Forward, results, verdict, reason, tubes, t0: float) -> WindowResult:
+    """The :class:`WindowResult`: the hull of the non-empty ``tubes`` (NaN without any) and their widest
+    pose (m) and velocity (m/s) intervals; ``t0`` is the call's start (s)."""
+    K, n = req.q.shape[0], req.model.n
     tubes = [t for t in tubes if len(t[0])]
     if tubes:
         x_lo, x_hi, xd_lo, xd_hi = tube_hull(np.concatenate([t[0] for t in tubes]), np.concatenate([t[1] for t in tubes]))
@@ -300,6 +433,6 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     with np.errstate(invalid="ignore"):
         wx = float(np.nanmax(x_hi - x_lo)) if tubes else 0.0
         wv = float(np.nanmax(xd_hi - xd_lo)) if tubes else 0.0
-    return WindowResult(verdict=verdict, initial_mode=m0, forward_verdict=forward_verdict, hypotheses=results,
+    return WindowResult(verdict=verdict, initial_mode=fwd.m0, forward_verdict=fwd.verdict, hypotheses=results,
                         x_lo=x_lo, x_hi=x_hi, xd_lo=xd_lo, xd_hi=xd_hi, max_width_pose=wx, max_width_velocity=wv,
                         steps=K, elapsed_s=time.perf_counter() - t0, reason=reason)
