@@ -41,6 +41,10 @@ import numpy as np
 
 __all__ = [
     "quiet_fp",
+    "next_up",
+    "next_down",
+    "next_up_keep0",
+    "next_down_keep0",
     "TRIG_ULPS",
     "add",
     "sub",
@@ -104,23 +108,27 @@ def quiet_fp():
         _QUIET_MODE.reset(token)
 
 
-def _dn(r):
+def next_down(r):
+    """The next float below ``r``, elementwise: one outward step of a rounded lower bound."""
     with _fp(**_QUIET):
         return np.nextafter(r, -_INF)
 
 
-def _up(r):
+def next_up(r):
+    """The next float above ``r``, elementwise: one outward step of a rounded upper bound."""
     with _fp(**_QUIET):
         return np.nextafter(r, _INF)
 
 
-def _dn_keep0(r):
-    # Sums/differences that round to 0 are exactly 0 (gradual underflow).
-    return np.where(r == 0.0, 0.0, _dn(r))
+def next_down_keep0(r):
+    """:func:`next_down`, but an exact 0 stays 0 (a sum or difference that rounds to 0 is exact: gradual
+    underflow)."""
+    return np.where(r == 0.0, 0.0, next_down(r))
 
 
-def _up_keep0(r):
-    return np.where(r == 0.0, 0.0, _up(r))
+def next_up_keep0(r):
+    """:func:`next_up`, but an exact 0 stays 0 (see :func:`next_down_keep0`)."""
+    return np.where(r == 0.0, 0.0, next_up(r))
 
 
 def point(x):
@@ -145,7 +153,7 @@ def add(al, ah, bl, bh):
     al, ah, bl, bh = _f64(al, ah, bl, bh)
     with _fp(over="ignore"):
         lo, hi = al + bl, ah + bh
-    return _dn_keep0(lo), _up_keep0(hi)
+    return next_down_keep0(lo), next_up_keep0(hi)
 
 
 def sub(al, ah, bl, bh):
@@ -153,7 +161,7 @@ def sub(al, ah, bl, bh):
     al, ah, bl, bh = _f64(al, ah, bl, bh)
     with _fp(over="ignore"):
         lo, hi = al - bh, ah - bl
-    return _dn_keep0(lo), _up_keep0(hi)
+    return next_down_keep0(lo), next_up_keep0(hi)
 
 
 def neg(al, ah):
@@ -176,8 +184,8 @@ def mul(al, ah, bl, bh):
     with _fp(invalid="ignore", over="ignore", under="ignore"):
         p = a * b
     zero = (a == 0.0) | (b == 0.0)  # exactly zero products, including 0*inf
-    lo = np.where(zero, 0.0, _dn(p)).min(axis=0)
-    hi = np.where(zero, 0.0, _up(p)).max(axis=0)
+    lo = np.where(zero, 0.0, next_down(p)).min(axis=0)
+    hi = np.where(zero, 0.0, next_up(p)).max(axis=0)
     return lo, hi
 
 
@@ -202,8 +210,8 @@ def div(al, ah, bl, bh):
     # An inf/inf corner (NaN) is no extremum: near it the quotient is bounded by
     # the corners (inf, finite bound of [b]) and (finite bound of [a], inf), or
     # [a] is the whole line and the other corners already give -inf and inf.
-    lo_c = _quot(a, b, _dn)
-    hi_c = _quot(a, b, _up)
+    lo_c = _quot(a, b, next_down)
+    hi_c = _quot(a, b, next_up)
     lo = np.where(np.isnan(lo_c), _INF, lo_c).min(axis=0)
     hi = np.where(np.isnan(hi_c), -_INF, hi_c).max(axis=0)
 
@@ -216,11 +224,11 @@ def div(al, ah, bl, bh):
         zlo = np.full_like(lo, -_INF)
         zhi = np.full_like(hi, _INF)
         # [0, bh]: a >= 0 -> [al/bh, inf]; a <= 0 -> [-inf, ah/bh]
-        zlo = np.where(pos_side & a_nonneg, _quot(al, bh, _dn), zlo)
-        zhi = np.where(pos_side & a_nonpos, _quot(ah, bh, _up), zhi)
+        zlo = np.where(pos_side & a_nonneg, _quot(al, bh, next_down), zlo)
+        zhi = np.where(pos_side & a_nonpos, _quot(ah, bh, next_up), zhi)
         # [bl, 0]: a >= 0 -> [-inf, al/bl]; a <= 0 -> [ah/bl, inf]
-        zhi = np.where(neg_side & a_nonneg, _quot(al, bl, _up), zhi)
-        zlo = np.where(neg_side & a_nonpos, _quot(ah, bl, _dn), zlo)
+        zhi = np.where(neg_side & a_nonneg, _quot(al, bl, next_up), zhi)
+        zlo = np.where(neg_side & a_nonpos, _quot(ah, bl, next_down), zlo)
         # a straddling 0 or b straddling 0 keeps the entire line, except
         # [0, 0] / b (b not [0, 0]) = [0, 0]
         a_zero = a_nonneg & a_nonpos
@@ -245,10 +253,10 @@ def sqr(al, ah):
     has0 = (al <= 0.0) & (ah >= 0.0)
     mn = np.minimum(l2, h2)
     mx = np.maximum(l2, h2)
-    lo = np.where(has0, 0.0, np.maximum(_dn(mn), 0.0))
+    lo = np.where(has0, 0.0, np.maximum(next_down(mn), 0.0))
     # an exact 0 bound squared is exactly 0: leave it, otherwise widen
     hi_exact0 = (mx == 0.0) & (al == 0.0) & (ah == 0.0)
-    hi = np.where(hi_exact0, 0.0, _up(mx))
+    hi = np.where(hi_exact0, 0.0, next_up(mx))
     return lo, hi
 
 
@@ -297,8 +305,8 @@ def sqrt(al, ah):
     with _fp(invalid="ignore"):
         sl = np.sqrt(np.maximum(al, 0.0))
         sh = np.sqrt(np.maximum(ah, 0.0))
-    lo = np.where(sl == 0.0, 0.0, np.maximum(_dn(sl), 0.0))
-    hi = np.where(sh == 0.0, 0.0, _up(sh))
+    lo = np.where(sl == 0.0, 0.0, np.maximum(next_down(sl), 0.0))
+    hi = np.where(sh == 0.0, 0.0, next_up(sh))
     neg_only = ah < 0.0
     lo = np.where(neg_only, _INF, lo)
     hi = np.where(neg_only, -_INF, hi)
@@ -337,7 +345,7 @@ def _enclose_value(fun, x, zero_at_0):
         f = fun(x)
     m = _trig_margin(f)
     # rounded outward so that rounding f -+ m cannot eat into the margin
-    lo, hi = _dn(f - m), _up(f + m)
+    lo, hi = next_down(f - m), next_up(f + m)
     if zero_at_0:  # sin(0) = 0 exactly: an exact zero is not widened
         lo = np.where(x == 0.0, 0.0, lo)
         hi = np.where(x == 0.0, 0.0, hi)
@@ -393,7 +401,7 @@ def is_empty(al, ah):
 def width(al, ah):
     """Upper bound of ``hi - lo`` (0 for an empty interval)."""
     with _fp(invalid="ignore", over="ignore"):
-        w = _up(np.asarray(ah) - np.asarray(al))
+        w = next_up(np.asarray(ah) - np.asarray(al))
     return np.where(is_empty(al, ah), 0.0, np.where(np.asarray(ah) == np.asarray(al), 0.0, w))
 
 

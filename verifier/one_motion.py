@@ -71,7 +71,7 @@ def _mul_up(a, b):
     (also for an infinite other factor: the interval convention ``0 * inf = 0``); NaN propagates."""
     with np.errstate(invalid="ignore", over="ignore", under="ignore"):
         p = a * b
-    return np.where((a == 0.0) | (b == 0.0), 0.0, I._up(p))
+    return np.where((a == 0.0) | (b == 0.0), 0.0, I.next_up(p))
 
 
 def _sum_up(v):
@@ -81,7 +81,7 @@ def _sum_up(v):
         if v.shape[-1] % 2:
             v = np.concatenate([v, np.zeros(v.shape[:-1] + (1,))], axis=-1)  # + 0: exact
         with np.errstate(over="ignore"):
-            v = I._up_keep0(v[..., 0::2] + v[..., 1::2])
+            v = I.next_up_keep0(v[..., 0::2] + v[..., 1::2])
     return v[..., 0]
 
 
@@ -155,7 +155,7 @@ def _taylor_rows(c, r, F, Jp, Hlo, Hhi):
         up = _sum_up(_mul_up(np.where(diag, np.maximum(Hhi, 0.0), mag), rr).reshape(S, n, N * N))
         down = _sum_up(_mul_up(np.where(diag, np.maximum(-Hlo, 0.0), mag), rr).reshape(S, n, N * N))
         # 0.5 x is exact unless subnormal: rounded up anyway (an exact 0, a point box, stays 0)
-        Rhi, Rlo = I._up_keep0(0.5 * up), -I._up_keep0(0.5 * down)
+        Rhi, Rlo = I.next_up_keep0(0.5 * up), -I.next_up_keep0(0.5 * down)
         Jcc = _enclose_dot(Jc, c)
         b = I.sub(*Jcc, *F)
         blo = I.sub(b[0], b[0], Rhi, Rhi)[0]

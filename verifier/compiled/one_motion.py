@@ -1,7 +1,7 @@
 """The interval arithmetic of the one-motion step (:mod:`verifier.one_motion`), compiled.
 
 * :func:`dual_bound`: the weak-duality bounds that prove a row refuted or a geometry bound
-  (``verifier.one_motion._dual_bound``);
+  (``verifier.certified_lp._dual_bound``);
 * :func:`taylor_rows`: the loop closure's linear rows from its enclosures over the boxes
   (the part of ``verifier.one_motion.loop_closure_rows`` after the tapes).
 
@@ -34,7 +34,7 @@ def _pow2_at_least(s):
 def _pairwise(lo, hi, w):
     """The outward-rounded pairwise sum of the intervals ``lo[:w]``, ``hi[:w]`` (``w`` a power of two),
     in place: level by level, element ``t`` of a level is the sum of elements ``2t`` and ``2t + 1`` of the
-    last one (as ``verifier.one_motion._tree_sum``)."""
+    last one (as ``verifier.certified_lp.tree_sum``)."""
     while w > 1:
         w //= 2
         for t in range(w):
@@ -45,7 +45,7 @@ def _pairwise(lo, hi, w):
 @cached_jit
 def dual_bound(rows, cols, vals, b, lo, hi, Y, cost, used, counts, start, order, buf_lo, buf_hi, tlo, left, yb):
     """``left[k]``, a lower bound of ``min over the box of (cost[k] + Y[k]ᵀA) z``, and ``yb[k]``, an upper
-    bound of ``Y[k]ᵀb``, for every multiplier row ``k`` (``verifier.one_motion._dual_bound``).
+    bound of ``Y[k]ᵀb``, for every multiplier row ``k`` (``verifier.certified_lp._dual_bound``).
 
     ``A`` is given by coordinates ``rows``, ``cols``, ``vals`` ``(E,)`` (int64, int64, float64), ``b``
     ``(M,)``, the box ``lo``, ``hi`` ``(N,)``; ``Y`` ``(B, M)`` holds multipliers already made non-negative
