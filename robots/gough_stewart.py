@@ -205,7 +205,7 @@ GOUGH_STEWART = Robot(
     eps_q=5e-6,  # m: a 5 um linear encoder count on each leg
     t_s=1e-3,
     xd0=(0.05, 0.05, 0.05, 0.15, 0.15, 0.15),  # m/s and rad/s
-    mode_sign=-1.0,  # det of the Euler-rate map is -cos(pitch): +1 = Plücker determinant > 0 (home)
+    mode_sign=-1.0,  # det of the Euler-rate map is -cos(pitch): mode +1 = Plücker determinant > 0 (home: -1)
     mode_reference=_mode_reference,
     description=(
         "Gough-Stewart 6-6 platform with ASSUMED design data (base radius 0.5 m, platform radius 0.3 m). "
