@@ -3,8 +3,8 @@
 The shipped CSV is what the script writes; the plan crosses the locus at ``yaw = pi/2`` once, within the
 robot's ranges and ``a_max``.  Through the command line, the robot file with a ten times narrower
 calibration box (docs/examples/gough_stewart_calibrated.py) certifies it ``mode-changed``: about 70
-CPU-s (200 s wall on 2 cores shared with other jobs), under the ``slow`` marker.  The shipped robot's box leaves it ``unknown``
-(docs/robots.md); that run (two minutes) is not repeated here.
+CPU-s (200 s wall on 2 cores shared with other jobs), under the ``slow`` marker.  The shipped robot's
+box leaves it ``unknown`` (docs/robots.md); that run (two minutes) is not repeated here.
 """
 
 from __future__ import annotations
