@@ -26,12 +26,34 @@ in the chart; hence ``mode_sign = -1`` and the mode is ``sign(det P)``.  The
 geometric reference (:func:`mode_by_plucker`) computes it from the leg lines
 without CasADi.  The home pose is mode -1.
 
+Type 2 locus: turning the platform about the vertical by ``yaw = +-pi/2``
+(pitch = roll = 0) is singular at every position ``p`` (the classic
+singularity of the semi-regular design); along the yaw turn about HOME
+``det P = -3.73e-3 cos(yaw)`` m^3 to four digits, so the mode goes from -1 to
++1 at ``yaw = pi/2`` with a simple sign change (``d det P / d yaw = 3.73e-3``
+m^3/rad there, zero along the translations).
+docs/examples/gough_stewart_crossing.py plans a 6-DOF crossing through it.
+
+Workspace (``x_bounds``): +-0.15 m about HOME, ``p_z`` in [0.6, 1.0] m, pitch
+and roll +-0.35 rad, yaw in [-1.3, 2.3] rad: the upper end takes a yaw turn
+from home through the locus at +pi/2 and 0.73 rad beyond it; the locus at
+-pi/2 stays outside.  Each mode has one forward-kinematics solution there
+for the joints checked: the interval branch and prune of the first sample
+(over the whole box, readings +-``eps_q``) on poses across it, with this
+calibration box where it isolates the solutions (yaw up to about 1 rad) and
+with a box ten times narrower up to yaw 2.3 rad; multi-start Newton at the
+nominal geometry on 45 poses.  The joints of a pose beyond the locus (mode
++1) also reach a mode -1 pose higher up and turned less (``yaw = 2.1``,
+``p_z = 0.8`` and ``yaw = 1.04``, ``p_z = 0.96``): one solution per mode,
+not one in all.
+
 The design is the usual semi-regular hexagon pair (base radius 0.5 m,
 platform radius 0.3 m, joints in pairs 20 deg either side of their axis),
 **assumed**, with calibration intervals of about 0.1 % of the radii.  This
-robot ships a reference motion for ``simulate`` (no crossing benchmark: the
-crossing planning of ``plan`` and ``certify`` is not provided for it).  SI
-units: m, rad.
+robot ships a reference motion for ``simulate`` and no crossing benchmark
+(``plan``, ``sweep`` and ``certify`` without ``--plan`` refuse it); a planned
+crossing is certified with ``certify --plan`` (docs/examples/gough_stewart_crossing.py
+writes one).  SI units: m, rad.
 """
 
 from __future__ import annotations
@@ -170,10 +192,11 @@ GOUGH_STEWART = Robot(
     xi_hi=tuple(_nominal() + _half_widths()),
     q_lo=(0.55,) * 6,
     q_hi=(1.25,) * 6,
-    # the tracked workspace around HOME: +-0.15 m, yaw +-1.3 rad (towards the
-    # singularity of the yaw turn near +-pi/2), pitch and roll +-0.35 rad (one FK
-    # solution per mode there; |pitch| < pi/2 keeps the Euler chart valid)
-    x_bounds=((-0.15, -0.15, 0.6, -1.3, -0.35, -0.35), (0.15, 0.15, 1.0, 1.3, 0.35, 0.35)),
+    # the tracked workspace around HOME: +-0.15 m, pitch and roll +-0.35 rad
+    # (|pitch| < pi/2 keeps the Euler chart valid), yaw from -1.3 rad (short of
+    # the locus at -pi/2) to 2.3 rad (through the locus at +pi/2, for a planned
+    # crossing); one FK solution per mode there (module docstring)
+    x_bounds=((-0.15, -0.15, 0.6, -1.3, -0.35, -0.35), (0.15, 0.15, 1.0, 2.3, 0.35, 0.35)),
     loop_closure=gough_stewart_loop_closure,
     # 40 m/s^2 (a fast hexapod); 120 rad/s^2 gives ~40 m/s^2 at the platform's 0.3 m radius
     pose_units=("m", "m", "m", "rad", "rad", "rad"),  # (p_x, p_y, p_z, yaw, pitch, roll)
@@ -182,7 +205,7 @@ GOUGH_STEWART = Robot(
     eps_q=5e-6,  # m: a 5 um linear encoder count on each leg
     t_s=1e-3,
     xd0=(0.05, 0.05, 0.05, 0.15, 0.15, 0.15),  # m/s and rad/s
-    mode_sign=-1.0,  # det of the Euler-rate map is -cos(pitch): +1 = Plücker determinant > 0 (home)
+    mode_sign=-1.0,  # det of the Euler-rate map is -cos(pitch): mode +1 = Plücker determinant > 0 (home: -1)
     mode_reference=_mode_reference,
     description=(
         "Gough-Stewart 6-6 platform with ASSUMED design data (base radius 0.5 m, platform radius 0.3 m). "
