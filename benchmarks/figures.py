@@ -4,7 +4,7 @@ Each figure runs one benchmark of this folder, or one ``crosscert`` command, the
 says; the block names the machine (CPU, cores, load average), the date and the commit measured.  Nothing is
 asserted: a figure is a number printed, never a pass or a fail.
 
-Run (the kernels compiled once first; about 15 minutes on 2 cores)::
+Run (the kernels compiled once first; about 5-10 minutes on 2 cores)::
 
     python benchmarks/figures.py                      # every figure; rewrites the block of benchmarks/README.md
     python benchmarks/figures.py --only certify,check # some figures, printed only (the block stays whole)
@@ -68,7 +68,7 @@ def certify(_args) -> list[tuple[str, str]]:
         r = _timed(cc + ["certify", "--no-progress", "--out", str(Path(tmp) / "c")])
         cpu1, peak = _children()
         cert = json.loads((Path(tmp) / "c" / "certificate.json").read_text())
-    v, bound = cert["v_min"], cert["refutation_bound"]
+    v, bound = cert["v_min_mps"], cert["refutation_bound_mps"]
     mc = cert["monte_carlo"]
     ratio = f", ratio {v / bound:.3f}" if v and bound else ""
     covered = mc.get("covered_at_run_time")
