@@ -31,7 +31,19 @@ README = HERE / "README.md"
 BEGIN, END = "<!-- figures:begin -->", "<!-- figures:end -->"
 sys.path.insert(0, str(HERE))
 
-from bench_tracker import crosscert_cmd, machine  # noqa: E402  (one reading of the machine for the benchmarks)
+
+def crosscert_cmd() -> list:
+    """The ``crosscert`` command of this interpreter (:func:`bench_tracker.crosscert_cmd`)."""
+    import bench_tracker  # imported when measuring only: it pins BLAS to one thread for its process
+
+    return bench_tracker.crosscert_cmd()
+
+
+def machine() -> dict:
+    """CPU, cores, versions and commit (:func:`bench_tracker.machine`, one reading for the benchmarks)."""
+    import bench_tracker
+
+    return bench_tracker.machine()
 
 
 def _timed(cmd: list[str]) -> dict:
@@ -188,17 +200,19 @@ def render(rows: list[tuple[str, str, str]], info: dict, load: tuple[float, floa
     return "\n".join(lines)
 
 
-def write_block(text: str) -> None:
-    """Replace the block between the markers of benchmarks/README.md (a regular file, its mode kept)."""
-    old = README.read_text()
+def write_block(text: str, readme: Path = README) -> None:
+    """Replace the block between the markers of ``readme`` (a regular file, its mode kept; the rest untouched)."""
+    if readme.is_symlink() or not readme.is_file():
+        raise SystemExit(f"{readme}: not a regular file")
+    old = readme.read_text()
     if BEGIN not in old or END not in old:
-        raise SystemExit(f"{README}: the markers {BEGIN} and {END} are missing")
+        raise SystemExit(f"{readme}: the markers {BEGIN} and {END} are missing")
     head, rest = old.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
-    tmp = README.with_suffix(".md.tmp")
+    tmp = readme.with_suffix(".md.tmp")
     tmp.write_text(f"{head}{BEGIN}\n{text}\n{END}{tail}")
-    os.chmod(tmp, README.stat().st_mode & 0o7777)
-    os.replace(tmp, README)
+    os.chmod(tmp, readme.stat().st_mode & 0o7777)
+    os.replace(tmp, readme)
 
 
 def main(argv=None) -> int:
