@@ -191,15 +191,15 @@ def test_crossing_guess_switch_ignores_the_last_bits_of_equal_gaps(monkeypatch):
     """Over a run of equal readings the two branches' gaps agree up to Newton's last bits, which differ between
     machines: the switch is the middle of the whole run whatever those bits are (on one machine the exact minimum
     fell on sample 140 of the run 133-159, and the switch 6 samples early)."""
-    import crosscert.planner.refute.nlp as nlp
+    import crosscert.planner.refute.guess as guess
 
     K, run = 60, slice(20, 41)
     rng = np.random.default_rng(7)
     gap = np.linspace(1.0, 2.0, K)[:, None] * np.ones((K, 2))
     gap[run] = 1.4074804786538692e-3 * (1.0 + 4 * np.finfo(float).eps * rng.standard_normal((21, 1)))
     branches = {1: (np.zeros((K, 2)), np.ones(K, bool)), -1: (gap, np.ones(K, bool))}
-    monkeypatch.setattr(nlp, "fk_branch_guess", lambda kin, q, xi, m: branches[m])
-    _, k = nlp.fk_crossing_guess(None, np.zeros((K, 2)), np.zeros(3), 1)
+    monkeypatch.setattr(guess, "fk_branch_guess", lambda kin, q, xi, m: branches[m])
+    _, k = guess.fk_crossing_guess(None, np.zeros((K, 2)), np.zeros(3), 1)
     assert k == 30
 
 
