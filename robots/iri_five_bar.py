@@ -60,12 +60,11 @@ through the Type 2 locus, where the two distal links are aligned (near
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 
 from .base import BenchmarkCrossing, Robot
-from .dextar import axis_singular_y, dextar_loop_closure, elbows_out_ik, mode_by_cross_product
+from .dextar import DEXTAR, axis_singular_y, dextar_loop_closure, elbows_out_ik, mode_by_cross_product
 from .errors import ModelError
 from .kinematics import KinematicModel
 
@@ -96,22 +95,23 @@ IRI_FIVE_BAR = Robot(
     xi_nominal=_NOMINAL,
     xi_lo=tuple(v - w for v, w in zip(_NOMINAL, _HALF_WIDTHS)),
     xi_hi=tuple(v + w for v, w in zip(_NOMINAL, _HALF_WIDTHS)),
-    # not in the source: one full turn each, centred on the upward vertical
-    q_lo=(-0.5 * math.pi, -0.5 * math.pi),
-    q_hi=(1.5 * math.pi, 1.5 * math.pi),
+    # not in the source: the DexTAR's range, one full turn each centred on the upward vertical
+    q_lo=DEXTAR.q_lo,
+    q_hi=DEXTAR.q_hi,
     # |E - A_i| <= l_i1 + l_i2 <= 0.35018 m with |A1 A2| >= 0.11986 m gives
     # |x| <= 0.2904 m and |y| <= 0.3449 m; rounded outwards.
     x_bounds=((-0.30, -0.36), (0.30, 0.36)),
     loop_closure=dextar_loop_closure,
-    pose_units=("m", "m"),  # E = (x, y)
-    a_max=(80.0, 80.0),
-    eps_q=math.pi / 34000,
-    t_s=1e-3,
-    xd0=(0.1, 0.1),
-    xi_splits=(1, 1, 1, 1, 1, 2, 2),
-    # the loop closure reads q_i only through q_i + delta_i
-    joint_offsets=(5, 6),
-    mode_sign=1.0,
+    pose_units=DEXTAR.pose_units,  # E = (x, y), m
+    # not in the source: the DexTAR's bounds and hypotheses, read from it (one home for the shared choice)
+    a_max=DEXTAR.a_max,
+    eps_q=DEXTAR.eps_q,
+    t_s=DEXTAR.t_s,
+    xd0=DEXTAR.xd0,
+    xi_splits=DEXTAR.xi_splits,
+    # the loop closure reads q_i only through q_i + delta_i, as the DexTAR's
+    joint_offsets=DEXTAR.joint_offsets,
+    mode_sign=DEXTAR.mode_sign,
     mode_reference=_mode_reference,
     description=(
         "IRI (CSIC-UPC) five-bar planar parallel robot: lengths of the authors' published model "

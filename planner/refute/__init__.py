@@ -32,7 +32,8 @@ Explicit re-exports (no star imports).
 """
 
 from .explain import ExplainAttempt, RefutingExplainer
-from .nlp import fk_branch_guess, fk_crossing_guess, search_bounce, search_counterexample, search_crossing
+from .guess import fk_branch_guess, fk_crossing_guess
+from .nlp import search_bounce, search_counterexample, search_crossing
 from .problem import (
     ACCEL_MARGIN,
     JOINT_MARGIN,

@@ -45,7 +45,7 @@ from .guess import fk_branch_guess, fk_crossing_guess
 from .results import BounceSearch
 from .verify import DENSE_POINTS, verify_counterexample
 
-__all__ = ["MAX_CPU_TIME", "MAX_ITER", "fk_branch_guess", "fk_crossing_guess", "nlp_variables", "scaled_cpu_time",
+__all__ = ["MAX_CPU_TIME", "MAX_ITER", "nlp_variables", "scaled_cpu_time",
            "search_bounce", "search_counterexample", "search_crossing"]
 
 #: Default IPOPT iteration cap per attempt: on the benchmark crossing IPOPT
