@@ -273,7 +273,7 @@ def test_no_fastmath_in_compiled():
     """No ``fastmath`` other than ``False`` anywhere in verifier/compiled: it
     would allow FMA contraction and reassociation (unsound directed rounding)."""
     folder = Path(__file__).resolve().parents[1] / "verifier" / "compiled"
-    files = sorted(folder.glob("*.py"))
+    files = sorted(folder.rglob("*.py"))
     assert files
     offending = [f"{p.name}:{n}: {line.strip()}"
                  for p in files for n, line in enumerate(p.read_text().splitlines(), 1)

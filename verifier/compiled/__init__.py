@@ -17,7 +17,7 @@ def sources_digest() -> str:
     """A digest of every source the compiled kernels are built from (this
     package, and the reference modules it follows operation for operation)."""
     here = Path(__file__).resolve().parent
-    sources = sorted(here.glob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
+    sources = sorted(here.rglob("*.py")) + [here.parent / n for n in ("interval.py", "tape.py", "constants.py")]
     return hashlib.sha256(b"".join(p.read_bytes() for p in sources)).hexdigest()
 
 
@@ -33,6 +33,7 @@ def _drop_stale_cache() -> None:
     digest = sources_digest()[:20]
     cache = here / "__pycache__"
     stamp = cache / "kernels.stamp"
+    caches = [cache] + [d / "__pycache__" for d in here.iterdir() if d.is_dir() and d.name != "__pycache__"]
     try:
         if stamp.read_text() == digest:
             return
@@ -40,8 +41,9 @@ def _drop_stale_cache() -> None:
         pass
     try:
         cache.mkdir(exist_ok=True)
-        for f in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
-            f.unlink(missing_ok=True)
+        for d in caches:  # the subpackages' kernels (lanes/) are cached beside their sources
+            for f in list(d.glob("*.nbi")) + list(d.glob("*.nbc")):
+                f.unlink(missing_ok=True)
         stamp.write_text(digest)
     except OSError:
         pass

@@ -13,9 +13,18 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..constants import SOUND
 from ..motion_model import contract_tubes
 
 __all__ = ["CompiledStep"]
+
+
+#: Rows per thread from which a batch of the ``SOUND`` velocity model runs in lanes
+#: (:mod:`verifier.compiled.lanes`): below it the per-row driver is faster (benchmarks/README.md).
+LANES_MIN_ROWS = 16
+#: Rows in one chunk of lanes (whole scenarios): enough for the loops over lanes to pay, few
+#: enough that a chunk's state stays in the cache.
+LANES_CHUNK_ROWS = 128
 
 
 class CompiledStep:
@@ -34,9 +43,12 @@ class CompiledStep:
         threads = numba.config.NUMBA_NUM_THREADS
         if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
             return kernels.run_hypotheses_parallel, min(threads, st.hypotheses)
-        if threads > 1 and config.parallel and st.batch > 1:
-            return kernels.run_slot, min(threads, st.batch)
-        return kernels.run_slot, 1
+        slots = min(threads, st.batch) if threads > 1 and config.parallel and st.batch > 1 else 1
+        if int(config.const.velocity_model) == SOUND and st.batch * st.hypotheses >= LANES_MIN_ROWS * slots:
+            from .lanes.step import run_lanes
+
+            return run_lanes, slots
+        return kernels.run_slot, slots
 
     def _args(self, config, st):
         """The kernel's arguments that stay the same from call to call, built
@@ -52,6 +64,8 @@ class CompiledStep:
 
             model, c = config.model, config.const
             run, threads = self._threads(config, st)
+            lanes = run is not kernels.run_slot and run is not kernels.run_hypotheses_parallel
+            lane_scratch = _lane_scratch(model, c, st, threads) if lanes else None
             if run is kernels.run_slot:
                 from . import warm
 
@@ -63,9 +77,10 @@ class CompiledStep:
             B, n = st.batch, model.n
             a.update(
                 run=run,
-                # the extra arguments of each call per block: run_slot's (slot, slots), once per slot; the
-                # hypotheses' driver is called once, with none
-                slots=tuple((t, threads) for t in range(threads)) if run is kernels.run_slot else ((),),
+                # the extra arguments of each call per block: run_slot's (slot, slots), once per slot (the
+                # lanes' driver: its lanes scratch first); the hypotheses' driver is called once, with none
+                slots=(tuple((lane_scratch, t, threads) for t in range(threads)) if lanes
+                       else tuple((t, threads) for t in range(threads)) if run is kernels.run_slot else ((),)),
                 # the kernels' views of the state, field by field under the same names
                 rows=kernels.Rows(*(getattr(st, f) for f in kernels.Rows._fields)),
                 scen=kernels.Scenarios(*(getattr(st, f) for f in kernels.Scenarios._fields)),
@@ -118,6 +133,16 @@ class CompiledStep:
         if count < 0:
             return None
         return out[:count].copy(), modes[:count].copy()
+
+
+def _lane_scratch(model, c, st, threads):
+    """The lanes driver's scratch for ``threads`` slots: chunks of whole scenarios, about
+    :data:`LANES_CHUNK_ROWS` rows, no more than a slot's share of the batch."""
+    from .lanes.step import lane_scratch_arrays
+
+    P = st.hypotheses
+    chunk = max(1, min(LANES_CHUNK_ROWS // P, -(-st.batch // threads)))
+    return lane_scratch_arrays(threads, chunk, P, model.program.n_nodes, model.n, model.m, c.baseline.shape[0])
 
 
 def _load_pair_kernel(n: int) -> None:

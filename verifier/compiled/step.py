@@ -349,26 +349,17 @@ def _velocity_contract_of(vel, prog, c, rows, r, sc, info):
 
 
 @inline_jit
-def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
-    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` with the velocity strategy ``vel`` (its hooks
-    :func:`velocity_info`, :func:`velocity_contract`, chosen by its type).  Writes
-    its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
-    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
-    Results are written rather than returned because an assignment of a
-    call's result inside a ``prange`` body went wrong (test_backends); with
-    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
-    hold the truth at this sample are intersected with the prediction."""
+def row_begin(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqdd):
+    """The part of :func:`row_step` before the contraction rounds: the reading's box into ``rows.q[r]``,
+    the velocity information (returned: what :func:`velocity_contract` reads), the prediction, the
+    prior, the calibration sub-box into the scratch slot ``TB_XIW``."""
     X = rows.x
     XD = rows.xd
     XI = rows.xi
     Q = rows.q
-    past_x = rows.past_x
-    past_q = rows.past_q
-    past_r = rows.past_r
     tb = sc.tb
     n = X.shape[2]
     m = XI.shape[2]
-    D = past_x.shape[1]
     ts = c.t_s
     for i in range(n):
         qk = q[b, kk, i]
@@ -393,28 +384,62 @@ def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qd
             XD[r, 0, i], XD[r, 1, i] = ops.intersect(XD[r, 0, i], XD[r, 1, i], prior.xd[b, kk, 0, i],
                                                      prior.xd[b, kk, 1, i])
     copy_box(tb, TB_QN, Q, r, n)
-    keep_xi = c.keep_xi
     copy_box(XI, r, tb, TB_XIW, m)
-    dead = False
-    for _ in range(c.max_iter):
-        wx0 = _wsum(X, r, n)
-        wv0 = _wsum(XD, r, n)
-        if not keep_xi:
-            copy_box(XI, r, tb, TB_XIW, m)
-        hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
-        if keep_xi:
-            copy_box(tb, TB_XIW, XI, r, m)
-        newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
-        velocity_contract(vel, prog, c, rows, r, sc, info)
-        if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(XI, r, m) or empty_box(Q, r, n):
-            dead = True
-            break
-        wx1 = _wsum(X, r, n)
-        wv1 = _wsum(XD, r, n)
-        gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
-        gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
-        if not (ops.maxn(gx, gv) > c.rel_tol):
-            break
+    return info
+
+
+@inline_jit
+def pose_round(prog, c, rows, r, sc):
+    """The pose half of a contraction round of row ``r``: HC4Revise (on the calibration sub-box of the
+    scratch slot ``TB_XIW``, refreshed from ``rows.xi[r]`` unless ``c.keep_xi``), then Newton; returns the
+    widths of the pose and velocity boxes before it."""
+    X = rows.x
+    XI = rows.xi
+    Q = rows.q
+    tb = sc.tb
+    n = X.shape[2]
+    m = XI.shape[2]
+    wx0 = _wsum(X, r, n)
+    wv0 = _wsum(rows.xd, r, n)
+    if not c.keep_xi:
+        copy_box(XI, r, tb, TB_XIW, m)
+    hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
+    if c.keep_xi:
+        copy_box(tb, TB_XIW, XI, r, m)
+    newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
+    return wx0, wv0
+
+
+@inline_jit
+def round_end(c, rows, r, wx0, wv0):
+    """After a round of row ``r``: whether a box is empty (the row is dead), and whether another round
+    is due (some relative width gain above ``c.rel_tol``)."""
+    X = rows.x
+    XD = rows.xd
+    n = X.shape[2]
+    if empty_box(X, r, n) or empty_box(XD, r, n) or empty_box(rows.xi, r, rows.xi.shape[2]) or empty_box(rows.q, r, n):
+        return True, False
+    wx1 = _wsum(X, r, n)
+    wv1 = _wsum(XD, r, n)
+    gx = (wx0 - wx1) / ops.maxn(wx0, 1e-300)
+    gv = (wv0 - wv1) / ops.maxn(wv0, 1e-300) if math.isfinite(wv0) else 1.0
+    return False, ops.maxn(gx, gv) > c.rel_tol
+
+
+@inline_jit
+def row_end(prog, c, rows, r, k, q, b, kk, sc, dead, modes, qdd, iqdd):
+    """The part of :func:`row_step` after the rounds: the mode (branch and prune when undecided and
+    narrow), the row's death, this sample into the window of past boxes and readings; writes the mode
+    to ``modes[iqdd]`` and ``|qdd|`` to row 0 of ``qdd[iqdd]``."""
+    X = rows.x
+    Q = rows.q
+    XI = rows.xi
+    past_x = rows.past_x
+    past_q = rows.past_q
+    past_r = rows.past_r
+    n = X.shape[2]
+    m = XI.shape[2]
+    D = past_x.shape[1]
     mode = 0
     if not dead:
         mode = mode_of(prog, X, r, Q, r, XI, r, n, m, sc)
@@ -439,6 +464,30 @@ def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qd
         past_r[r, slot, i] = q[b, kk, i]
         qdd[iqdd, 0, i] = max(abs(qdd[iqdd, 0, i]), abs(qdd[iqdd, 1, i]))
     modes[iqdd] = mode
+
+
+@inline_jit
+def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
+    """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` with the velocity strategy ``vel`` (its hooks
+    :func:`velocity_info`, :func:`velocity_contract`, chosen by its type).  Writes
+    its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
+    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
+    Results are written rather than returned because an assignment of a
+    call's result inside a ``prange`` body went wrong (test_backends); with
+    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
+    hold the truth at this sample are intersected with the prediction.
+    Its parts (:func:`row_begin`, :func:`pose_round`, :func:`round_end`, :func:`row_end`) are those the
+    rows-in-lanes driver (:mod:`verifier.compiled.lanes.step`) runs row by row around its velocity
+    contraction over lanes."""
+    info = row_begin(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqdd)
+    dead = False
+    for _ in range(c.max_iter):
+        wx0, wv0 = pose_round(prog, c, rows, r, sc)
+        velocity_contract(vel, prog, c, rows, r, sc, info)
+        dead, more = round_end(c, rows, r, wx0, wv0)
+        if dead or not more:
+            break
+    row_end(prog, c, rows, r, k, q, b, kk, sc, dead, modes, qdd, iqdd)
 
 
 @inline_jit
