@@ -48,7 +48,7 @@ def main_bench() -> dict:
     print(f"CPU: {cpu_name()}; Python {platform.python_version()}")
     kin, imodel = KinematicModel(DEXTAR), IntervalModel(DEXTAR)
     task = benchmark_task(get_entry("dextar"))
-    b = PlanningBounds().for_robot(DEXTAR)
+    b = PlanningBounds().resolve(DEXTAR)
     tmp = Path(tempfile.mkdtemp(prefix="bench_given_plan_"))
     certify_speed(kin, imodel, task, b, 1.3)  # kernels loaded (compiled once after install)
 

@@ -33,7 +33,7 @@ import numpy as np
 from crosscert.robots.errors import InputError
 
 __all__ = ["AccelerationSource", "AxisAcceleration", "AccelerationAssumption", "acceleration_assumption",
-           "derived_a_max", "robot_a_max_assumption", "PLAN_AT_REST"]
+           "robot_a_max_assumption", "PLAN_AT_REST"]
 
 #: An axis whose planned peak ``|x''_i|`` is at most this fraction of the robot's
 #: ``a_max_i`` (same axis, same unit) is one the plan does not accelerate:
@@ -121,14 +121,17 @@ def robot_a_max_assumption(robot) -> AccelerationAssumption:
 
 
 def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
-    """The acceleration bounds a certificate of ``plan`` assumes, per axis, under ``b`` (bound to the robot: ``PlanningBounds.for_robot``).
+    """The acceleration bounds a certificate of ``plan`` assumes, per axis, under ``b``.
+
+    The plan-dependent step of the bounds' resolution: :meth:`planner.task.ResolvedBounds.for_plan` calls it.
 
     Parameters
     ----------
     plan : PlannedTrajectory
         Its ``xdd`` (K, n) gives the planned peak of each axis, in that axis' unit per s^2.
-    b : PlanningBounds
-        Resolved bounds: ``a_max`` (given, per axis) or ``a_margin`` (relative; ``None``: no margin asked for).
+    b : planner.task.ResolvedBounds
+        Its ``a_max_given`` (per axis; ``None``: not given) and ``a_margin`` (relative; ``None``: no margin
+        asked for).
     robot : robots.Robot
         Its ``pose_units``, ``tracking_a_margin`` and ``a_max``.
 
@@ -136,7 +139,7 @@ def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
     -------
     AccelerationAssumption
         Axis ``i`` depends only on axis ``i`` of the plan and of the robot:
-        ``given`` when ``b.a_max`` is set; else, with ``b.a_margin`` set and
+        ``given`` when ``b.a_max_given`` is set; else, with ``b.a_margin`` set and
         the axis accelerated by the plan (peak above :data:`PLAN_AT_REST` of
         ``a_max_i``), its peak times ``1 + a_margin``; else, when the robot
         declares a tracking margin, the peak plus that margin; else the
@@ -145,7 +148,7 @@ def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
     Raises
     ------
     InputError
-        ``b.a_max`` or the robot's ``a_max`` below the plan's peak on some
+        ``b.a_max_given`` or the robot's ``a_max`` below the plan's peak on some
         axis (the message names the axis, both values and the unit).
     """
     peak = np.max(np.abs(np.asarray(plan.xdd, float)), axis=0)
@@ -154,9 +157,10 @@ def acceleration_assumption(plan, b, robot) -> AccelerationAssumption:
         raise InputError(f"the plan has {peak.size} pose axes, robot {robot.name} has {robot.n}")
     _check_peak(peak, robot.a_max, units, "the robot's a_max", "no execution of this plan exists under it; "
                 "slow the plan down or lower its peak acceleration")
-    if b.a_max is not None:
-        _check_peak(peak, b.a_max, units, "a_max", "raise a_max on that axis or lower a_peak")
-        return AccelerationAssumption(tuple(AxisAcceleration(float(b.a_max[i]), units[i], AccelerationSource.GIVEN)
+    given = b.a_max_given
+    if given is not None:
+        _check_peak(peak, given, units, "a_max", "raise a_max on that axis or lower a_peak")
+        return AccelerationAssumption(tuple(AxisAcceleration(float(given[i]), units[i], AccelerationSource.GIVEN)
                                             for i in range(robot.n)))
     margin = robot.tracking_a_margin
     axes = []
@@ -180,8 +184,3 @@ def _check_peak(peak, bound, units, name: str, advice: str) -> None:
         raise InputError("bounds contradict the plan: " + "; ".join(
             f"axis {i + 1}: {name} = {bound[i]:g} {units[i]} is below the planned peak {peak[i]:.6g} {units[i]}"
             for i in low) + f"; {advice}")
-
-
-def derived_a_max(plan, b, robot) -> tuple[float, ...]:
-    """The values of :func:`acceleration_assumption`, per axis in its own unit (what the tracker reads)."""
-    return acceleration_assumption(plan, b, robot).values

@@ -153,7 +153,7 @@ def certify_at_robot_a_max(robot, task, cert: CrossingCertificate, *, v_low=0.6,
     # ...and the counterexample found there starts every scan speed's search (a start, verified as any)
     warm = None if scan is None else next((verified_counterexample(r) for r in cert.refutation
                                            if r.speed == known and r.verified), None)
-    bounds = replace(cert.bounds, a_max=ref.values, a_margin=None)
+    bounds = replace(cert.bounds.given, a_max=ref.values, a_margin=None)
     other = certify_crossing(robot, task, bounds, v_low=start, v_high=v_high, tol=tol, monte_carlo_runs=0,
                              refute=refute, refute_speeds=scan, executor=executor, seed=seed,
                              progress=suffixed(progress, " at the robot's a_max"),

@@ -33,7 +33,7 @@ from . import refute
 from .simulate import simulate_bounce
 from .sweep import cruise_for
 from .generate.crossing import crossing_point_and_joints
-from .task import CrossingTask, PlanningBounds
+from .task import CrossingTask, PlanningBounds, ResolvedBounds, resolved
 
 __all__ = ["BounceGap", "BounceVerdicts", "bounce_gap", "bounce_verdicts", "bounce_floor", "gap_of", "BOUNCE_DISTANCES",
            "BOUNCE_FLOOR_TOL"]
@@ -126,9 +126,10 @@ class BounceVerdicts:
 class _Bounces:
     """The task's bounces at one approach speed: readings by turn-back distance, simulated once each."""
 
-    def __init__(self, robot, task: CrossingTask, bounds: PlanningBounds, speed: float, kin=None, readings=None):
+    def __init__(self, robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBounds, speed: float, kin=None,
+                 readings=None):
         self.kin = KinematicModel(robot) if kin is None else kin
-        self.b = bounds.for_robot(robot)
+        self.b = resolved(bounds, robot)
         self.speed = float(speed)
         xi = robot.xi_center
         self.point, self.q_point, self.m0 = crossing_point_and_joints(self.kin, task, xi)
@@ -147,7 +148,7 @@ class _Bounces:
         return self.readings[d], self.b.t_s
 
 
-def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *,
+def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBounds, speed: float, *,
                     distances=BOUNCE_DISTANCES, kin=None, imodel=None, exhaustive: bool = False,
                     parallel: bool = True) -> BounceVerdicts:
     """The tracker's verdicts on the task's bounces at ``speed``, by bisection over ``distances`` (m).
@@ -197,8 +198,9 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds, speed: fl
     return BounceVerdicts(fam.speed, tried, tuple(verdicts[d] for d in tried), certified_from, dict(fam.readings))
 
 
-def bounce_floor(robot, task: CrossingTask, bounds: PlanningBounds, tracked: BounceVerdicts, *, starts=None,
-                 distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, exhaustive: bool = False):
+def bounce_floor(robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBounds, tracked: BounceVerdicts, *,
+                 starts=None, distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None,
+                 exhaustive: bool = False):
     """The crossing floor of the bounces of ``tracked`` (:func:`planner.refute.crossing_floor`).
 
     Module-level so that any executor can run it in another process.  The
@@ -219,8 +221,8 @@ def bounce_floor(robot, task: CrossingTask, bounds: PlanningBounds, tracked: Bou
                                  upper=None if exhaustive else certified_from)
 
 
-def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, *, starts=None,
-               distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None,
+def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBounds, speed: float, *,
+               starts=None, distances=BOUNCE_DISTANCES, tol: float = BOUNCE_FLOOR_TOL, kin=None, imodel=None,
                exhaustive: bool = False) -> BounceGap:
     """Certified and refuted turn-back distances of the task's bounces at ``speed`` (module docstring).
 
@@ -235,8 +237,9 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds, speed: float, 
     ----------
     robot : robots.Robot
     task : CrossingTask
-    bounds : PlanningBounds
-        ``t_s``, ``eps_q`` and ``a_peak`` (of the bounces' ramps) are used.
+    bounds : ResolvedBounds or PlanningBounds
+        ``t_s``, ``eps_q`` and ``a_peak`` (of the bounces' ramps) are used (resolved for ``robot``, or resolved
+        here: :func:`planner.task.resolved`).
     speed : float
         Approach speed, m/s.
     starts : sequence of array_like (m,), optional

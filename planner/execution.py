@@ -109,16 +109,14 @@ class ExecutionClass:
     def xi_box(self) -> tuple[np.ndarray, np.ndarray]:
         return self.xi_lo.copy(), self.xi_hi.copy()
 
-    def assumptions(self, robot, t_s: float, a_max, xd0=None) -> Assumptions:
-        """What a certifying run of this class assumes: its reading error, drift model and geometry box, the
-        initial speed bound ``xd0`` (per pose axis, its unit/s; ``None``: the robot's), with sampling period
-        ``t_s`` (s) and ``a_max`` (per pose axis, its unit/s^2)."""
+    def assumptions(self, base: Assumptions) -> Assumptions:
+        """What a certifying run of this class assumes: ``base`` (the certification's bounds for one plan:
+        ``t_s``, ``a_max``, ``xd0``, units) with this class's reading error, drift model and geometry box."""
         drift = None
         if self.drift_per_sample is not None:
             # d per sample as a rate, rounded up so that j t_s rate >= j d
-            drift = (self.fast_error, float(np.nextafter(self.drift_per_sample / t_s, np.inf)))
-        return Assumptions.for_robot(robot, t_s=t_s, eps_q=self.reading_error, a_max=a_max, drift=drift,
-                                     xi_box=self.xi_box, xd0=xd0)
+            drift = (self.fast_error, float(np.nextafter(self.drift_per_sample / base.t_s, np.inf)))
+        return base.with_(eps_q=self.reading_error, drift=drift, xi_box=self.xi_box)
 
     def summary(self) -> dict:
         return {

@@ -74,7 +74,7 @@ from crosscert.verifier import interval as I
 
 from .execution import ExecutionClass, ExecutionKind, cartesian_class, joint_class, joint_error
 from .execution_search import branch_and_bound_joints, loop_closure_tapes, offset_joints, offset_split, setup_path
-from .task import PlannedTrajectory
+from .task import PlannedTrajectory, resolved
 
 __all__ = ["METHOD", "ClassProof", "prove_cartesian_class", "prove_cartesian_class_cached", "proved_class",
            "with_proof_failure", "describe", "offset_split", "execution_class"]
@@ -284,7 +284,8 @@ def with_proof_failure(cls: ExecutionClass, proof: ClassProof) -> ExecutionClass
 
 def execution_class(kin, plans, bounds) -> ExecutionClass:
     """The admissible executions of one plan or a list of plans (union of their paths) under ``bounds``
-    (:class:`planner.task.PlanningBounds`).
+    (:class:`planner.task.ResolvedBounds` for ``kin.robot``, or a :class:`~planner.task.PlanningBounds`
+    resolved here).
 
     See :mod:`planner.execution`; ``cartesian`` classes are proved over the
     whole box ``[xi]`` (:mod:`planner.execution_proof`) and, when the proof
@@ -292,7 +293,7 @@ def execution_class(kin, plans, bounds) -> ExecutionClass:
     (seeded, deterministic) and marked ``proved: false`` with the reason.
     """
     robot = kin.robot
-    b = bounds.for_robot(robot)
+    b = resolved(bounds, robot)
     if b.execution is ExecutionKind.JOINT:
         return joint_class(robot, b.eps_q, b.tracking_error)
     plans = [plans] if isinstance(plans, PlannedTrajectory) else list(plans)

@@ -26,9 +26,8 @@ from crosscert.verifier.window import Reasoning, track_window
 from . import execution as ex_
 from .execution_proof import execution_class
 from .models import interval_model, kinematic_model
-from .plan import derived_a_max
 from .simulate import Quantisation, quantise, random_geometry
-from .task import PlannedTrajectory, PlanningBounds
+from .task import PlannedTrajectory, PlanningBounds, ResolvedBounds, resolved
 
 __all__ = ["RunRecord", "MonteCarloResult", "monte_carlo_confirmation", "monte_carlo_runs", "merge_results", "BATCH_RUNS"]
 
@@ -121,8 +120,8 @@ BATCH_RUNS = 200
 BESIDE_CHUNK = 1
 
 
-def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds, *, runs=50, seed=0,
-                             a_max=None, progress=None, execution: ex_.ExecutionClass | None = None,
+def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: PlanningBounds | ResolvedBounds, *,
+                             runs=50, seed=0, progress=None, execution: ex_.ExecutionClass | None = None,
                              executor: Executor | None = None, batch_runs: int = BATCH_RUNS,
                              parallel: bool = True, beside: Executor | None = None,
                              envelope=None) -> MonteCarloResult:
@@ -140,6 +139,9 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
 
     Parameters
     ----------
+    bounds : ResolvedBounds or PlanningBounds
+        Resolved for ``kin.robot`` (for ``plan`` or not: :meth:`~planner.task.ResolvedBounds.for_plan`, whose
+        ``a_max`` the tracker assumes), or resolved here (:func:`planner.task.resolved`).
     executor : concurrent.futures.Executor, optional
         Run the executions in batches of ``batch_runs`` on it (a process pool,
         a Dask client's ``get_executor()``): for 10^5 executions and more.
@@ -162,10 +164,11 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     runs = int(V.number("runs", runs, lo=1))
     batch_runs = int(V.number("batch_runs", batch_runs, lo=1))
     robot = kin.robot
-    b = bounds.for_robot(robot)
-    a_max = derived_a_max(plan, b, robot) if a_max is None else a_max
+    b = resolved(bounds, robot).for_plan(plan)
     cls = execution_class(kin, plan, b) if execution is None else execution
-    s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=a_max, xi_splits=b.xi_splits)
+    # the run-time tracker: the robot's settings (its xd0 too), with the certificate's eps_q, t_s and a_max
+    s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=b.assumptions.a_max,
+                                  xi_splits=b.xi_splits)
     if executor is None and beside is None:
         return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress,
                                 parallel=parallel, envelope=envelope)
@@ -185,12 +188,12 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     return merge_results([f.result() for f in futures])
 
 
-def monte_carlo_runs(robot, plan: PlannedTrajectory, b: PlanningBounds, settings: TrackerSettings,
+def monte_carlo_runs(robot, plan: PlannedTrajectory, b: ResolvedBounds, settings: TrackerSettings,
                      cls: ex_.ExecutionClass, seed: int, start: int, stop: int, *, models=None,
                      progress=None, parallel: bool = True, envelope=None) -> MonteCarloResult:
     """Executions ``start .. stop - 1`` of a Monte Carlo confirmation (module-level: any executor can run it).
 
-    ``b`` are bounds bound to the robot (``PlanningBounds.for_robot``); ``models`` the robot's ``(KinematicModel,
+    ``b`` are the bounds resolved for the robot (``PlanningBounds.resolve``); ``models`` the robot's ``(KinematicModel,
     IntervalModel)``, those this thread keeps when absent (:mod:`planner.models`); ``envelope`` the
     certificate's run-time envelope, any object with ``check(q)`` (:mod:`planner.certify.envelope`).
     """

@@ -3,9 +3,10 @@
 * :func:`plan_crossing` — a rest-to-rest trajectory along the straight segment
   from ``task.start`` to ``task.goal`` that crosses the nominal Type 2 locus at
   speed ``v_sing`` (smoothstep, time-optimal or dynamic time law);
-* :func:`speed_ceiling` — the fastest crossing speed a time law allows;
-* :func:`derived_a_max` — the acceleration bound a certificate of a plan assumes
-  (defined in :mod:`planner.acceleration`, with its units and sources).
+* :func:`speed_ceiling` — the fastest crossing speed a time law allows.
+
+The acceleration bound a certificate of a plan assumes is the bounds' step for
+that plan (:meth:`planner.task.ResolvedBounds.for_plan`).
 """
 
 from __future__ import annotations
@@ -15,14 +16,14 @@ import numpy as np
 from crosscert.robots import arguments as V
 from crosscert.robots.errors import InputError, SimulationError
 
-from .acceleration import derived_a_max
 from .generate import GenerationLimits, generate_crossing
 from .path import (PathTask, joints_along, path_speed_ceiling, plan_along_path, smoothstep_law,
                    time_optimal_along_path, time_optimal_ceiling)
 from .simulate import RAMP_PEAK
-from .task import CrossingTask, Method, PlannedTrajectory, PlanningBounds, crossing_on_segment, parse_option
+from .task import (CrossingTask, Method, PlannedTrajectory, PlanningBounds, ResolvedBounds, crossing_on_segment,
+                   parse_option, resolved)
 
-__all__ = ["plan_crossing", "speed_ceiling", "derived_a_max"]
+__all__ = ["plan_crossing", "speed_ceiling"]
 
 #: Path grid of the time-optimal law, m: fine enough that the cone program's
 #: finite differences do not limit the speed at the crossing (~0.1 mm).
@@ -36,10 +37,11 @@ DYNAMIC_QD_MAX = 30.0
 DYNAMIC_QDD_MAX = 3000.0
 
 
-def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds,
+def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds | ResolvedBounds,
                   method: str | None = None, limits=None) -> PlannedTrajectory:
     """Plan a rest-to-rest straight crossing at ``v_sing`` (m/s).
 
+    ``bounds``: resolved for ``kin.robot``, or resolved here (:func:`planner.task.resolved`).
     ``method`` defaults to ``bounds.method``.  ``"smoothstep"``: rest ``t_rest``; smoothstep speed ramp
     to ``v_sing`` (peak ``a_peak``); constant speed through the crossing point
     (zero acceleration there: the crossing criterion); ramp to rest at
@@ -65,7 +67,7 @@ def plan_crossing(kin, task: CrossingTask, v_sing: float, bounds: PlanningBounds
         and goal: the message gives the largest feasible speed), bad task.
     """
     robot = kin.robot
-    b = bounds.for_robot(robot)
+    b = resolved(bounds, robot)
     v_sing = V.positive("v_sing", v_sing)
     method = b.method if method is None else parse_option(Method, "planning method", method)
     if isinstance(task, PathTask):
@@ -108,8 +110,10 @@ def _time_optimal_setup(kin, task, b, xi, s_star, u, L, limits):
     return ts_, samples, lim
 
 
-def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
+def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds | ResolvedBounds) -> float:
     """Fastest ``v_sing`` (m/s) the time law of ``bounds`` allows on ``task``: the upper end of a search.
+
+    ``bounds`` as for :func:`plan_crossing`.
 
     ``smoothstep`` and ``dynamic``: both speed ramps (length ``1.875 v^2 / (2
     a_peak)``) must fit between the start, the crossing point and the goal.
@@ -124,7 +128,7 @@ def speed_ceiling(kin, task: CrossingTask, bounds: PlanningBounds) -> float:
         No admissible time law reaches the crossing point.
     """
     robot = kin.robot
-    b = bounds.for_robot(robot)
+    b = resolved(bounds, robot)
     if isinstance(task, PathTask):
         if b.method is Method.TIME_OPTIMAL:
             return time_optimal_ceiling(kin, task, b, TIME_OPTIMAL_GRID_STEP) * (1 - CEILING_SHRINK)

@@ -3,7 +3,9 @@
 * :class:`CrossingTask` — go from a start at rest in one assembly mode to a
   goal at rest in the other;
 * :class:`PlanningBounds` — encoder error, acceleration, sampling and time-law
-  choices of the certification;
+  choices of the certification, as given; :class:`ResolvedBounds` — the same
+  resolved against the robot once (one :class:`~robots.assumptions.Assumptions`),
+  and for one plan (:meth:`ResolvedBounds.for_plan`);
 * :class:`PlannedTrajectory` — a planned crossing: a :class:`~verifier.Trajectory`
   with its crossing sample;
 * :func:`crossing_on_segment` — where the straight segment of a task meets
@@ -13,22 +15,22 @@
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import Enum, StrEnum
 
 import numpy as np
 
 from crosscert.robots import arguments as V
-from crosscert.robots.assumptions import check_bound
+from crosscert.robots.assumptions import Assumptions, check_bound
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.registry import RobotEntry
 from crosscert.verifier.one_motion import ONE_MOTION_SAMPLES
 from crosscert.verifier.trajectory import Trajectory
 from crosscert.verifier.window import Reasoning
 
+from .acceleration import AccelerationAssumption, acceleration_assumption
 from .execution import ExecutionKind
 from .locus import LineScan, locate_crossing, sign_changes
 
@@ -38,6 +40,8 @@ __all__ = [
     "ExecutionKind",
     "CrossingTask",
     "PlanningBounds",
+    "ResolvedBounds",
+    "resolved",
     "PlannedTrajectory",
     "SegmentCrossing",
     "crossing_on_segment",
@@ -113,11 +117,12 @@ def benchmark_task(entry: RobotEntry, xi=None, *, half_length: float = BENCHMARK
 
 @dataclass(frozen=True)
 class PlanningBounds:
-    """Bounds of the planning-time certification (SI), checked once at construction.
+    """Bounds of the planning-time certification as the caller gives them (SI), checked once at construction.
 
-    ``eps_q``, ``t_s`` and ``a_max`` obey the rules of
+    ``eps_q``, ``t_s``, ``a_max`` and ``xd0`` obey the rules of
     :class:`~robots.assumptions.Assumptions`; ``None`` takes the robot's value
-    when :meth:`for_robot` binds the bounds to a robot (cheap, no re-check).
+    when :meth:`resolve` resolves the bounds against a robot, once per
+    certification (:class:`ResolvedBounds`, what the planner reads).
 
     Parameters
     ----------
@@ -128,8 +133,8 @@ class PlanningBounds:
     a_max : float or array (n,), optional
         End-effector acceleration bound per pose axis, in that axis' unit per
         s^2 (m/s^2 or rad/s^2, ``robot.pose_units``); one number stands for
-        every axis only when all axes share a unit.  ``None``: derived from
-        from the robot, axis by axis (:func:`planner.acceleration.acceleration_assumption`):
+        every axis only when all axes share a unit.  ``None``: derived for
+        each plan from the robot, axis by axis (:meth:`ResolvedBounds.for_plan`):
         its physical ``a_max``, or its declared tracking margin around the plan.
     a_margin : float, optional
         Asked-for tracking margin, relative: an axis the plan accelerates is
@@ -194,13 +199,6 @@ class PlanningBounds:
     reasoning: Reasoning = Reasoning.WINDOW
     one_motion: int = ONE_MOTION_SAMPLES
     xd0: tuple | None = None
-    #: Name of the robot whose defaults :meth:`for_robot` filled in (``None``: not yet bound).
-    robot_name: str | None = field(default=None, init=False, compare=False)
-    #: The robot itself and these bounds before its defaults were filled in: binding to another robot
-    #: (a variant of the same name included) starts again from what the caller gave.
-    _robot: object = field(default=None, init=False, compare=False, repr=False)
-    _unbound: object = field(default=None, init=False, compare=False, repr=False)
-
     def __post_init__(self) -> None:
         set_ = object.__setattr__  # frozen: normalise once; the bounds by the assumptions' rules
         if self.eps_q is not None:
@@ -227,29 +225,25 @@ class PlanningBounds:
         if self.method is Method.DYNAMIC and self.dynamics is None:
             raise InputError("method 'dynamic' needs a dynamic model (PlanningBounds.dynamics)")
 
-    def for_robot(self, robot) -> PlanningBounds:
-        """These bounds with the robot's defaults where none was given (``eps_q``, ``t_s``, ``xi_splits``) and
-        ``a_max`` as one bound per pose axis.  Checked at construction: nothing is checked again here but
-        what needs the robot (one ``a_max`` per axis in its unit)."""
-        if self._robot is robot:
-            return self
-        given = self._unbound if self._unbound is not None else self
-        out = copy.copy(given)
-        set_ = object.__setattr__
-        set_(out, "robot_name", robot.name)
-        set_(out, "_robot", robot)
-        set_(out, "_unbound", given)
-        if given.eps_q is None:
-            set_(out, "eps_q", robot.eps_q)
-        if given.t_s is None:
-            set_(out, "t_s", robot.t_s)
-        if given.xi_splits is None:
-            set_(out, "xi_splits", getattr(robot, "xi_splits", None))
-        if given.a_max is not None:
-            set_(out, "a_max", _per_axis_a_max(given.a_max, robot))
-        if given.xd0 is not None:
-            set_(out, "xd0", _per_axis(given.xd0, robot, "xd0", robot.velocity_units, robot.xd0))
-        return out
+    def resolve(self, robot) -> ResolvedBounds:
+        """These bounds for ``robot``, once: :class:`ResolvedBounds` holding one
+        :class:`~robots.assumptions.Assumptions`.
+
+        The robot's defaults fill what was not given (``eps_q``, ``t_s``, ``xd0``, ``xi_splits``, and
+        ``a_max``: its physical bound until :meth:`ResolvedBounds.for_plan` derives a plan's); ``a_max`` and
+        ``xd0`` become one bound per pose axis in the robot's units.
+
+        Raises
+        ------
+        InputError
+            One number for ``a_max`` or ``xd0`` on a robot whose pose axes mix m and rad, or a count of
+            bounds that is not the robot's number of axes.
+        """
+        a_max = None if self.a_max is None else _per_axis_a_max(self.a_max, robot)
+        xd0 = None if self.xd0 is None else _per_axis(self.xd0, robot, "xd0", robot.velocity_units, robot.xd0)
+        assumptions = Assumptions.for_robot(robot, t_s=self.t_s, eps_q=self.eps_q, a_max=a_max, xd0=xd0)
+        splits = self.xi_splits if self.xi_splits is not None else getattr(robot, "xi_splits", None)
+        return ResolvedBounds(self, robot, assumptions, splits)
 
 
 def _per_axis_a_max(value: tuple, robot) -> tuple[float, ...]:
@@ -272,6 +266,113 @@ def _per_axis(value: tuple, robot, name: str, units, example, why: str = "") -> 
         raise InputError(f"{name} needs {robot.n} entries, got {len(value)} (one bound per pose axis of robot "
                          f"{robot.name}, in {', '.join(units)})")
     return value
+
+
+#: The options of :class:`PlanningBounds` that no robot default fills: :class:`ResolvedBounds` reads them
+#: through by name from the caller's bounds.
+_OPTIONS = ("tracking_error", "a_margin", "a_peak", "t_rest", "method", "dynamics", "qd_max", "qdd_max",
+            "execution", "reasoning", "one_motion")
+
+
+@dataclass(frozen=True, eq=False)
+class ResolvedBounds:
+    """:class:`PlanningBounds` resolved against one robot: built once (:meth:`PlanningBounds.resolve`), then
+    read by every step of a certification, never bound again.
+
+    The bounds are one :class:`~robots.assumptions.Assumptions` (``t_s``, ``eps_q``, ``a_max``, ``xd0``,
+    the calibration box, the units); the options of the caller's bounds (``tracking_error``, ``a_margin``,
+    ``a_peak``, ``t_rest``, ``method``, ``dynamics``, ``qd_max``, ``qdd_max``, ``execution``,
+    ``reasoning``, ``one_motion``) read through by name.
+
+    The acceleration bound resolves in two steps.  For the robot: the given ``a_max``, else the robot's
+    physical ``a_max`` (the cap of any bound derived from a plan).  For one plan, an explicit step:
+    :meth:`for_plan` gives new bounds whose ``assumptions.a_max`` is what a certificate of that plan assumes
+    (:func:`planner.acceleration.acceleration_assumption`), with units and sources in ``acceleration``.
+
+    Attributes
+    ----------
+    given : PlanningBounds
+        What the caller asked for (``None``: the robot's default).
+    robot : robots.Robot
+    assumptions : robots.assumptions.Assumptions
+        The bounds in force; ``eps_q`` one number for every joint.
+    xi_splits : tuple of int or None
+        Geometry hypotheses of the tracker (given, else the robot's).
+    acceleration : planner.acceleration.AccelerationAssumption or None
+        The acceleration bound of :attr:`plan`, per axis with unit and source (``None``: not for a plan yet).
+    plan : PlannedTrajectory or None
+        The plan :meth:`for_plan` derived ``a_max`` for.
+    """
+
+    given: PlanningBounds
+    robot: object = field(repr=False)
+    assumptions: Assumptions = field(repr=False)
+    xi_splits: tuple | None = None
+    acceleration: AccelerationAssumption | None = None
+    plan: object = field(default=None, repr=False)
+
+    @property
+    def eps_q(self) -> float:
+        """Reading error of every joint, in its unit (rad or m)."""
+        return float(self.assumptions.eps_q[0])
+
+    @property
+    def t_s(self) -> float:
+        """Sampling period, s."""
+        return self.assumptions.t_s
+
+    @property
+    def a_max_given(self) -> tuple[float, ...] | None:
+        """The caller's acceleration bound, one per pose axis in its unit per s^2 (``None``: not given)."""
+        return None if self.given.a_max is None else tuple(float(v) for v in self.assumptions.a_max)
+
+    def for_plan(self, plan) -> ResolvedBounds:
+        """These bounds for one plan: ``assumptions.a_max`` the bound a certificate of ``plan`` assumes per
+        axis, and ``acceleration`` that bound with its units and sources.
+
+        The plan-dependent step of the resolution (the given ``a_max`` checked against the plan's peak, or
+        the robot's bound, or a margin around the peak: :func:`planner.acceleration.acceleration_assumption`).
+        Bounds already for ``plan`` are returned as they are.
+
+        Raises
+        ------
+        InputError
+            The plan's peak acceleration exceeds the given or the robot's ``a_max`` on some axis.
+        """
+        if self.plan is plan:
+            return self
+        acc = acceleration_assumption(plan, self, self.robot)
+        return replace(self, assumptions=self.assumptions.with_(a_max=acc.values), acceleration=acc, plan=plan)
+
+
+def _option(name: str) -> property:
+    return property(lambda self: getattr(self.given, name), doc=f"``{name}`` of the caller's bounds.")
+
+
+for _name in _OPTIONS:  # after @dataclass: the options read the caller's bounds
+    setattr(ResolvedBounds, _name, _option(_name))
+del _name
+
+
+def resolved(bounds, robot) -> ResolvedBounds:
+    """The bounds a public step of the planner reads: ``bounds`` as they are when resolved for ``robot``;
+    a :class:`PlanningBounds` (``None``: the defaults) resolved now.
+
+    A certification resolves its bounds once and passes the result down, so this resolves only what a caller
+    of a single step hands in.
+
+    Raises
+    ------
+    InputError
+        ``bounds`` resolved for another robot.
+    """
+    if isinstance(bounds, ResolvedBounds):
+        if bounds.robot is not robot and bounds.robot != robot:
+            other = robot.name if robot.name != bounds.robot.name else f"another definition of {robot.name}"
+            raise InputError(f"these bounds are resolved for robot {bounds.robot.name}, not for {other}: "
+                             f"resolve the PlanningBounds for this robot (PlanningBounds.resolve)")
+        return bounds
+    return (bounds or PlanningBounds()).resolve(robot)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -26,7 +26,7 @@ def _plan(*peaks):
 
 
 def _resolved(robot, **kw):
-    return PlanningBounds(**kw).for_robot(robot)
+    return PlanningBounds(**kw).resolve(robot)
 
 
 def test_robots_declare_the_unit_of_each_pose_axis():
@@ -106,7 +106,7 @@ def test_one_number_cannot_bound_axes_of_different_units():
         _resolved(RPR3, a_max=80.0)
     with pytest.raises(InputError, match="3 entries.*one bound per pose axis of robot 3rpr"):
         _resolved(RPR3, a_max=(80.0, 200.0))
-    assert _resolved(DEXTAR, a_max=80.0).a_max == (80.0, 80.0)  # one unit: one number is fine
+    assert _resolved(DEXTAR, a_max=80.0).a_max_given == (80.0, 80.0)  # one unit: one number is fine
 
 
 def test_widest_of_a_batch_compares_each_axis_with_itself_only():
@@ -222,17 +222,32 @@ def test_check_refuses_one_a_max_for_axes_of_different_units(tmp_path, capsys):
     assert "axes are in m, m, rad: omit --a-max to use the robot's per-axis a_max (80, 80, 200)" in err, err
 
 
-def test_bounds_bound_to_one_robot_take_another_variants_defaults():
-    """for_robot on bounds already bound to a robot of the same name but other defaults: the variant's defaults."""
+def test_bounds_resolve_once_per_robot_and_refuse_another():
+    """Resolving takes the robot's defaults (a variant of the same name: the variant's); bounds resolved for
+    one robot are read as they are, never bound again, and refused for another robot."""
     from dataclasses import replace
 
-    from crosscert.planner.task import PlanningBounds
+    from crosscert.planner.task import PlanningBounds, resolved
     from crosscert.robots import DEXTAR
 
     variant = replace(DEXTAR, eps_q=2 * DEXTAR.eps_q, t_s=2 * DEXTAR.t_s)
-    b = PlanningBounds().for_robot(DEXTAR)
-    assert (b.eps_q, b.t_s) == (DEXTAR.eps_q, DEXTAR.t_s) and b.for_robot(DEXTAR) is b
-    v = b.for_robot(variant)
-    assert (v.eps_q, v.t_s) == (variant.eps_q, variant.t_s) and v.robot_name == DEXTAR.name
-    given = PlanningBounds(eps_q=1e-4).for_robot(DEXTAR).for_robot(variant)
+    b = PlanningBounds().resolve(DEXTAR)
+    assert (b.eps_q, b.t_s) == (DEXTAR.eps_q, DEXTAR.t_s) and resolved(b, DEXTAR) is b
+    v = PlanningBounds().resolve(variant)
+    assert (v.eps_q, v.t_s) == (variant.eps_q, variant.t_s) and v.robot.name == DEXTAR.name
+    given = PlanningBounds(eps_q=1e-4).resolve(variant)
     assert given.eps_q == 1e-4 and given.t_s == variant.t_s
+    with pytest.raises(InputError, match="resolved for robot dextar, not for another definition of dextar"):
+        resolved(b, variant)
+
+
+def test_the_plan_dependent_part_is_an_explicit_step():
+    """for_plan: new bounds whose a_max is the plan's (the source per axis in ``acceleration``), the robot-level
+    bounds unchanged; the same plan again changes nothing."""
+    b = _resolved(DEXTAR, a_margin=0.1)
+    plan = _plan(6.0, 66.0)
+    p = b.for_plan(plan)
+    assert b.acceleration is None and b.assumptions.a_max.tolist() == list(DEXTAR.a_max)
+    assert p.acceleration.sources == (SRC.PLAN_PEAK, SRC.PLAN_PEAK) and p.plan is plan
+    assert p.assumptions.a_max.tolist() == list(p.acceleration.values) == [6.0 * 1.1, 66.0 * 1.1]
+    assert p.for_plan(plan) is p and p.a_max_given is None and p.eps_q == b.eps_q

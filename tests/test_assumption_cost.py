@@ -73,7 +73,7 @@ def test_the_scan_at_the_robot_a_max_starts_from_the_first_bound_and_its_counter
     trials = tuple(certify_mod.SpeedTrial(v, Verdict.MODE_CHANGED if v >= 0.96 else Verdict.UNKNOWN, 0.0, 0.0,
                                           None, Verdict.UNKNOWN) for v in (0.95, 0.961, 1.959))
     cert = CrossingCertificate(Verdict.MODE_CHANGED, 0.961, 0.84375, trials, None, None,
-                               PlanningBounds().for_robot(DEXTAR), used, None, {}, 0.0,
+                               PlanningBounds().resolve(DEXTAR), used, None, {}, 0.0,
                                refutation=(_Row(0.8), _Row(0.84375, "ce@0.84375"), _Row(0.85)))
     seen = {}
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from crosscert.planner.refute.problem import RecordingBounds
-from crosscert.planner.task import PlanningBounds
+from crosscert.planner.task import PlanningBounds, resolved
 from crosscert.robots import DEXTAR, RPR3, InputError, ModelError
 from crosscert.robots.assumptions import RULES, Assumptions, check_bound
 from crosscert.verifier.settings import TrackerSettings
@@ -96,8 +96,9 @@ def test_recording_and_planning_bounds_use_the_same_rules():
         PlanningBounds(eps_q=0.0)
     with pytest.raises(InputError, match="t_s must be positive"):
         PlanningBounds(t_s=-1e-3)
-    b = PlanningBounds(a_max=90.0).for_robot(DEXTAR)
-    assert b.a_max == (90.0, 90.0) and b.eps_q == DEXTAR.eps_q and b.for_robot(DEXTAR) is b
+    b = PlanningBounds(a_max=90.0).resolve(DEXTAR)
+    assert b.a_max_given == (90.0, 90.0) and b.eps_q == DEXTAR.eps_q and b.assumptions.a_max.tolist() == [90.0, 90.0]
+    assert resolved(b, DEXTAR) is b  # resolved once: never bound again
 
 
 def test_execution_class_gives_the_tracker_its_assumptions_with_the_drift_rate_rounded_up():
@@ -115,7 +116,7 @@ def test_execution_class_gives_the_tracker_its_assumptions_with_the_drift_rate_r
     box = (DEXTAR.xi_lo_array, DEXTAR.xi_hi_array)
     for d, t in short[:20] + pairs[:20]:
         cls = ExecutionClass(ExecutionKind.CARTESIAN, 2e-4, 1e-4, *box, fast_error=1e-4, drift_per_sample=d)
-        a = cls.assumptions(DEXTAR, t, DEXTAR.a_max)
+        a = cls.assumptions(Assumptions.for_robot(DEXTAR, t_s=t))
         assert all(Fraction(float(r)) * Fraction(t) >= Fraction(d) for r in a.drift_rate), (d, t)
         assert a.eps_q.tolist() == [2e-4, 2e-4] and a.eps_q_fast.tolist() == [1e-4, 1e-4]
         assert a.xi_lo.tolist() == box[0].tolist() and a.t_s == t

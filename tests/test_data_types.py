@@ -64,12 +64,12 @@ def test_task_copies_what_it_is_given():
 
 
 def test_options_are_enums_and_bad_ones_list_the_choices():
-    b = PlanningBounds(method="time-optimal", execution="joint").for_robot(robots.DEXTAR)
+    b = PlanningBounds(method="time-optimal", execution="joint").resolve(robots.DEXTAR)
     assert b.method is Method.TIME_OPTIMAL and b.execution is ExecutionKind.JOINT
     with pytest.raises(InputError, match="'smoothstep', 'time-optimal', 'dynamic'"):
-        PlanningBounds(method="fast").for_robot(robots.DEXTAR)
+        PlanningBounds(method="fast").resolve(robots.DEXTAR)
     with pytest.raises(InputError, match="'cartesian', 'joint'"):
-        PlanningBounds(execution="loose").for_robot(robots.DEXTAR)
+        PlanningBounds(execution="loose").resolve(robots.DEXTAR)
 
 
 def test_a_sweep_row_not_certified_has_no_certified_step(kin, bench):

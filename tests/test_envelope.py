@@ -129,7 +129,7 @@ def test_executions_of_another_geometry_following_the_path_leave_the_joint_envel
 def test_the_envelope_of_a_certified_run_is_the_one_its_certificate_file_gives(kin, imodel, certified, envelope):
     """``CertifiedRun.envelope`` (what the Monte Carlo checks) and ``CertifiedEnvelope.load`` (what ``monitor
     --certificate`` reads) are one envelope."""
-    b = PlanningBounds().for_robot(DEXTAR)
+    b = PlanningBounds().resolve(DEXTAR)
     run = certify_planned(kin, imodel, certified[1], b)
     env = run.envelope(DEXTAR, DEXTAR.eps_q)
     assert (env.verdict, env.decided_at, env.initial_mode, env.final_mode) == (
@@ -143,7 +143,7 @@ def test_monte_carlo_counts_the_executions_the_envelope_confirms(kin, imodel, ce
     """Each execution's readings go through the run-time envelope check: those of random geometries leave
     the certificate's envelope (where, recorded), and an envelope wide enough confirms them all."""
     plan = certified[1]
-    b = PlanningBounds().for_robot(DEXTAR)
+    b = PlanningBounds().resolve(DEXTAR)
     run = certify_planned(kin, imodel, plan, b)
     mc = monte_carlo_confirmation(kin, imodel, plan, b, runs=3, seed=1, execution=run.execution, envelope=envelope)
     assert mc.envelope_checked and mc.covered_at_run_time == 0 and len(mc.left_envelope) == 3

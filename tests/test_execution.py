@@ -89,7 +89,7 @@ def test_joint_class_is_the_literal_tube(plan, kin):
     q = kin.ik_path(plan.x, xi, plan.q[0])
     assert not in_class(jc, DEXTAR, q, plan.q, xi, plan.xi_plan, DEXTAR.eps_q, 1e-4)
     with pytest.raises(InputError, match="execution class"):
-        PlanningBounds(execution="cartesain").for_robot(DEXTAR)
+        PlanningBounds(execution="cartesain").resolve(DEXTAR)
     with pytest.raises(InputError, match="safety"):
         cartesian_class(kin, plan.x, plan.q, plan.xi_plan, DEXTAR.eps_q, safety=0.5)
 
@@ -129,8 +129,8 @@ def test_the_joint_error_is_rounded_outward_on_each_side():
         assert Fraction(joint_error(e, t, down=True)) <= exact
         jc = joint_class(DEXTAR, e, t)
         assert Fraction(jc.reading_error) >= exact and Fraction(jc.fast_error) >= exact
-        b = PlanningBounds(eps_q=e, tracking_error=t).for_robot(DEXTAR)
-        assert Fraction(refute_overrides(b, DEXTAR.a_max)["eps_q"]) <= exact
+        b = PlanningBounds(eps_q=e, tracking_error=t).resolve(DEXTAR)
+        assert Fraction(refute_overrides(b)["eps_q"]) <= exact
 
 
 def test_the_measured_cartesian_class_rounds_its_reading_error_up(kin, plan):

@@ -273,7 +273,7 @@ def test_the_benchmark_task_is_refuted_at_0_848_m_s():
     from problems import PLANNING
 
     kin, task = kinematics(), PLANNING["dextar_benchmark"].task()
-    b = PlanningBounds().for_robot(DEXTAR)
+    b = PlanningBounds().resolve(DEXTAR)
     m0 = crossing_on_segment(kin, task, DEXTAR.xi_center).m0
     starts = [DEXTAR.xi_center, random_geometry(DEXTAR, np.random.default_rng(0), corners=True)]  # certify's, seed 0
     row = refute_speed(DEXTAR, task, b, m0, starts, NEAR_FLOOR, kin=kin)

@@ -11,6 +11,7 @@ from crosscert.planner.certify.plan import SpeedTrial
 from crosscert.planner.cli.planning import _bound_text
 from crosscert.planner.refute import BounceSearch, SearchCompleteness, SpeedRefutation, completeness
 from crosscert.planner.task import PlanningBounds
+from crosscert.robots import DEXTAR
 from crosscert.verifier.settings import Verdict
 
 
@@ -51,11 +52,12 @@ def test_the_printout_never_says_none_found_for_capped_searches():
 
 def test_certificate_and_bounce_json_state_what_the_bound_rests_on():
     trials = (SpeedTrial(1.0, Verdict.MODE_CHANGED, 0.1, 1.0, 5, Verdict.MODE_CHANGED),)
-    cert = CrossingCertificate(Verdict.MODE_CHANGED, 1.0, None, trials, None, None, PlanningBounds(), None, None, {}, 1.0,
+    b = PlanningBounds().resolve(DEXTAR)
+    cert = CrossingCertificate(Verdict.MODE_CHANGED, 1.0, None, trials, None, None, b, None, None, {}, 1.0,
                                refutation=(_row(0.5, *CAPPED),), refutation_ran=True)
     assert cert.summary()["refutation_search"] == "not-searched-to-completion"
     assert cert.summary()["refutation_bound_mps"] is None
-    off = CrossingCertificate(Verdict.MODE_CHANGED, 1.0, None, trials, None, None, PlanningBounds(), None, None, {}, 1.0)
+    off = CrossingCertificate(Verdict.MODE_CHANGED, 1.0, None, trials, None, None, b, None, None, {}, 1.0)
     assert off.summary()["refutation_search"] is None  # not run: not computed, not "none found"
     gap = BounceGap(1.0, (0.01,), (Verdict.MODE_UNCHANGED,), 0.01, None, ())
     assert gap.summary()["crossing_floor_search"] == "not-searched-to-completion"

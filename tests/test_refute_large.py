@@ -21,7 +21,6 @@ from crosscert.planner.refute.nlp import nlp_variables, scaled_cpu_time
 from crosscert.planner.simulate import random_geometry
 from crosscert.planner.task import PlanningBounds, crossing_on_segment
 from crosscert.planner.plan import plan_crossing
-from crosscert.planner.acceleration import derived_a_max
 from crosscert.robots import KinematicModel, get_entry
 from problems import PLANNING, RPR3_REFUTATION
 
@@ -31,7 +30,7 @@ def _setup(robot_name):
     robot = entry.robot
     kin = KinematicModel(robot)
     task = PLANNING[f"{robot_name}_benchmark"].task()
-    b = PlanningBounds().for_robot(robot)
+    b = PlanningBounds().resolve(robot)
     m0 = crossing_on_segment(kin, task, robot.xi_center).m0
     # certify's starting geometries (planner.certify.crossing._start_refuter, seed 0)
     starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(0), corners=True)]
@@ -58,7 +57,7 @@ def test_branch_guess_does_not_jump_to_the_other_assembly():
     # instead of taking the other mode-m0 assembly (phi = 0.46 rad against -0.3 rad: 3780 a_max in one sample)
     robot, kin, task, b, m0, starts = _setup(RPR3_REFUTATION["robot"])
     plan = plan_crossing(kin, task, RPR3_REFUTATION["guess"], b)
-    a_max = np.asarray(derived_a_max(plan, b, robot), float)
+    a_max = b.for_plan(plan).assumptions.a_max
     X, solved = fk_branch_guess(kin, plan.q, starts[1], m0)
     assert not solved.all()
     ratio = np.max(np.abs(np.diff(X, 2, axis=0)) / b.t_s ** 2 / a_max)

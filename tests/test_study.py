@@ -92,7 +92,7 @@ def test_bad_grids_are_refused_before_any_work(tmp_path):
 
 
 def test_monte_carlo_in_batches_on_dask_equals_one_batch(client, kin, imodel, task):
-    b = PlanningBounds().for_robot(kin.robot)
+    b = PlanningBounds().resolve(kin.robot)
     plan = plan_crossing(kin, task, 1.3, b)
     cls = execution_class(kin, plan, b)
     one = monte_carlo_confirmation(kin, imodel, plan, b, runs=12, seed=3, execution=cls)

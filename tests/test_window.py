@@ -28,7 +28,7 @@ from adversarial import near_scenarios
 from problems import MARGIN, check_contains, interval_model
 from crosscert.planner.certify.plan import tracker_settings
 from crosscert.planner.execution_proof import execution_class
-from crosscert.planner.plan import derived_a_max, plan_crossing
+from crosscert.planner.plan import plan_crossing
 from crosscert.planner.task import PlanningBounds
 from crosscert.robots import DEXTAR, get_entry
 from crosscert.robots.errors import InputError
@@ -215,10 +215,10 @@ def test_planning_run_at_one_metre_per_second(speed, certified):
     from crosscert.robots import KinematicModel
 
     kin = KinematicModel(DEXTAR)
-    b = PlanningBounds(a_margin=MARGIN).for_robot(DEXTAR)
+    b = PlanningBounds(a_margin=MARGIN).resolve(DEXTAR)
     plan = plan_crossing(kin, benchmark_task(entry), speed, b)
     cls = execution_class(kin, plan, b)
-    s = tracker_settings(DEXTAR, b, derived_a_max(plan, b, DEXTAR), cls)
+    s = tracker_settings(b.for_plan(plan), cls)
     res = track_window(interval_model(), plan.q, s, initial_mode=1, xi_box=cls.xi_box, max_geometries=4)
     assert res.forward_verdict is Verdict.UNKNOWN
     assert res.verdict is (Verdict.MODE_CHANGED if certified else Verdict.UNKNOWN), res.summary()

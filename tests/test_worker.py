@@ -75,7 +75,7 @@ def _task():
 
 def test_refutation_falls_back_to_this_process():
     robot = dataclasses.replace(DEXTAR, loop_closure=local_closure)
-    ref = Refuter(robot, _task(), PlanningBounds().for_robot(robot), 1, [robot.xi_center], kinematics(),
+    ref = Refuter(robot, _task(), PlanningBounds().resolve(robot), 1, [robot.xi_center], kinematics(),
                   SubprocessExecutor(), own_executor=True)
     try:
         row = ref.result(0.5)
@@ -86,7 +86,7 @@ def test_refutation_falls_back_to_this_process():
 
 def test_any_executor_gives_the_rows_of_this_process():
     """A thread pool (any concurrent.futures executor) gives the same search rows as a call here."""
-    b = PlanningBounds().for_robot(DEXTAR)
+    b = PlanningBounds().resolve(DEXTAR)
     args = (DEXTAR, _task(), b, 1, [DEXTAR.xi_center])
     with cf.ThreadPoolExecutor(max_workers=1) as pool:
         ref = Refuter(*args, None, pool)

@@ -20,7 +20,7 @@ from .. import refute
 from ..acceleration import AccelerationAssumption
 from ..bounce import BounceGap
 from ..montecarlo import MonteCarloResult
-from ..task import CrossingTask, PlannedTrajectory, PlanningBounds
+from ..task import CrossingTask, PlannedTrajectory, ResolvedBounds
 from .plan import decision_sample
 
 __all__ = ["CrossingCertificate", "CERTIFICATE_SCHEMA", "package_versions"]
@@ -65,7 +65,7 @@ class CrossingCertificate:
     trials: tuple
     trajectory: PlannedTrajectory | None
     enclosures: TrackResult | None
-    bounds: PlanningBounds
+    bounds: ResolvedBounds
     a_max_used: AccelerationAssumption | None
     monte_carlo: MonteCarloResult | None
     versions: dict
@@ -146,7 +146,8 @@ class CrossingCertificate:
             "bounds": {
                 "eps_q": b.eps_q, "tracking_error": b.tracking_error, "t_s": b.t_s, "t_rest_s": b.t_rest,
                 "a_peak_mps2": b.a_peak,
-                "a_max": None if b.a_max is None else [{"value": v, "unit": u} for v, u in zip(b.a_max, self.acceleration_units)],
+                "a_max": None if b.a_max_given is None else [{"value": v, "unit": u}
+                                                             for v, u in zip(b.a_max_given, self.acceleration_units)],
                 "a_margin": b.a_margin, "xi_splits": None if b.xi_splits is None else list(b.xi_splits),
                 "execution": b.execution.value, "qd_max": b.qd_max, "qdd_max": b.qdd_max,
                 "reasoning": b.reasoning.value, "one_motion_samples": b.one_motion,

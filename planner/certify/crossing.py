@@ -29,7 +29,7 @@ from ..montecarlo import monte_carlo_confirmation
 from ..plan import speed_ceiling
 from ..simulate import random_geometry
 from ..path import PathTask
-from ..task import CrossingTask, PlanningBounds, crossing_on_segment
+from ..task import CrossingTask, PlanningBounds, ResolvedBounds, crossing_on_segment, resolved
 from ..progress import Phase, enter
 from ..refute.orchestrate import Refuter, refutation_search, timed
 from .certificate import CrossingCertificate, package_versions
@@ -79,7 +79,7 @@ class _Job:
 
     robot: object
     task: CrossingTask
-    b: PlanningBounds
+    b: ResolvedBounds
     kin: KinematicModel
     imodel: IntervalModel
     m0: int
@@ -103,6 +103,8 @@ def certify_crossing(robot, task: CrossingTask, bounds: PlanningBounds | None = 
     robot : robots.Robot
     task : CrossingTask
     bounds : PlanningBounds, optional
+        Resolved for ``robot`` once, here (:meth:`PlanningBounds.resolve`; bounds already resolved for it,
+        :class:`~planner.task.ResolvedBounds`, are taken as they are); the certificate keeps them.
     v_low, v_high, tol : float
         Speed bracket and resolution of ``v_min``, m/s (:class:`SpeedBracket`); ``v_high`` defaults
         to (and is capped at) :func:`speed_ceiling`: the fastest crossing the time law allows.
@@ -206,10 +208,10 @@ class _Clock:
 
 
 def _prepare(robot, task, bounds, v_low, v_high, tol, kin, imodel, *, threads: bool, v_guess=None) -> _Job:
-    """The models, the bounds bound to the robot, the start's mode and the checked speed bracket."""
+    """The models, the bounds resolved for the robot, the start's mode and the checked speed bracket."""
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
-    b = (bounds or PlanningBounds()).for_robot(robot)
+    b = resolved(bounds, robot)  # once: every step of the certification reads these
     m0 = task.m0 if isinstance(task, PathTask) else crossing_on_segment(kin, task, robot.xi_center).m0
     v_feasible = speed_ceiling(kin, task, b)
     v_high = v_feasible if v_high is None else min(float(v_high), v_feasible)

@@ -60,11 +60,11 @@ from crosscert.verifier.tracker import TrackResult, track
 from crosscert.verifier.window import Explainer, Reasoning, WindowResult, track_window
 
 from .. import execution as ex_
-from ..acceleration import AccelerationAssumption, acceleration_assumption, derived_a_max
+from ..acceleration import AccelerationAssumption
 from ..execution_proof import execution_class
 from ..plan import plan_crossing
 from ..refute import RefutingExplainer
-from ..task import PlannedTrajectory, PlanningBounds
+from ..task import PlannedTrajectory, PlanningBounds, ResolvedBounds, resolved
 from .envelope import CertifiedEnvelope
 
 __all__ = [
@@ -101,13 +101,15 @@ CERTIFY_WINDOW_GEOMETRIES = 16
 
 
 # ------------------------------------------------------------------ planning
-def tracker_settings(robot, b: PlanningBounds, a_max, cls: ex_.ExecutionClass) -> TrackerSettings:
-    """Tracker settings of a certifying run: the class's assumptions (reading error, drift, geometry box) at
-    the plan's ``t_s`` and ``a_max`` (per axis, its unit/s^2), with the bounds' geometry hypotheses."""
-    return TrackerSettings(assumptions=cls.assumptions(robot, b.t_s, a_max, b.xd0), xi_splits=b.xi_splits)
+def tracker_settings(b: ResolvedBounds, cls: ex_.ExecutionClass) -> TrackerSettings:
+    """Tracker settings of a certifying run: the bounds for one plan (``b``, :meth:`ResolvedBounds.for_plan`:
+    ``t_s``, ``a_max``, ``xd0``) with the class's reading error, drift and geometry box, and the bounds'
+    geometry hypotheses."""
+    return TrackerSettings(assumptions=cls.assumptions(b.assumptions), xi_splits=b.xi_splits)
 
 
-def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int, *,
+def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds | ResolvedBounds,
+                 initial_mode: int, *,
                  execution: ex_.ExecutionClass | None = None, kin=None, progress=None) -> TrackResult:
     """Run the tracker on inputs covering every admissible execution of ``plan``.
 
@@ -117,23 +119,24 @@ def certify_plan(imodel: IntervalModel, plan: PlannedTrajectory, bounds: Plannin
     encloses every start pose of mode ``initial_mode`` for every geometry of
     the box.  ``MODE_CHANGED`` certifies every admissible execution.  The
     forward tracker's run; :func:`certify_plan_window` adds the window passes.
-    ``progress(k)`` (optional) after each tracked sample.
+    ``progress(k)`` (optional) after each tracked sample.  ``bounds``: resolved for the robot (for this
+    plan or not: :meth:`ResolvedBounds.for_plan`), or resolved here (:func:`planner.task.resolved`).
     """
     robot = imodel.robot
-    b = bounds.for_robot(robot)
+    b = resolved(bounds, robot).for_plan(plan)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
-    s = tracker_settings(robot, b, derived_a_max(plan, b, robot), execution)
+    s = tracker_settings(b, execution)
     return track(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box, progress=progress)
 
 
-def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds, initial_mode: int,
-                        *, execution: ex_.ExecutionClass | None = None, kin=None, a_max=None,
+def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: PlanningBounds | ResolvedBounds,
+                        initial_mode: int, *, execution: ex_.ExecutionClass | None = None, kin=None,
                         max_geometries: int = CERTIFY_WINDOW_GEOMETRIES, parallel: bool = True,
                         explainer: Explainer | None = None) -> WindowResult:
     """:func:`certify_plan` with window passes (:func:`verifier.window.track_window`) on the same inputs.
 
-    ``a_max`` (per axis, in its unit per s^2) defaults to the plan's derived bound.  ``MODE_CHANGED``
+    ``bounds`` as for :func:`certify_plan` (``a_max`` the plan's: :meth:`ResolvedBounds.for_plan`).  ``MODE_CHANGED``
     certifies every admissible execution, as for :func:`certify_plan`.  ``parallel``: the geometry
     sub-boxes over the thread slots (the same boxes either way).  The window's one-motion refutation
     runs over ``bounds.one_motion`` samples (0: not tried).  ``explainer`` (e.g.
@@ -141,10 +144,10 @@ def certify_plan_window(imodel: IntervalModel, plan: PlannedTrajectory, bounds: 
     early with ``unknown`` (no sound method can certify ``MODE_CHANGED`` then); ``None``: not asked.
     """
     robot = imodel.robot
-    b = bounds.for_robot(robot)
+    b = resolved(bounds, robot).for_plan(plan)
     if execution is None:
         execution = execution_class(kin if kin is not None else KinematicModel(robot), plan, b)
-    s = tracker_settings(robot, b, derived_a_max(plan, b, robot) if a_max is None else a_max, execution)
+    s = tracker_settings(b, execution)
     return track_window(imodel, plan.q, s, initial_mode=initial_mode, xi_box=execution.xi_box,
                         max_geometries=max_geometries, parallel=parallel, goal=Verdict.MODE_CHANGED,
                         one_motion=b.one_motion, explainer=explainer)
@@ -211,9 +214,9 @@ def certify_speed(kin, imodel, task, bounds, v_sing, *, progress=None, parallel:
     What the certificate of ``v_sing`` is: its verdict ``MODE_CHANGED``
     certifies every admissible execution of the plan (module docstring).
     ``parallel``: window passes over the thread slots (the same boxes; off
-    where another process holds the other cores).
+    where another process holds the other cores).  ``bounds`` as for :func:`certify_plan`.
     """
-    b = bounds.for_robot(kin.robot)
+    b = resolved(bounds, kin.robot)
     return certify_planned(kin, imodel, plan_crossing(kin, task, v_sing, b), b, progress=progress, parallel=parallel)
 
 
@@ -223,18 +226,18 @@ def certify_planned(kin, imodel, plan: PlannedTrajectory, bounds, *, progress=No
 
     The initial assembly mode is that of the plan's first pose and joints at the planning geometry.  Its
     verdict ``MODE_CHANGED`` certifies every admissible execution of the plan (module docstring).
+    ``bounds`` as for :func:`certify_plan`.
     """
-    b = bounds.for_robot(kin.robot)
+    b = resolved(bounds, kin.robot).for_plan(plan)
     cls = execution_class(kin, plan, b)
     m0 = int(kin.mode(plan.x[0], plan.q[0], plan.xi_plan))
-    acceleration = acceleration_assumption(plan, b, kin.robot)
     forward = certify_plan(imodel, plan, b, m0, execution=cls, progress=progress)
     window = None
     if forward.verdict is Verdict.UNKNOWN and b.reasoning is Reasoning.WINDOW:
         # a verified bounce stops the window early: that speed cannot be certified by any sound method
-        window = certify_plan_window(imodel, plan, b, m0, execution=cls, a_max=acceleration.values,
-                                     parallel=parallel, explainer=RefutingExplainer())
-    return CertifiedRun(plan, cls, acceleration, forward, window)
+        window = certify_plan_window(imodel, plan, b, m0, execution=cls, parallel=parallel,
+                                     explainer=RefutingExplainer())
+    return CertifiedRun(plan, cls, b.acceleration, forward, window)
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,8 +297,7 @@ def search_v_min(kin, imodel, task, bounds, v_low, v_high, *, tol=0.01, progress
     searches running meanwhile); ``progress(k)`` after each tracked sample;
     ``parallel`` as for :func:`certify_speed`.
     """
-    robot = kin.robot
-    b = bounds.for_robot(robot)
+    b = resolved(bounds, kin.robot)
     v_low, v_high = V.positive("v_low", v_low), V.positive("v_high", v_high)
     tol = V.positive("tol", tol)
     if not v_low < v_high:

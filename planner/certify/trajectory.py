@@ -37,12 +37,11 @@ from crosscert.verifier.trajectory import Trajectory
 from crosscert.verifier.trajfile import read_trajectory
 
 from .. import refute
-from ..acceleration import derived_a_max
 from ..locus import sign_changes
 from ..montecarlo import monte_carlo_confirmation
 from ..progress import Phase, enter
 from ..simulate import random_geometry
-from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds
+from ..task import ExecutionKind, PlannedTrajectory, PlanningBounds, ResolvedBounds, resolved
 from ..path import path_task_of
 from ..refute.orchestrate import REFUTE_CAP_VARIABLES, REFUTE_CPU_TIME, refute_overrides
 from .certificate import CrossingCertificate, package_versions
@@ -306,7 +305,8 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
         A plan file (``t, q1..qn[, x1..xn]``, docs/file-formats.md, "Planned trajectory"), a trajectory
         (``t``, ``q``, optional ``x``), or a completed plan.
     bounds : PlanningBounds, optional
-        Its ``t_s`` is replaced by the plan's step; ``xd0`` states the plan's initial speed.
+        Its ``t_s`` is replaced by the plan's step; ``xd0`` states the plan's initial speed.  Resolved for
+        ``robot`` here (:meth:`PlanningBounds.resolve`); the certificate keeps the resolved bounds.
     initial_mode : int, optional
         The mode at the first sample (needed when only joints are given).
     execution : ExecutionKind or str, optional
@@ -326,11 +326,12 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
     t0 = time.perf_counter()
     kin = KinematicModel(robot) if kin is None else kin
     imodel = IntervalModel(robot) if imodel is None else imodel
-    b = bounds or PlanningBounds()
-    plan, src, given_x = _complete_plan(kin, robot, plan, b, initial_mode)
+    start = resolved(bounds, robot)  # its xd0: the bound the plan's first step is held against
+    plan, src, given_x = _complete_plan(kin, robot, plan, start.assumptions.xd0, initial_mode)
     source = source or src
     kind = (ExecutionKind.CARTESIAN if given_x else ExecutionKind.JOINT) if execution is None else execution
-    b = replace(b, t_s=float(plan.t_s), execution=kind).for_robot(robot)
+    # the bounds of the certification: the plan's own step replaces any given t_s
+    b = replace(start.given, t_s=float(plan.t_s), execution=kind).resolve(robot)
     if b.execution is ExecutionKind.CARTESIAN and not given_x:
         raise InputError("a plan of joints only has no path for 'cartesian' executions to follow: give its poses "
                          "(columns x1..xn) or certify 'joint' executions")
@@ -356,8 +357,9 @@ def certify_trajectory(robot, plan, bounds: PlanningBounds | None = None, *, ini
     return _trajectory_certificate(robot, plan, b, run, certified, mc, rows, clock, source, t0)
 
 
-def _complete_plan(kin, robot, plan, b: PlanningBounds, initial_mode: int | None):
-    """The plan given to :func:`certify_trajectory` completed: ``(plan, source, given_x)``.
+def _complete_plan(kin, robot, plan, xd0, initial_mode: int | None):
+    """The plan given to :func:`certify_trajectory` completed: ``(plan, source, given_x)``; its first step
+    within the initial speed bound ``xd0`` (per pose axis, its unit per s).
 
     ``plan`` a :class:`PlannedTrajectory`, ``source`` its :class:`PlanSource` (file and sha256, or the
     arrays' digest), ``given_x`` whether its poses were given (not computed by forward kinematics).
@@ -365,18 +367,18 @@ def _complete_plan(kin, robot, plan, b: PlanningBounds, initial_mode: int | None
     if isinstance(plan, (str, Path)):
         traj, digest = read_plan(plan, robot)
         given_x = traj.x is not None
-        plan, src = plan_from_trajectory(kin, traj, initial_mode=initial_mode, xd0=_xd0(b, robot), name=str(plan),
+        plan, src = plan_from_trajectory(kin, traj, initial_mode=initial_mode, xd0=xd0, name=str(plan),
                                          digest=digest)
     elif isinstance(plan, PlannedTrajectory):
         given_x = True
         src = PlanSource("<arrays>", _arrays_digest(plan.t, plan.q, plan.x), len(plan.t), float(plan.t_s), "given")
     else:
         given_x = plan.x is not None
-        plan, src = plan_from_trajectory(kin, plan, initial_mode=initial_mode, xd0=_xd0(b, robot))
+        plan, src = plan_from_trajectory(kin, plan, initial_mode=initial_mode, xd0=xd0)
     return plan, src, given_x
 
 
-def _refute_plan(kin, robot, plan: PlannedTrajectory, b: PlanningBounds, m0: int, seed: int, progress):
+def _refute_plan(kin, robot, plan: PlannedTrajectory, b: ResolvedBounds, m0: int, seed: int, progress):
     """The counterexample search on the readings of a plan that is not certified: the refutation's rows.
 
     Started at the centre of ``[xi]`` and at one seeded random geometry (corners included), at the plan's own
@@ -385,12 +387,12 @@ def _refute_plan(kin, robot, plan: PlannedTrajectory, b: PlanningBounds, m0: int
     enter(progress, Phase.REFUTATION, unit="")
     starts = [robot.xi_center, random_geometry(robot, np.random.default_rng(seed), corners=True)]
     found = refute.refutation_bound(kin, lambda _v: (plan.q, b.t_s), [plan.v_sing], m0=m0, xi_starts=starts,
-                                    bounds=refute_overrides(b, derived_a_max(plan, b, robot)),
+                                    bounds=refute_overrides(b.for_plan(plan)),
                                     max_cpu_time=REFUTE_CPU_TIME, cap_variables=REFUTE_CAP_VARIABLES)
     return found.rows
 
 
-def _trajectory_certificate(robot, plan: PlannedTrajectory, b: PlanningBounds, run, certified: bool, mc, rows,
+def _trajectory_certificate(robot, plan: PlannedTrajectory, b: ResolvedBounds, run, certified: bool, mc, rows,
                             clock: dict, source: PlanSource, t0: float) -> CrossingCertificate:
     """The certificate of a given plan from its run (:func:`~planner.certify.plan.certify_planned`), Monte
     Carlo confirmation ``mc``, refutation ``rows`` (None: not run) and phase times ``clock`` (s); ``t0`` the
@@ -421,11 +423,6 @@ def _trajectory_certificate(robot, plan: PlannedTrajectory, b: PlanningBounds, r
     )
 
 
-def _xd0(b: PlanningBounds, robot):
-    """The initial speed bound a plan is checked against: the stated one, else the robot's."""
-    return None if b.xd0 is None else b.for_robot(robot).xd0
-
-
 def certify_path(robot, plan: PlannedTrajectory, bounds: PlanningBounds | None = None, *, source: str = "<path>",
                  kin=None, imodel=None, **kwargs) -> CrossingCertificate:
     """The minimal time scaling of a given plan's path that certifies: its path kept, re-timed.
@@ -433,10 +430,12 @@ def certify_path(robot, plan: PlannedTrajectory, bounds: PlanningBounds | None =
     The plan's poses become a :class:`~planner.path.PathTask` (a curve through the locus, its knots the plan's
     samples) and :func:`~planner.certify.crossing.certify_crossing` searches the slowest speed at the
     singularity whose smoothstep timing of that path certifies, with the refutation bound on the same path.
-    ``bounds`` as for :func:`certify_trajectory` (the plan's sampling period); ``kwargs`` go to
+    ``bounds`` as for :func:`certify_trajectory` (the plan's sampling period; a given plan's certificate's
+    bounds, its execution class with them, are taken as they were given); ``kwargs`` go to
     ``certify_crossing`` (``v_low``, ``tol``, ``monte_carlo_runs``, ``refute``, ``executor``, ...).
     """
     kin = KinematicModel(robot) if kin is None else kin
-    b = replace(bounds or PlanningBounds(), t_s=float(plan.t_s))
+    given = bounds.given if isinstance(bounds, ResolvedBounds) else bounds or PlanningBounds()
+    b = replace(given, t_s=float(plan.t_s))  # resolved once, by certify_crossing
     task = path_task_of(kin, plan, source)
     return certify_crossing(robot, task, b, kin=kin, imodel=imodel, **kwargs)

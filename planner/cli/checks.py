@@ -429,7 +429,7 @@ def _study(a) -> None:
         dynamic = bounds.get("method") == Method.DYNAMIC or Method.DYNAMIC in values.get("method", ())
         kw = dict(bounds, dynamics=entry.require_dynamics() if dynamic else None)
         try:
-            b = PlanningBounds(**kw).for_robot(entry.robot)
+            b = PlanningBounds(**kw).resolve(entry.robot)
         except TypeError as exc:  # a value of the wrong kind deep inside numpy
             raise InputError(f"{a.grid}: [bounds]: {exc}") from None
         # the slowest plan of a case bounds its batches: a crossing at v_low with the lowest ramps

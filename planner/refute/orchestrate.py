@@ -19,11 +19,10 @@ import numpy as np
 
 from crosscert.robots.errors import InputError, SimulationError
 
-from ..acceleration import derived_a_max
 from ..execution import joint_error
 from ..models import kinematic_model
 from ..plan import plan_crossing
-from ..task import PlanningBounds
+from ..task import ResolvedBounds
 from .results import SpeedRefutation
 from .search import refutation_bound, verified_counterexample
 
@@ -60,17 +59,18 @@ def load_model(robot) -> None:
     kinematic_model(robot)
 
 
-def refute_overrides(b: PlanningBounds, a_max) -> dict:
+def refute_overrides(b: ResolvedBounds) -> dict:
     """The bounds a counterexample search of a certifying run uses (:func:`planner.refute.refutation_bound`'s
-    ``bounds``): the readings within ``eps_q + tracking_error``, ``a_max`` per axis, and the stated initial speed."""
-    out = {"eps_q": joint_error(b.eps_q, b.tracking_error, down=True), "a_max": np.asarray(a_max, float)}
-    if b.xd0 is not None:
-        out["v0_max"] = np.asarray(b.xd0, float)
-    return out
+    ``bounds``), from the bounds for one plan (:meth:`ResolvedBounds.for_plan`): the readings within
+    ``eps_q + tracking_error``, ``a_max`` per axis, and the initial speed bound."""
+    a = b.assumptions
+    return {"eps_q": joint_error(b.eps_q, b.tracking_error, down=True), "a_max": np.array(a.a_max, float),
+            "v0_max": np.array(a.xd0, float)}
 
 
 def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
-    """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max``.
+    """Counterexample search on the planned readings at speed ``v``, with that plan's own ``a_max`` (``b``:
+    the certification's :class:`~planner.task.ResolvedBounds`).
 
     Module-level so that any executor can run it in another process; builds
     (and keeps) the robot's ``KinematicModel`` there.  A speed the planner cannot plan gives
@@ -84,8 +84,8 @@ def refute_speed(robot, task, b, m0, starts, v, kin=None, warm=None):
     except (InputError, SimulationError) as exc:
         nan = float("nan")
         return SpeedRefutation(float(v), 0, False, False, None, nan, nan, nan, f"no plan: {exc}", 0.0, ())
-    a_max = b.a_max if b.a_max is not None else derived_a_max(plan, b, robot)
-    overrides = refute_overrides(b, a_max)
+    # a given a_max bounds the search as it is: not held against this plan's peak as a certificate's is
+    overrides = refute_overrides(b if b.a_max_given is not None else b.for_plan(plan))
     return refutation_bound(kin, lambda _v: (plan.q, b.t_s), [v], m0=m0, xi_starts=starts,
                                    bounds=overrides, max_cpu_time=REFUTE_CPU_TIME, warm=warm,
                                    cap_variables=REFUTE_CAP_VARIABLES).rows[0]

@@ -281,8 +281,9 @@ class RecordingBounds:
         own = {k: given.pop(k) for k in ("x_lo", "x_hi") if k in given}
         if "assumptions" not in given:
             box = (given.pop("xi_lo", r.xi_lo_array), given.pop("xi_hi", r.xi_hi_array))
-            given = {_ASSUMED[k]: v for k, v in given.items()}
-            given["assumptions"] = Assumptions.for_robot(r, t_s=t_s, xi_box=box, **given)
+            assumed = {_ASSUMED[k]: v for k, v in given.items()}
+            # the fields by their Assumptions names (v0_max is xd0 there), held in one value: no InitVar repeats them
+            given = {"assumptions": Assumptions.for_robot(r, t_s=t_s, xi_box=box, **assumed)}
         out = cls(q_meas=q_meas, m0=m0, x_lo=own.get("x_lo", r.x_lo_array), x_hi=own.get("x_hi", r.x_hi_array),
                   **given)
         if out.q_meas.shape[1] != kin.n or out.xi_lo.shape != (kin.m,):
