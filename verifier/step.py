@@ -314,7 +314,7 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
 
 def _numpy_combine(st: TrackerState, alive, mode, QDD, k: int) -> None:
     """Combine the geometry hypotheses of each scenario at sample ``k``, in place (the numpy twin of the compiled
-    ``_combine``): the scenario's first inconsistent sample, its mode (the rows' common one, 0 if they differ),
+    ``combine``): the scenario's first inconsistent sample, its mode (the rows' common one, 0 if they differ),
     the hulls of its live rows' pose (m) and velocity (m/s) boxes and of their joint acceleration bounds
     ``QDD`` (joint units per s²), its certified streak and widest boxes.  ``alive`` ``(R,)`` and ``mode`` ``(R,)`` are
     the rows' after the step."""

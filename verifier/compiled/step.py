@@ -389,13 +389,12 @@ def row_begin(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqd
 
 
 @inline_jit
-def pose_round(prog, c, rows, r, sc):
-    """The pose half of a contraction round of row ``r``: HC4Revise (on the calibration sub-box of the
-    scratch slot ``TB_XIW``, refreshed from ``rows.xi[r]`` unless ``c.keep_xi``), then Newton; returns the
-    widths of the pose and velocity boxes before it."""
+def hc4_round(prog, c, rows, r, sc):
+    """The first part of a contraction round of row ``r``: HC4Revise on the loop closure (on the
+    calibration sub-box of the scratch slot ``TB_XIW``, refreshed from ``rows.xi[r]`` unless
+    ``c.keep_xi``); returns the widths of the pose and velocity boxes before the round."""
     X = rows.x
     XI = rows.xi
-    Q = rows.q
     tb = sc.tb
     n = X.shape[2]
     m = XI.shape[2]
@@ -403,10 +402,9 @@ def pose_round(prog, c, rows, r, sc):
     wv0 = _wsum(rows.xd, r, n)
     if not c.keep_xi:
         copy_box(XI, r, tb, TB_XIW, m)
-    hc4_pose(prog, X, r, Q, r, tb, TB_XIW, n, m, sc, YES)
+    hc4_pose(prog, X, r, rows.q, r, tb, TB_XIW, n, m, sc, YES)
     if c.keep_xi:
         copy_box(tb, TB_XIW, XI, r, m)
-    newton(prog, X, r, Q, r, XI, r, YES, n, m, sc)
     return wx0, wv0
 
 
@@ -476,13 +474,14 @@ def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qd
     call's result inside a ``prange`` body went wrong (test_backends); with
     ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
     hold the truth at this sample are intersected with the prediction.
-    Its parts (:func:`row_begin`, :func:`pose_round`, :func:`round_end`, :func:`row_end`) are those the
-    rows-in-lanes driver (:mod:`verifier.compiled.lanes.step`) runs row by row around its velocity
-    contraction over lanes."""
+    Its parts (:func:`row_begin`, :func:`hc4_round`, :func:`round_end`, :func:`row_end`) are those the
+    rows-in-lanes driver (:mod:`verifier.compiled.lanes.step`) runs row by row around its Newton step
+    and velocity contraction over lanes."""
     info = row_begin(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqdd)
     dead = False
     for _ in range(c.max_iter):
-        wx0, wv0 = pose_round(prog, c, rows, r, sc)
+        wx0, wv0 = hc4_round(prog, c, rows, r, sc)
+        newton(prog, rows.x, r, rows.q, r, rows.xi, r, YES, rows.x.shape[2], rows.xi.shape[2], sc)
         velocity_contract(vel, prog, c, rows, r, sc, info)
         dead, more = round_end(c, rows, r, wx0, wv0)
         if dead or not more:
@@ -491,7 +490,7 @@ def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qd
 
 
 @inline_jit
-def _combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
+def combine(b, k, kk, P, rows, scen, modes, row_qdd, use_record, rec):
     """Combine the geometry hypotheses of scenario ``b`` after sample ``k``:
     hull of the consistent rows, their common mode, streaks, widths, record."""
     X = rows.x
@@ -569,7 +568,7 @@ def run_slot(prog, c, vel, rows, scen, S, t, T, k0, q, use_record, rec, use_prio
                 r = b * P + p
                 if rows.row_bad[r] < 0:
                     row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, sc.modes, sc.row_qdd, p)
-            _combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
+            combine(b, k, kk, P, rows, scen, sc.modes, sc.row_qdd, use_record, rec)
 
 
 @jit
@@ -596,7 +595,7 @@ def run_hypotheses_parallel(prog, c, vel, rows, scen, S, k0, q, use_record, rec,
                     if rows.row_bad[r] < 0:
                         _row_step_apart(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, s0.modes,
                                         s0.row_qdd, p)
-            _combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
+            combine(b, k, kk, P, rows, scen, s0.modes, s0.row_qdd, use_record, rec)
 
 
 run_hypotheses_parallel = njit(cache=True, parallel=True, **KERNEL_FLAGS)(run_hypotheses_parallel)

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..interval import _bits, _float, _mul_general, inline_jit
+from .. import interval as ops
+from ..interval import inline_jit
 
 __all__ = ["dn", "up", "add", "sub", "mul_fast", "mul", "pmul"]
 
@@ -32,8 +33,8 @@ _TINY = 5e-324  # the smallest positive subnormal: the neighbour of +-0
 @inline_jit
 def dn(c):
     """The float below ``c`` (``np.nextafter(c, -inf)``), without a branch."""
-    b = _bits(c)
-    stepped = _float(b - 1 if b > 0 else b + 1)
+    b = ops._bits(c)
+    stepped = ops._float(b - 1 if b > 0 else b + 1)
     r = -_TINY if c == 0.0 else stepped
     return c if (c != c or c == -_INF) else r
 
@@ -41,8 +42,8 @@ def dn(c):
 @inline_jit
 def up(c):
     """The float above ``c`` (``np.nextafter(c, inf)``), without a branch."""
-    b = _bits(c)
-    stepped = _float(b + 1 if b > 0 else b - 1)
+    b = ops._bits(c)
+    stepped = ops._float(b + 1 if b > 0 else b - 1)
     r = _TINY if c == 0.0 else stepped
     return c if (c != c or c == _INF) else r
 
@@ -92,7 +93,7 @@ def mul(al, ah, bl, bh):
     """``[a] * [b]`` with ``0 * inf = 0`` (the general path on the lanes outside the common case)."""
     lo, hi, ok = mul_fast(al, ah, bl, bh)
     if not ok:
-        lo, hi = _mul_general(al, ah, bl, bh)
+        lo, hi = ops._mul_general(al, ah, bl, bh)
     return lo, hi
 
 
@@ -104,5 +105,5 @@ def pmul(c, bl, bh):
     lo = dn(_lo(p1, p2))
     hi = up(_hi(p1, p2))
     if not ((c != 0.0) & (bl != 0.0) & (bh != 0.0) & (c == c) & (bl == bl) & (bh == bh) & (lo != 0.0) & (hi != 0.0)):
-        lo, hi = _mul_general(c, c, bl, bh)
+        lo, hi = ops._mul_general(c, c, bl, bh)
     return lo, hi

@@ -3,11 +3,11 @@
 :func:`run_lanes` is :func:`verifier.compiled.step.run_slot` with the loops
 turned round: for each sample, each row of the chunk runs the per-row
 kernel's parts (:func:`~verifier.compiled.step.row_begin`,
-:func:`~verifier.compiled.step.pose_round`,
+:func:`~verifier.compiled.step.hc4_round`,
 :func:`~verifier.compiled.step.round_end`,
 :func:`~verifier.compiled.step.row_end`) and, in every contraction round,
-the velocity contraction runs once over the rows still contracting
-(:func:`.velocity.displacement`).  Rows are independent of each other and the
+the Newton step and the velocity contraction run once over the rows still
+contracting (:func:`.newton.newton_x`, :func:`.velocity.displacement`).  Rows are independent of each other and the
 thread's scratch holds nothing from one row to the next (the calibration
 sub-box of the ``TB_XIW`` slot and the velocity information are kept per
 lane), so every box is the per-row driver's, bit for bit.  The ``SOUND``
@@ -25,7 +25,8 @@ from numba import njit
 
 from ..contractors import TB_DQ, TB_XIW, copy_box, thread_scratch
 from ..interval import KERNEL_FLAGS, jit
-from ..step import _combine, pose_round, round_end, row_begin, row_end
+from ..step import combine, hc4_round, round_end, row_begin, row_end
+from .newton import newton_x
 from .velocity import displacement, work_rows
 
 __all__ = ["LaneScratch", "lane_scratch_arrays", "run_lanes"]
@@ -134,7 +135,7 @@ def _sample(vel, prog, c, rows, scen, sc, ls, b0, b1, k, kk, q, use_prior, prior
             L += 1
     for jb in range(n_base):
         ls.idx[jb] = sc.wi[jb]
-    # contraction rounds: the pose row by row, the velocity over the lanes still contracting
+    # contraction rounds: HC4Revise row by row, the Newton step and the velocity over the lanes still contracting
     A = L
     for _ in range(c.max_iter):
         if A == 0:
@@ -144,10 +145,11 @@ def _sample(vel, prog, c, rows, scen, sc, ls, b0, b1, k, kk, q, use_prior, prior
             r = ls.lane_row[l]
             if keep_xi:
                 copy_box(ls.xiw, l, sc.tb, TB_XIW, m)
-            ls.wx0[l], ls.wv0[l] = pose_round(prog, c, rows, r, sc)
+            ls.wx0[l], ls.wv0[l] = hc4_round(prog, c, rows, r, sc)
             if keep_xi:
                 copy_box(sc.tb, TB_XIW, ls.xiw, l, m)
             ls.act_row[a] = r
+        newton_x(prog, rows, ls.act_row, A, n, m, ls, sc.mk, sc.mv)
         displacement(prog, rows, ls.act_row, ls.act, A, ls.idx, n_base, ls.dq, c.baseline, c.axis, n, m, ls,
                      sc.mk, sc.mv)
         kept = 0
@@ -165,7 +167,7 @@ def _sample(vel, prog, c, rows, scen, sc, ls, b0, b1, k, kk, q, use_prior, prior
         row_end(prog, c, rows, ls.lane_row[l], k, q, b0 + bi, kk, sc, ls.dead[l], ls.modes[bi], ls.qdd[bi],
                 ls.lane_p[l])
     for b in range(b0, b1):
-        _combine(b, k, kk, P, rows, scen, ls.modes[b - b0], ls.qdd[b - b0], use_record, rec)
+        combine(b, k, kk, P, rows, scen, ls.modes[b - b0], ls.qdd[b - b0], use_record, rec)
 
 
 @njit(cache=True, **KERNEL_FLAGS)

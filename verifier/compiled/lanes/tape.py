@@ -13,27 +13,15 @@ from __future__ import annotations
 
 from .. import interval as ops
 from ..interval import jit
-from ..tape import (
-    _ADD,
-    _ASSIGN,
-    _CONST,
-    _COS,
-    _DIV,
-    _FABS,
-    _INPUT,
-    _INV,
-    _MUL,
-    _NEG,
-    _SIN,
-    _SQ,
-    _SQRT,
-    _SUB,
-    _TWICE,
-    trig,
-)
+from ...tape import OPCODES
+from ..tape import trig
 from . import interval as lane
 
 __all__ = ["forward"]
+
+_INPUT, _CONST, _ADD, _SUB, _MUL, _DIV, _NEG, _SQ, _SQRT, _SIN, _COS, _TWICE, _FABS, _INV, _ASSIGN = (
+    OPCODES[f"OP_{name}"] for name in ("INPUT", "CONST", "ADD", "SUB", "MUL", "DIV", "NEG", "SQ", "SQRT", "SIN", "COS",
+                                      "TWICE", "FABS", "INV", "ASSIGN"))
 
 
 @jit

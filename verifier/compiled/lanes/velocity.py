@@ -21,9 +21,9 @@ import numpy as np
 
 from .. import interval as ops
 from ..interval import jit
-from ..linalg import point_inverse
 from ..tape import T_VEL
 from . import interval as lane
+from .linalg import gauss_seidel, midpoint_inverse, pmat_imat, pmat_ivec
 from .tape import forward
 
 __all__ = ["displacement", "work_rows"]
@@ -113,24 +113,10 @@ def displacement(prog, rows, lane_row, lane_id, L, idx, n_base, DQ, baseline, ax
 
 @jit
 def _precondition(w, JL, JH, C, GL, GH, BETA, n, L, mat):
-    """:func:`verifier.compiled.linalg.precondition` per lane: ``C`` the midpoint inverse of ``[J]``
-    (lane by lane, on the flat ``mat`` ``(3 n^2,)``), ``[G] = C [J]``, ``beta`` ``>= |I - [G]|``."""
-    nn = n * n
-    for l in range(L):
-        for e in range(nn):
-            mat[e] = ops.midpoint(w[JL + e, l], w[JH + e, l])
-        point_inverse(mat, 0, nn, 2 * nn, n)
-        for e in range(nn):
-            w[C + e, l] = mat[nn + e]
-    for i in range(n):
-        for j in range(n):
-            for l in range(L):
-                lo, hi = lane.pmul(w[C + i * n, l], w[JL + j, l], w[JH + j, l])
-                for k in range(1, n):
-                    pl, ph = lane.pmul(w[C + i * n + k, l], w[JL + k * n + j, l], w[JH + k * n + j, l])
-                    lo, hi = lane.add(lo, hi, pl, ph)
-                w[GL + i * n + j, l] = lo
-                w[GH + i * n + j, l] = hi
+    """:func:`verifier.compiled.linalg.precondition` per lane: ``C`` the midpoint inverse of ``[J]``,
+    ``[G] = C [J]``, ``beta`` ``>= |I - [G]|``."""
+    midpoint_inverse(w, JL, JH, C, n, L, mat)
+    pmat_imat(w, C, JL, JH, GL, GH, n, L)
     for l in range(L):
         beta = 0.0
         for i in range(n):
@@ -148,14 +134,7 @@ def _precondition(w, JL, JH, C, GL, GH, BETA, n, L, mat):
 def _solve(w, BL, BH, YL, YH, C, GL, GH, CL, CH, BETA, n, L):
     """:func:`verifier.compiled.linalg.solve_preconditioned` per lane, one sweep: ``[Cb] = C [b]``, the
     Neumann bound on ``[y]``, then one Gauss–Seidel sweep on ``[G] y = [Cb]``."""
-    for i in range(n):
-        for l in range(L):
-            lo, hi = lane.pmul(w[C + i * n, l], w[BL, l], w[BH, l])
-            for k in range(1, n):
-                pl, ph = lane.pmul(w[C + i * n + k, l], w[BL + k, l], w[BH + k, l])
-                lo, hi = lane.add(lo, hi, pl, ph)
-            w[CL + i, l] = lo
-            w[CH + i, l] = hi
+    pmat_ivec(w, C, BL, BH, CL, CH, n, L)
     for l in range(L):
         cmag = 0.0
         for i in range(n):
@@ -170,18 +149,4 @@ def _solve(w, BL, BH, YL, YH, C, GL, GH, CL, CH, BETA, n, L):
                 rad = np.inf
         for i in range(n):
             w[YL + i, l], w[YH + i, l] = ops.intersect(w[YL + i, l], w[YH + i, l], -rad, rad)
-    for i in range(n):
-        for l in range(L):
-            sl = w[CL + i, l]
-            sh = w[CH + i, l]
-            for j in range(n):
-                if j != i:
-                    pl, ph = lane.mul(w[GL + i * n + j, l], w[GH + i * n + j, l], w[YL + j, l], w[YH + j, l])
-                    sl, sh = lane.sub(sl, sh, pl, ph)
-            dl = w[GL + i * n + i, l]
-            dh = w[GH + i * n + i, l]
-            ql, qh = ops.div(sl, sh, dl, dh)
-            if dl <= 0.0 and dh >= 0.0 and sl <= 0.0 and sh >= 0.0:
-                ql = -np.inf
-                qh = np.inf
-            w[YL + i, l], w[YH + i, l] = ops.intersect(w[YL + i, l], w[YH + i, l], ql, qh)
+    gauss_seidel(w, GL, GH, CL, CH, YL, YH, n, L)
