@@ -9,7 +9,9 @@ centre geometry, readings quantised by ``floor``).
 
 * ``certified_from`` — the smallest tried ``d`` from which every tried
   bounce is certified ``mode-unchanged`` by the run-time tracker with window
-  reasoning (robot's calibration box, ``eps_q`` and ``a_max``);
+  reasoning under the certification's bounds (robot's calibration box,
+  ``eps_q``, ``xd0`` and ``a_max``: the certificate's, when the bounds are
+  for its plan);
 * ``floor`` — the crossing floor (:func:`planner.refute.crossing_floor`): the
   largest ``d`` at which a verified motion that *did* change mode explains
   the same readings; no sound method certifies ``mode-unchanged`` there.
@@ -25,7 +27,7 @@ import numpy as np
 
 from crosscert.robots import KinematicModel
 from crosscert.verifier.model import IntervalModel
-from crosscert.verifier.settings import TrackerSettings, Verdict
+from crosscert.verifier.settings import Verdict
 from crosscert.verifier.tracker import initial_box_from_mode
 from crosscert.verifier.window import track_window
 
@@ -163,7 +165,7 @@ def bounce_verdicts(robot, task: CrossingTask, bounds: PlanningBounds | Resolved
     fam = _Bounces(robot, task, bounds, speed, kin)
     imodel = IntervalModel(robot) if imodel is None else imodel
     distances = tuple(sorted({float(d) for d in distances}))
-    s = TrackerSettings.for_robot(robot, t_s=fam.b.t_s, eps_q=fam.b.eps_q)
+    s = fam.b.tracker_settings()
     verdicts: dict[float, Verdict] = {}
 
     def unchanged(i: int) -> bool:
@@ -217,8 +219,15 @@ def bounce_floor(robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBou
     if certified_from is not None and not exhaustive:
         scan = tuple(d for d in scan if d < certified_from) or distances[:1]
     return refute.crossing_floor(fam.kin, fam.recording, scan, tol=tol, m0=fam.m0, xi_starts=starts,
-                                 bounds={"eps_q": fam.b.eps_q}, max_cpu_time=BOUNCE_CPU_TIME,
+                                 bounds=_floor_bounds(fam.b), max_cpu_time=BOUNCE_CPU_TIME,
                                  upper=None if exhaustive else certified_from)
+
+
+def _floor_bounds(b: ResolvedBounds) -> dict:
+    """The crossing searches' bounds (:func:`planner.refute.crossing_floor`): the readings within ``eps_q``
+    (the bounces are simulated without tracking error), the ``a_max`` and ``xd0`` the tracker's side assumes."""
+    a = b.assumptions
+    return {"eps_q": b.eps_q, "a_max": np.array(a.a_max, float), "v0_max": np.array(a.xd0, float)}
 
 
 def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBounds, speed: float, *,
@@ -238,8 +247,10 @@ def bounce_gap(robot, task: CrossingTask, bounds: PlanningBounds | ResolvedBound
     robot : robots.Robot
     task : CrossingTask
     bounds : ResolvedBounds or PlanningBounds
-        ``t_s``, ``eps_q`` and ``a_peak`` (of the bounces' ramps) are used (resolved for ``robot``, or resolved
-        here: :func:`planner.task.resolved`).
+        ``t_s``, ``eps_q`` and ``a_peak`` (of the bounces' ramps) are used, and ``a_max`` and ``xd0`` are
+        assumed by the tracker and the crossing searches (resolved for ``robot``, or for a certificate's plan
+        with the ``a_max`` it assumes: :meth:`~planner.task.ResolvedBounds.for_plan`; or resolved here:
+        :func:`planner.task.resolved`).
     speed : float
         Approach speed, m/s.
     starts : sequence of array_like (m,), optional

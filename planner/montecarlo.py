@@ -130,7 +130,8 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     Each execution ``r``: geometry uniform in ``[xi]`` (every 5th at a random
     corner), joints by the true IK, readings quantised (floor, round or a
     uniform random error within ``eps_q``, in turn), tracked by the run-time
-    tracker (robot defaults, ``a_max`` of the certificate) from the plan's
+    tracker under the certificate's bounds (:meth:`~planner.task.ResolvedBounds.tracker_settings`: its
+    ``eps_q``, ``t_s``, initial speed ``xd0`` and the plan's ``a_max``, the robot's ``[xi]``) from the plan's
     initial mode, with window passes where it is undecided when
     ``bounds.reasoning`` is ``window``.  Each execution is checked against the certificate's class
     ``execution`` (derived from ``bounds`` when not given).  Execution ``r``
@@ -141,7 +142,7 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     ----------
     bounds : ResolvedBounds or PlanningBounds
         Resolved for ``kin.robot`` (for ``plan`` or not: :meth:`~planner.task.ResolvedBounds.for_plan`, whose
-        ``a_max`` the tracker assumes), or resolved here (:func:`planner.task.resolved`).
+        ``a_max`` and ``xd0`` the tracker assumes), or resolved here (:func:`planner.task.resolved`).
     executor : concurrent.futures.Executor, optional
         Run the executions in batches of ``batch_runs`` on it (a process pool,
         a Dask client's ``get_executor()``): for 10^5 executions and more.
@@ -166,9 +167,7 @@ def monte_carlo_confirmation(kin, imodel, plan: PlannedTrajectory, bounds: Plann
     robot = kin.robot
     b = resolved(bounds, robot).for_plan(plan)
     cls = execution_class(kin, plan, b) if execution is None else execution
-    # the run-time tracker: the robot's settings (its xd0 too), with the certificate's eps_q, t_s and a_max
-    s = TrackerSettings.for_robot(robot, t_s=b.t_s, eps_q=b.eps_q, a_max=b.assumptions.a_max,
-                                  xi_splits=b.xi_splits)
+    s = b.tracker_settings()  # the run-time tracker under the certificate's bounds (its xd0, the plan's a_max)
     if executor is None and beside is None:
         return monte_carlo_runs(robot, plan, b, s, cls, seed, 0, runs, models=(kin, imodel), progress=progress,
                                 parallel=parallel, envelope=envelope)
@@ -223,8 +222,9 @@ def monte_carlo_runs(robot, plan: PlannedTrajectory, b: ResolvedBounds, settings
                                            goal=Verdict.MODE_CHANGED, one_motion=b.one_motion).verdict
     misses, failures, wrong = [], [], []
     for i, r in enumerate(range(start, stop)):
+        # from the first sample on: a start faster than the initial box (xd0) is a containment failure there
         inside = (np.all(rec["x_lo"][i] <= plan.x) and np.all(plan.x <= rec["x_hi"][i])
-                  and np.all(rec["xd_lo"][i, 1:] <= plan.xd[1:]) and np.all(plan.xd[1:] <= rec["xd_hi"][i, 1:]))
+                  and np.all(rec["xd_lo"][i] <= plan.xd) and np.all(plan.xd <= rec["xd_hi"][i]))
         if not inside:
             misses.append(r)
         modes = truths[i][1]

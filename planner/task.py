@@ -27,6 +27,7 @@ from crosscert.robots.assumptions import Assumptions, check_bound
 from crosscert.robots.errors import InputError, SimulationError
 from crosscert.robots.registry import RobotEntry
 from crosscert.verifier.one_motion import ONE_MOTION_SAMPLES
+from crosscert.verifier.settings import TrackerSettings
 from crosscert.verifier.trajectory import Trajectory
 from crosscert.verifier.window import Reasoning
 
@@ -343,6 +344,16 @@ class ResolvedBounds:
             return self
         acc = acceleration_assumption(plan, self, self.robot)
         return replace(self, assumptions=self.assumptions.with_(a_max=acc.values), acceleration=acc, plan=plan)
+
+    def tracker_settings(self) -> TrackerSettings:
+        """The run-time tracker under these bounds: :attr:`assumptions` as they are (``t_s``, ``eps_q``,
+        ``a_max``, ``xd0``, the robot's calibration box) and :attr:`xi_splits`.
+
+        Every run of a certification that tracks an execution's own readings (the Monte Carlo executions,
+        the bounces) takes its settings here, so that it assumes what the certificate states: a stated
+        initial speed ``xd0`` included, and, for bounds :meth:`for_plan`, that plan's ``a_max``.
+        """
+        return TrackerSettings(assumptions=self.assumptions, xi_splits=self.xi_splits)
 
 
 def _option(name: str) -> property:

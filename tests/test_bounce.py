@@ -23,3 +23,30 @@ def test_bounces_are_certified_only_beyond_the_crossing_floor(task, kin, imodel)
     assert g.verdicts[-1] is Verdict.MODE_UNCHANGED
     s = g.summary()
     assert s["gap_m"] == g.certified_from - g.floor and len(s["tracker"]) == 5
+
+
+def test_bounces_assume_the_bounds_they_are_given(task, kin, imodel, monkeypatch):
+    """The tracker's side and the crossing searches of the bounces read ``a_max`` and ``xd0`` from the
+    bounds (a certification passes its own, for its plan), not from the robot."""
+    from crosscert.planner import bounce
+
+    b = PlanningBounds(a_max=(100.0, 90.0), xd0=(0.3, 0.2)).resolve(DEXTAR)
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def window(_model, _q, settings, **_kw):
+        seen["settings"] = settings
+        raise Stop
+
+    monkeypatch.setattr(bounce, "track_window", window)
+    try:
+        bounce.bounce_verdicts(DEXTAR, task, b, 1.1, distances=(0.03,), kin=kin, imodel=imodel)
+    except Stop:
+        pass
+    s = seen["settings"]
+    assert s.assumptions is b.assumptions
+    assert s.a_max.tolist() == [100.0, 90.0] and s.xd0.tolist() == [0.3, 0.2]
+    floor = bounce._floor_bounds(b)
+    assert floor["a_max"].tolist() == [100.0, 90.0] and floor["v0_max"].tolist() == [0.3, 0.2]

@@ -155,3 +155,23 @@ def test_a_plan_the_robot_cannot_execute_is_refused(kin, planned):
     plan, _ = plan_from_trajectory(kin, traj)
     with pytest.raises(InputError, match="the robot's a_max = 80 m/s\\^2 is below the planned peak"):
         certify_trajectory(DEXTAR, plan, monte_carlo_runs=0, kin=kin, imodel=problems.interval_model())
+
+
+def test_monte_carlo_of_a_plan_that_starts_moving_assumes_the_stated_initial_speed(kin, imodel, planned):
+    """The Monte Carlo executions of a given plan that starts at 0.73 m/s are tracked from the stated ``xd0``:
+    under the robot's own 0.1 m/s their true speed lay outside the initial box (every execution a containment
+    failure, and ``inconsistent``) while the certificate, under the stated bound, was ``mode-changed``."""
+    cut = 40
+    t, q, x = planned.t, planned.q, planned.x
+    traj = Trajectory(t=t[: len(t) - cut], q=q[cut:], t_s=planned.t_s, x=x[cut:])
+    bounds = PlanningBounds(xd0=(1.0, 1.0))
+    cert = certify_trajectory(DEXTAR, traj, bounds, monte_carlo_runs=5, refute_plan=False, kin=kin, imodel=imodel)
+    assert cert.verdict is Verdict.MODE_CHANGED
+    plan = cert.trajectory
+    v0 = np.abs(plan.xd[0])
+    assert np.any(v0 > np.asarray(DEXTAR.xd0)) and np.all(v0 <= 1.0)  # the truth starts outside the robot's box
+    assert np.array_equal(cert.bounds.tracker_settings().xd0, [1.0, 1.0])
+    mc = cert.monte_carlo
+    # the truth (the plan's poses and velocities, from the first sample on) lies in every box of every execution
+    assert mc.containment_failures == () and mc.wrong_verdicts == ()
+    assert mc.detected_in_class == mc.in_class == 5

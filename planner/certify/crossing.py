@@ -178,7 +178,7 @@ def _phases(job: _Job, task, opts: RefuteOptions, refuter, starts, monte_carlo_r
     bounces = None
     # the bounces of a task turn back along its straight segment: a given curved path has none of its own
     if refuter is not None and search.v_min is not None and opts.bounce and not isinstance(task, PathTask):
-        bounces = _start_bounces(job, search.v_min, refuter, starts)
+        bounces = _start_bounces(job, search.v_min, run, refuter, starts)
         t1 = time.perf_counter()  # counted in "bounce", not in the Monte Carlo phase
     mc = _confirm(job, run, monte_carlo_runs, seed, progress, None if refuter is None else refuter.executor)
     t1 = clock.lap("monte_carlo", t1)
@@ -302,29 +302,36 @@ def _refutation(refuter, ref_job, top, tol):
     return None, None
 
 
-def _start_bounces(job: _Job, v_min, refuter, starts) -> tuple:
-    """The bounces of the task at ``v_min``: the tracker's side here (this process has the kernels loaded),
-    then the crossing searches on the worker, beside the Monte Carlo run.  ``(tracked, seconds, job)``."""
-    tracked, seconds = timed(bounce_verdicts, job.robot, job.task, job.b, v_min, kin=job.kin, imodel=job.imodel,
-                             parallel=job.threads)
+def _start_bounces(job: _Job, v_min, run, refuter, starts) -> tuple:
+    """The bounces of the task at ``v_min`` (``run``: the certificate's run there): the tracker's side here
+    (this process has the kernels loaded), then the crossing searches on the worker, beside the Monte Carlo
+    run.  ``(tracked, seconds, job, bounds)``.
+
+    Both sides assume what the certificate states (its bounds for its own plan: ``a_max``, ``xd0``): a
+    bounce certified ``mode-unchanged`` under a narrower assumption than the certificate's would claim more
+    than the certificate can.
+    """
+    b = job.b.for_plan(run.plan)
+    tracked, seconds = timed(bounce_verdicts, job.robot, job.task, b, v_min, kin=job.kin,
+                             imodel=job.imodel, parallel=job.threads)
     pool = refuter.executor
-    floor_job = None if pool is None else pool.submit(timed, bounce_floor, job.robot, job.task, job.b, tracked,
+    floor_job = None if pool is None else pool.submit(timed, bounce_floor, job.robot, job.task, b, tracked,
                                                       starts=starts)
-    return tracked, seconds, floor_job
+    return tracked, seconds, floor_job, b
 
 
 def _bounce_gap(job: _Job, bounces, starts) -> tuple:
     """``(gap, seconds of the crossing searches)`` of the started bounces (searched here if the worker failed)."""
     if bounces is None:
         return None, 0.0
-    tracked, _seconds, floor_job = bounces
+    tracked, _seconds, floor_job, b = bounces
     floor = None
     try:
         floor, ran = floor_job.result() if floor_job is not None else (None, 0.0)
     except Exception as exc:  # as for the refutation: a failed worker is no result; run it here
         log.warning("background bounce search failed (%r); searching in this process", exc)
     if floor is None:
-        floor, ran = timed(bounce_floor, job.robot, job.task, job.b, tracked, starts=starts, kin=job.kin)
+        floor, ran = timed(bounce_floor, job.robot, job.task, b, tracked, starts=starts, kin=job.kin)
     return gap_of(tracked, floor), ran
 
 
