@@ -17,9 +17,11 @@ of one axis is ever computed from another axis:
   controller lets the executed acceleration deviate from the plan
   (``Robot.tracking_a_margin``): the planned peak plus that margin.
 
-No bound exceeds the robot's ``a_max`` (the physical bound holds too), and a
-plan that asks more than ``a_max`` of some axis is refused: no execution of it
-exists under the robot's bound.  See docs/planning.md, "The acceleration
+No bound derived from the plan exceeds the robot's ``a_max`` (the physical
+bound holds too); a given bound is taken as given, a larger one only makes
+the certificate assume more (weaker, still sound).  A plan that asks more than
+``a_max`` of some axis is refused: no execution of it exists under the
+robot's bound.  See docs/planning.md, "The acceleration
 assumption".
 """
 
