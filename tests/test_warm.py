@@ -53,6 +53,46 @@ def test_the_child_compiles_the_signature_the_tracker_calls(name, velocity_model
     assert warm.signature(code) == _tracker_signature(name, velocity_model)
 
 
+@pytest.mark.parametrize("name", available_robots())
+def test_the_child_compiles_the_lanes_signature_the_tracker_calls(name, monkeypatch):
+    """Every robot: the rows-in-lanes driver's types (a batch of many rows, ``SOUND``) are the child's."""
+    from crosscert.verifier.compiled import driver
+    from crosscert.verifier.compiled.lanes.step import run_lanes
+
+    robot = get_robot(name)
+    monkeypatch.setattr(driver, "LANES_MIN_ROWS", 1)
+    config = configure(IntervalModel(robot), TrackerSettings.for_robot(robot, velocity_model="sound"), parallel=False)
+    box = tuple(np.asarray(v, dtype=np.float64) for v in robot.x_bounds)
+    st = init_state(config, box)
+    a = CompiledStep()._args(config, st)
+    assert a["run"] is run_lanes
+    head = (config.model.program, config.const, a["vel"], a["rows"], a["scen"], a["scratch"])
+    args = head + a["slots"][0] + (int(st.k), np.zeros((1, 1, robot.n)), False, a["no_record"], False, a["no_prior"])
+    assert warm.lanes_signature() == tuple(numba.typeof(v) for v in args)
+
+
+def test_the_lanes_wait_ends_once_the_lanes_driver_is_cached(monkeypatch):
+    """The child says the driver is cached, then the lanes driver: ``wait_lanes`` returns on the second line
+    (not the first), and stops a child that says nothing in time."""
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    monkeypatch.setenv(warm.DISABLE, "1")
+    say = (f"import sys, time; print({warm.READY!r}, sys.argv[1], flush=True); time.sleep(%s); "
+           f"print({warm.LANES_READY!r}, sys.argv[1], flush=True); time.sleep(600)")
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 0.5])
+    assert warm.start("sound")
+    child = warm._CHILDREN[SOUND]
+    lanes = warm._LANES[child]
+    warm.wait_lanes(timeout=60)
+    assert lanes.is_set() and child.poll() is None and warm._LANES == {}
+    warm._stop_all()
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 600])
+    assert warm.start("sound")
+    child = warm._CHILDREN[SOUND]
+    warm.wait_lanes(timeout=0.5)
+    assert child.poll() is not None  # stopped: the lanes driver then compiles in this process
+    warm._stop_all()
+
+
 def test_the_signatures_differ_by_velocity_model():
     assert len({warm.signature(c) for c in (SOUND, JOINT_FD, PAPER)}) == 3
 

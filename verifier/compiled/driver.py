@@ -66,6 +66,10 @@ class CompiledStep:
             run, threads = self._threads(config, st)
             lanes = run is not kernels.run_slot and run is not kernels.run_hypotheses_parallel
             lane_scratch = _lane_scratch(model, c, st, threads) if lanes else None
+            if lanes and not run.overloads:
+                from . import warm
+
+                warm.wait_lanes()  # a child compiling it: load its cache entry, not a second compilation here
             if run is kernels.run_slot:
                 from . import warm
 

@@ -36,8 +36,9 @@ import numpy as np
 
 from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
 
-__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "LOADAVG", "PROBES", "PROBE_S", "example_arguments", "signature",
-           "cached", "runnable_now", "core_free", "start", "wait", "finish", "pending", "main"]
+__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "LANES_READY", "LOADAVG", "PROBES", "PROBE_S",
+           "example_arguments", "signature", "lanes_signature", "cached", "runnable_now", "core_free", "start", "wait",
+           "wait_lanes", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -55,6 +56,9 @@ POLL_S = 0.05
 #: The line the child prints (with the velocity model code) once the driver is in numba's disk cache:
 #: ``Dispatcher.compile`` returns after numba wrote the entry's data and its index.
 READY = "driver-cached"
+#: The line the child prints next, for ``SOUND``, once the rows-in-lanes driver
+#: (:func:`verifier.compiled.lanes.step.run_lanes`) is in the cache too.
+LANES_READY = "lanes-cached"
 
 _LOCK = threading.Lock()
 #: velocity model code -> the child compiling the driver for it
@@ -65,6 +69,8 @@ _READY: dict[subprocess.Popen, threading.Event] = {}
 _FINISHING: list[subprocess.Popen] = []
 #: child -> the thread reading its output (joined once the child is stopped at exit)
 _READERS: dict[subprocess.Popen, threading.Thread] = {}
+#: child compiling the lanes driver (``SOUND``) -> set once it printed :data:`LANES_READY`
+_LANES: dict[subprocess.Popen, threading.Event] = {}
 
 
 def example_arguments(velocity_model: int = SOUND) -> tuple:
@@ -95,6 +101,15 @@ def example_arguments(velocity_model: int = SOUND) -> tuple:
             scratch_arrays(1, 1, 1, 1, 1, 0, 1), 0, 1, 0, z(1, 1, 1), False, rec, False, prior)
 
 
+def _lanes_arguments() -> tuple:
+    """Arguments of :func:`verifier.compiled.lanes.step.run_lanes` of the types the tracker passes: those of
+    :func:`example_arguments` (``SOUND``) with the lanes scratch before the slot."""
+    from .lanes.step import lane_scratch_arrays
+
+    a = example_arguments(SOUND)
+    return a[:6] + (lane_scratch_arrays(1, 1, 1, 1, 1, 1, 1),) + a[6:]
+
+
 def signature(velocity_model: int = SOUND) -> tuple:
     """numba's argument types of :func:`example_arguments`: the driver's signature."""
     import numba
@@ -102,19 +117,35 @@ def signature(velocity_model: int = SOUND) -> tuple:
     return tuple(numba.typeof(v) for v in example_arguments(velocity_model))
 
 
-def cached(velocity_model: int = SOUND) -> bool:
-    """Whether the driver of ``velocity_model`` is compiled in this process or in numba's disk cache
-    (read without loading it; False when numba's cache cannot be read)."""
-    from .step import run_slot
+def lanes_signature() -> tuple:
+    """numba's argument types of the rows-in-lanes driver (``SOUND`` only)."""
+    import numba
 
-    sig = signature(velocity_model)
-    if sig in run_slot.overloads:
+    return tuple(numba.typeof(v) for v in _lanes_arguments())
+
+
+def _in_cache(dispatcher, sig) -> bool:
+    if sig in dispatcher.overloads:
         return True
     try:  # numba's private cache API (0.68): the index of the function's file, keyed as numba keys it
-        cache = run_slot._cache
-        return cache._cache_file._load_index().get(cache._index_key(sig, run_slot.targetctx.codegen())) is not None
+        cache = dispatcher._cache
+        return cache._cache_file._load_index().get(cache._index_key(sig, dispatcher.targetctx.codegen())) is not None
     except Exception:
         return False
+
+
+def cached(velocity_model: int = SOUND) -> bool:
+    """Whether the drivers of ``velocity_model`` (for ``SOUND`` the lanes driver too) are compiled in this
+    process or in numba's disk cache (read without loading them; False when numba's cache cannot be read)."""
+    from .step import run_slot
+
+    if not _in_cache(run_slot, signature(velocity_model)):
+        return False
+    if int(velocity_model) != SOUND:
+        return True
+    from .lanes.step import run_lanes
+
+    return _in_cache(run_lanes, lanes_signature())
 
 
 def start(velocity_model="sound") -> bool:
@@ -144,7 +175,8 @@ def start(velocity_model="sound") -> bool:
                                      stderr=subprocess.DEVNULL)
             _CHILDREN[code] = child
             ready = _READY[child] = threading.Event()
-            reader = _READERS[child] = threading.Thread(target=_watch, args=(child, code, ready),
+            lanes = _LANES[child] = threading.Event() if code == SOUND else None
+            reader = _READERS[child] = threading.Thread(target=_watch, args=(child, code, ready, lanes),
                                                         name="crosscert-compile-child", daemon=True)
             reader.start()
         except Exception:  # no child: the driver compiles in this process
@@ -152,15 +184,19 @@ def start(velocity_model="sound") -> bool:
     return True
 
 
-def _watch(child, code: int, ready: threading.Event) -> None:
-    """Read the child's output to its end; set ``ready`` when it says the driver of ``code`` is cached."""
+def _watch(child, code: int, ready: threading.Event, lanes: threading.Event | None = None) -> None:
+    """Read the child's output to its end; set ``ready`` when it says the driver of ``code`` is cached,
+    ``lanes`` when it says the lanes driver is."""
     stream = getattr(child, "stdout", None)
     if stream is None:
         return
     with stream:
         for line in stream:
-            if line.split() == [READY.encode(), str(code).encode()]:
+            words = line.split()
+            if words == [READY.encode(), str(code).encode()]:
                 ready.set()
+            elif lanes is not None and words == [LANES_READY.encode(), str(code).encode()]:
+                lanes.set()
 
 
 #: Linux's snapshot of the scheduler: the fourth field of this file counts the threads runnable at this instant
@@ -249,6 +285,21 @@ def wait(velocity_model: int, timeout: float | None = None) -> int | None:
             time.sleep(POLL_S)
 
 
+def wait_lanes(timeout: float | None = None) -> None:
+    """Before the lanes driver's first call: wait for a child that compiles it (until it says it is cached,
+    or exits; at most ``timeout`` s, default :data:`WAIT_S`, then it is stopped), so that this process loads
+    it instead of compiling it beside the child.  Nothing to do when no child compiles it."""
+    with _LOCK:
+        waiting = [(child, event) for child, event in _LANES.items() if event is not None]
+        _LANES.clear()
+    deadline = time.monotonic() + (WAIT_S if timeout is None else timeout)
+    for child, event in waiting:
+        while not event.wait(POLL_S) and child.poll() is None:
+            if time.monotonic() >= deadline:
+                _stop(child)
+                break
+
+
 def finish(timeout: float | None = None) -> None:
     """Before a call of the one-motion kernels: wait for the children that put their driver in the cache and
     still compile those kernels (:func:`wait`), at most ``timeout`` s each (default :data:`WAIT_S`; then they
@@ -284,6 +335,7 @@ def _stop_all() -> None:
         _FINISHING[:] = []
         readers = list(_READERS.values())
         _READERS.clear()
+        _LANES.clear()
     for child in children:
         if child.poll() is None:
             _stop(child)
@@ -293,7 +345,7 @@ def _stop_all() -> None:
 
 def main(argv=None) -> int:
     """The child: compile the driver for each velocity model code of ``argv`` and write it to numba's
-    disk cache, then the window's one-motion kernels (:func:`verifier.compiled.one_motion.compile_kernels`:
+    disk cache (for ``SOUND`` then the lanes driver), then the window's one-motion kernels (:func:`verifier.compiled.one_motion.compile_kernels`:
     their first call in the parent comes later, and loads them when the child was first); exit code 0 when
     every one is compiled (or was cached)."""
     args = sys.argv[1:] if argv is None else list(argv)
@@ -303,7 +355,12 @@ def main(argv=None) -> int:
 
         for code in args:
             run_slot.compile(signature(int(code)))
-            print(READY, int(code), flush=True)  # the parent's wait ends: the one-motion kernels follow
+            print(READY, int(code), flush=True)  # the parent's wait ends: the lanes and one-motion kernels follow
+            if int(code) == SOUND:
+                from .lanes.step import run_lanes
+
+                run_lanes.compile(lanes_signature())
+                print(LANES_READY, int(code), flush=True)
         compile_kernels()
     except KeyboardInterrupt:  # the user's Ctrl-C reaches the whole process group: quietly
         return 130
