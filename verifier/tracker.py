@@ -48,6 +48,7 @@ import numpy as np
 from . import interval as I
 from crosscert.robots.errors import InputError
 from .settings import TrackerSettings, Verdict, VelocityModel
+from .state import ROW_FIELDS, SCENARIO_FIELDS
 from .step import Backend, Event, StepResult, advance, configure, init_state, pose_solutions, step
 
 __all__ = [
@@ -474,3 +475,19 @@ class Tracker:
         return StepResult(k=k, x=(st.x_hull[0, 0].copy(), st.x_hull[0, 1].copy()),
                           xd=(st.xd_hull[0, 0].copy(), st.xd_hull[0, 1].copy()), mode=mode,
                           consistent=consistent, events=tuple(events))
+
+    def snapshot(self) -> dict:
+        """Copies of the state's arrays and counters, as plain (picklable) data: what :meth:`restore`
+        reads, in another process too."""
+        st = self.state
+        return {"arrays": {f: getattr(st, f).copy() for f in ROW_FIELDS + SCENARIO_FIELDS}, "k": st.k,
+                "mode": self._mode, "consistent": self._consistent}
+
+    def restore(self, snap: dict) -> None:
+        """Continue from ``snap``, a :meth:`snapshot` of a tracker of the same settings (up to ``xd0``, read
+        only by the first box) and shapes: copied into this tracker's arrays in place, so that the compiled
+        step's arguments, built once per state, stay valid."""
+        st = self.state
+        for f, v in snap["arrays"].items():
+            np.copyto(getattr(st, f), v)
+        st.k, self._mode, self._consistent = snap["k"], snap["mode"], snap["consistent"]
