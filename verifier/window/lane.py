@@ -19,7 +19,7 @@ from .results import HypothesisStatus, OnlineEvent, WindowState
 
 __all__ = ["Anchor", "Attempt", "Lane", "Reasoner", "CONTRADICTED", "ONLINE_FK_TOL", "ONLINE_MAX_GEOMETRIES",
            "RESEED_FK_TOL", "RESEED_SMALL", "FIRST_ATTEMPT",
-           "catch_up", "contradicted", "next_is_full"]
+           "catch_up", "contradicted", "next_attempt"]
 
 #: Resolution (m) of the enumeration of the newest reading's poses in an attempt (coarser than the offline
 #: window's :data:`~verifier.window.offline.WINDOW_FK_TOL`: near the locus a finer one costs tens of ms).
@@ -94,23 +94,23 @@ class Lane:
         return lane
 
     def step(self, q):
-        """Track the reading ``q``; returns the events it causes."""
+        """Track the reading ``q`` (checked: see :meth:`Tracker.step_reading`); returns the events it causes."""
         if not self.consistent:  # an assumption was violated: nothing is certified any more
             self.k += 1
             return []
-        r = self.tracker.update(q)
-        k = self.k = self.offset + r.k
+        rk, r_mode, r_consistent = self.tracker.step_reading(q)
+        k = self.k = self.offset + rk
         events = []
         if self.anchor is not None:
             self.anchor.q.append(q)
             self.anchor.x.append(self.tracker.state.x_hull[0].copy())
-        if not r.consistent:
+        if not r_consistent:
             if self.consistent:
                 events.append(OnlineEvent(Event.INCONSISTENT, k, k, 0))
             self.consistent, self.mode, self.since = False, 0, -1
             self.anchor, self.window = None, WindowState.IDLE
-        elif r.mode != 0 or self._known:
-            mode = r.mode or self._known  # a window's decision holds at the sample it was made for
+        elif r_mode != 0 or self._known:
+            mode = r_mode or self._known  # a window's decision holds at the sample it was made for
             if self.anchor is not None or self.window is WindowState.GAVE_UP:
                 self.anchor, self.window = None, WindowState.IDLE  # decided by the tracker alone
             if mode != self.mode:
@@ -165,13 +165,15 @@ class Attempt:
     full: bool
 
     @classmethod
-    def of(cls, lane: Lane | None, anchor: Anchor, full: bool) -> "Attempt":
-        """An attempt over every reading of ``anchor`` so far (noted in its counts)."""
+    def of(cls, lane: Lane | None, anchor: Anchor, full: bool, length: int | None = None) -> "Attempt":
+        """An attempt over the first ``length`` readings of ``anchor`` (all so far by default; noted in its
+        counts)."""
+        n = len(anchor.q) if length is None else length
         anchor.attempts += 1
-        anchor.tried = len(anchor.q)
+        anchor.tried = n
         if full:
-            anchor.tried_full = anchor.tried
-        return cls(lane, anchor, np.array(anchor.q), anchor.x[len(anchor.q) - 1].copy(), full)
+            anchor.tried_full = n
+        return cls(lane, anchor, np.array(anchor.q[:n]), anchor.x[n - 1].copy(), full)
 
 
 @dataclass(frozen=True)
@@ -242,11 +244,15 @@ class Reasoner:
         return new, first, catch_up(new, backlog)
 
 
-def next_is_full(anchor: Anchor, settling: bool) -> bool:
-    """A worker's schedule: cheap attempts back to back, a full one once the window doubled since the last
-    full one, or over every reading when settling."""
+def next_attempt(anchor: Anchor, settling: bool) -> tuple:
+    """A worker's schedule, ``(full, length)``: cheap attempts back to back over every reading, a full one
+    once the window doubled since the last full one, or over every reading when settling.  A worker that
+    fell behind (readings faster than real time, busy cores) first tries the power-of-two lengths it
+    skipped, those an inline monitor tries: its answers never miss one of ``check``'s for lack of time."""
     L = len(anchor.q)
-    return (L >= FIRST_ATTEMPT and L >= 2 * anchor.tried_full) or (settling and L == anchor.tried)
+    n = max(FIRST_ATTEMPT, 1 << anchor.tried.bit_length())  # the next inline length past the last attempt
+    n = n if n < L else L
+    return (n >= FIRST_ATTEMPT and n >= 2 * anchor.tried_full) or (settling and n == L == anchor.tried), n
 
 
 def contradicted(lane: Lane, j: int) -> tuple:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from dataclasses import dataclass, replace
@@ -14,9 +15,9 @@ from ..settings import TrackerSettings, Verdict
 from ..step import Backend, Event
 from ..tracker import Tracker
 from .lane import (CONTRADICTED, FIRST_ATTEMPT, ONLINE_FK_TOL, ONLINE_MAX_GEOMETRIES, RESEED_FK_TOL,  # noqa: F401
-                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, next_is_full)
+                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, next_attempt)
 from .results import OnlineEvent, OnlineResult, WindowState
-from .worker import WindowProcess, WindowWorkerStopped, pack_reading
+from .worker import WindowProcess, WindowWorkerStopped, pack_readings
 
 __all__ = ["OnlineMonitor", "ONLINE_HORIZON", "online_boxes"]
 
@@ -32,6 +33,9 @@ SWITCH_INTERVAL = 1e-4
 #: within tens of samples of the crossing, and ``check`` runs the window over the whole recording after the
 #: monitor when it is still undecided.
 INLINE_FULL = (32, 128)
+#: Readings sent to the worker process at once: a frame costs the update path a few µs and wakes the
+#: worker; an attempt sees the readings at most this many samples late.
+FEED_EVERY = 4
 #: Longest wait (s) of the constructor for the worker process to start.
 START_WAIT_S = 60.0
 #: Where the window's attempts run (``worker``): a process of its own, a thread, or inside ``update``.
@@ -148,8 +152,8 @@ class OnlineMonitor:
     # ------------------------------------------------------------------ the update path
     def update(self, q) -> OnlineResult:
         """Feed the reading ``q`` ``(n,)``, rad: the tracker's step, and what the window found meanwhile."""
-        q = np.array(q, dtype=np.float64).reshape(-1)
-        if q.shape != (self.model.n,) or not np.isfinite(q).all():
+        q = np.array(q, dtype=np.float64).reshape(-1)  # a copy of its own: kept by the window
+        if q.shape != (self.model.n,) or not all(map(math.isfinite, q.tolist())):  # Python floats: cheaper
             raise InputError(f"a reading must be {self.model.n} finite joint values, got {q!r}")
         with self._lock:
             self._raise_worker_error()
@@ -326,7 +330,7 @@ class OnlineMonitor:
                     return
                 lane = self._lane
                 a = lane.anchor
-                at = Attempt.of(lane, a, next_is_full(a, self._settling))
+                at = Attempt.of(lane, a, *next_attempt(a, self._settling))
                 self._busy = True
             try:
                 h = self._run(at)
@@ -378,9 +382,9 @@ class OnlineMonitor:
         # first reading, so that a window opening early is worked on at once; past the bound, frames wait
         self._proc.started.wait(START_WAIT_S)
 
-    def _feed(self, lane: Lane) -> None:
+    def _feed(self, lane: Lane, flush: bool = False) -> None:
         """Send the child what it lacks of the lane's window: the anchor when it opened, else the new
-        readings, or that it closed (lock held)."""
+        readings (every :data:`FEED_EVERY` samples, or now: ``flush``), or that it closed (lock held)."""
         a = lane.anchor
         if a is None:
             if self._sent is not None:
@@ -392,9 +396,9 @@ class OnlineMonitor:
             self._sent, self._sent_n = a, len(a.q)
             self._proc.send(("open", self._id, a.k, a.mode, a.start, a.q, a.x))
             return
-        for i in range(self._sent_n, len(a.q)):
-            self._proc.send(("q", self._id, pack_reading(a.q[i], a.x[i])))
-        self._sent_n = len(a.q)
+        if len(a.q) - self._sent_n >= (1 if flush else FEED_EVERY):
+            self._proc.send(("q", self._id, pack_readings(a.q[self._sent_n:], a.x[self._sent_n:])))
+            self._sent_n = len(a.q)
 
     def _answers(self) -> None:
         """Apply what the child answered since the last call (lock held): a decided lane takes the place of
@@ -428,7 +432,7 @@ class OnlineMonitor:
         decision re-seeded may open a window of its own, which is settled in turn."""
         while True:
             self._answers()
-            self._feed(self._lane)
+            self._feed(self._lane, flush=True)
             if self._sent is None:
                 break
             self._token += 1
