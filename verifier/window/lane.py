@@ -19,7 +19,7 @@ from .results import HypothesisStatus, OnlineEvent, WindowState
 
 __all__ = ["Anchor", "Attempt", "Lane", "Reasoner", "CONTRADICTED", "ONLINE_FK_TOL", "ONLINE_MAX_GEOMETRIES",
            "RESEED_FK_TOL", "RESEED_SMALL", "FIRST_ATTEMPT",
-           "catch_up", "contradicted", "next_attempt"]
+           "catch_up", "contradicted", "due", "next_attempt"]
 
 #: Resolution (m) of the enumeration of the newest reading's poses in an attempt (coarser than the offline
 #: window's :data:`~verifier.window.offline.WINDOW_FK_TOL`: near the locus a finer one costs tens of ms).
@@ -49,6 +49,7 @@ class Anchor:
     attempts: int = 0
     tried: int = 0  # window length of the last attempt
     tried_full: int = 0  # window length of the last full attempt
+    ladder: int = 0  # the last inline length tried when settling (next_attempt)
 
 
 #: What :meth:`Reasoner.run` returns for a window that refuted both final modes.
@@ -170,9 +171,12 @@ class Attempt:
         counts)."""
         n = len(anchor.q) if length is None else length
         anchor.attempts += 1
-        anchor.tried = n
-        if full:
-            anchor.tried_full = n
+        if n < len(anchor.q):  # a settling monitor's inline length
+            anchor.ladder = n
+        else:
+            anchor.tried = n
+            if full:
+                anchor.tried_full = n
         return cls(lane, anchor, np.array(anchor.q[:n]), anchor.x[n - 1].copy(), full)
 
 
@@ -245,14 +249,24 @@ class Reasoner:
 
 
 def next_attempt(anchor: Anchor, settling: bool) -> tuple:
-    """A worker's schedule, ``(full, length)``: cheap attempts back to back over every reading, a full one
-    once the window doubled since the last full one, or over every reading when settling.  A worker that
-    fell behind (readings faster than real time, busy cores) first tries the power-of-two lengths it
-    skipped, those an inline monitor tries: its answers never miss one of ``check``'s for lack of time."""
+    """A worker's next attempt, ``(full, length)``: cheap attempts back to back over every reading, a full
+    one once the window doubled since the last full one, or over every reading when settling; then, when
+    that one left the window open, cheap ones over the power-of-two lengths of an inline monitor not tried
+    yet (a worker fed faster than real time skips them: without these, its last word could miss an answer
+    ``check`` finds)."""
     L = len(anchor.q)
-    n = max(FIRST_ATTEMPT, 1 << anchor.tried.bit_length())  # the next inline length past the last attempt
-    n = n if n < L else L
-    return (n >= FIRST_ATTEMPT and n >= 2 * anchor.tried_full) or (settling and n == L == anchor.tried), n
+    if settling and anchor.tried_full == L and anchor.ladder < L:
+        return False, max(FIRST_ATTEMPT, 2 * anchor.ladder)
+    return (L >= FIRST_ATTEMPT and L >= 2 * anchor.tried_full) or (settling and L == anchor.tried), L
+
+
+def due(anchor: Anchor | None, settling: bool) -> bool:
+    """An attempt is due: readings no attempt read, or, when settling, a full attempt over them all or a
+    cheap one over an inline length not tried (:func:`next_attempt`)."""
+    if anchor is None:
+        return False
+    L = len(anchor.q)
+    return anchor.tried < L or (settling and (anchor.tried_full < L or max(FIRST_ATTEMPT, 2 * anchor.ladder) < L))
 
 
 def contradicted(lane: Lane, j: int) -> tuple:

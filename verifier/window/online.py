@@ -15,7 +15,7 @@ from ..settings import TrackerSettings, Verdict
 from ..step import Backend, Event
 from ..tracker import Tracker
 from .lane import (CONTRADICTED, FIRST_ATTEMPT, ONLINE_FK_TOL, ONLINE_MAX_GEOMETRIES, RESEED_FK_TOL,  # noqa: F401
-                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, next_attempt)
+                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, due, next_attempt)
 from .results import OnlineEvent, OnlineResult, WindowState
 from .worker import WindowProcess, WindowWorkerStopped, pack_readings
 
@@ -63,10 +63,12 @@ class OnlineMonitor:
     An attempt is *cheap* (the tracker's geometry sub-boxes, not halved, and
     no one-motion step: tens of ms) or *full* (up to
     :data:`ONLINE_MAX_GEOMETRIES` sub-boxes and the one-motion step: up to
-    seconds).  With ``worker=True`` the window runs on a thread of its own
-    (the kernels release the GIL) and :meth:`update` never waits for an
-    attempt: cheap attempts follow one another over all the readings there
-    are, with a full one each time the window has doubled since the last.
+    seconds).  With a worker (``worker=True``: a process of its own,
+    :mod:`verifier.window.worker`; ``"thread"``: a thread, whose Python code
+    shares the interpreter lock with :meth:`update`) :meth:`update` never
+    waits for an attempt: cheap attempts follow one another over all the
+    readings there are, with a full one each time the window has doubled
+    since the last (:func:`~verifier.window.lane.next_attempt`).
     With ``worker=False`` the attempts run inside :meth:`update`, at window
     lengths :data:`FIRST_ATTEMPT`, twice that, ... (cheap; full too at
     :data:`INLINE_FULL`): the answers do not depend on the
@@ -89,12 +91,13 @@ class OnlineMonitor:
     backend : {"compiled", "numpy"}
     horizon : int
         Longest window, samples (>= 2).
-    worker : bool
-        The window on a thread (online) or inside :meth:`update` (reproducible).
+    worker : {True, "process", "thread", False}
+        The window in a worker process (True, the default: the constructor waits 1-2 s for it to start),
+        on a thread, or inside :meth:`update` (False: reproducible).
     window : bool
         False: the tracker alone (no window opens).
     switch_interval : float or None
-        With a worker: lower the interpreter's thread switch interval (``sys.setswitchinterval``, process
+        With a worker thread: lower the interpreter's thread switch interval (``sys.setswitchinterval``, process
         wide, s) to this, so that :meth:`update` waits at most about this long for the GIL while the
         window's Python code holds it; ``None`` leaves it.
     spread_hypotheses : bool
@@ -214,7 +217,7 @@ class OnlineMonitor:
 
     @property
     def tracker(self) -> Tracker:
-        """The tracker of the newest sample (a new one after each window decision)."""
+        """The tracker of the newest sample (another one after each window decision)."""
         return self._lane.tracker
 
     def verdict(self) -> Verdict:
@@ -313,11 +316,8 @@ class OnlineMonitor:
         return [replace(first, known_at=known_at), *events]
 
     def _pending_work(self, lane: Lane) -> bool:
-        """An attempt is due: readings no attempt read, or a full attempt over them all when settling."""
-        a = lane.anchor
-        if a is None:
-            return False
-        return a.tried < len(a.q) or (self._settling and a.tried_full < len(a.q))
+        """An attempt is due (:func:`~verifier.window.lane.due`)."""
+        return due(lane.anchor, self._settling)
 
     def _work(self):
         """The worker thread: attempts over the open window (see the class) until closed."""

@@ -41,7 +41,7 @@ from crosscert.robots.errors import CrosscertError
 from crosscert.robots.kinematics import KinematicModel
 
 from ..tracker import Tracker
-from .lane import CONTRADICTED, FIRST_ATTEMPT, Anchor, Attempt, Reasoner, catch_up, next_attempt
+from .lane import CONTRADICTED, FIRST_ATTEMPT, Anchor, Attempt, Reasoner, catch_up, due, next_attempt
 from .offline import WindowStart
 
 __all__ = ["WindowProcess", "WindowWorkerStopped", "pack_readings", "serve"]
@@ -202,8 +202,7 @@ class _Child:
             self.settling.append(frame[1])
 
     def due(self) -> bool:
-        a = self.anchor
-        return a is not None and (a.tried < len(a.q) or (bool(self.settling) and a.tried_full < len(a.q)))
+        return due(self.anchor, bool(self.settling))
 
     def loop(self) -> None:
         while True:
