@@ -333,3 +333,18 @@ def test_the_worker_process_failing_reaches_the_caller(settings):
             time.sleep(1e-3)
     assert isinstance(err.value, CrosscertError)
     mon.close()
+
+
+def test_a_robot_that_cannot_cross_processes_gets_a_thread(settings):
+    """A robot whose loop closure does not pickle (defined in a script, a lambda) keeps its window on a
+    thread: the monitor works the same, its window beside it."""
+    import dataclasses
+
+    from crosscert.robots import DEXTAR
+    from crosscert.verifier.model import IntervalModel
+
+    robot = dataclasses.replace(DEXTAR, loop_closure=lambda *a, **k: DEXTAR.loop_closure(*a, **k))
+    run = _simulated(1.1, 1)
+    mon = OnlineMonitor(IntervalModel(robot), settings, _x0(run, settings))
+    assert mon._proc is None and mon._thread is not None
+    mon.close()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import pickle
 import sys
 import threading
 from dataclasses import dataclass, replace
@@ -92,8 +93,9 @@ class OnlineMonitor:
     horizon : int
         Longest window, samples (>= 2).
     worker : {True, "process", "thread", False}
-        The window in a worker process (True, the default: the constructor waits 1-2 s for it to start),
-        on a thread, or inside :meth:`update` (False: reproducible).
+        The window in a worker process (True, the default: the constructor waits 1-2 s for it to start;
+        a thread when the robot cannot cross to another process), on a thread, or inside :meth:`update`
+        (False: reproducible).
     window : bool
         False: the tracker alone (no window opens).
     switch_interval : float or None
@@ -143,9 +145,9 @@ class OnlineMonitor:
         self._closed = False
         self._thread = None
         self._proc = None
-        if kind == "process":
-            self._start_process(x0)
-        elif kind == "thread":
+        if kind == "process" and not self._start_process(x0):
+            kind = "thread"  # the robot cannot cross to another process (a file the child cannot import, ...)
+        if kind == "thread":
             if switch_interval is not None and sys.getswitchinterval() > switch_interval:
                 # the window's Python code holds the GIL between kernels: update waits at most this long for it
                 sys.setswitchinterval(switch_interval)
@@ -361,12 +363,17 @@ class OnlineMonitor:
 
 
     # ------------------------------------------------------------------ the window in a worker process
-    def _start_process(self, x0) -> None:
+    def _start_process(self, x0) -> bool:
         """Start the child (:mod:`verifier.window.worker`) and build, ahead of any decision, the trackers a
         decided lane's state is copied into: building one and its first step cost about 2 ms, which the
-        update path would otherwise pay at the decision."""
+        update path would otherwise pay at the decision.  False (no child) when the child could not set up
+        its model: the robot does not pickle, or does not load in a fresh interpreter."""
         x0 = tuple(np.array(v, dtype=np.float64) for v in x0)
-        self._proc = WindowProcess(self.model.robot, self.settings, self.backend, self.horizon, self._spread, x0)
+        try:
+            proc = WindowProcess(self.model.robot, self.settings, self.backend, self.horizon, self._spread, x0)
+        except (pickle.PicklingError, TypeError, AttributeError):
+            return False
+        self._proc = proc
         self._sent = None  # the anchor the child holds (the lane's, once sent)
         self._sent_n = 0  # its readings sent
         self._id = 0  # that anchor's number: answers about another one are moot
@@ -381,6 +388,11 @@ class OnlineMonitor:
         # the child's start (an interpreter, the model, the kernels from the cache: 1-2 s) before the
         # first reading, so that a window opening early is worked on at once; past the bound, frames wait
         self._proc.started.wait(START_WAIT_S)
+        if not self._proc.ready:
+            self._proc.close(0.0)
+            self._proc = None
+            return False
+        return True
 
     def _feed(self, lane: Lane, flush: bool = False) -> None:
         """Send the child what it lacks of the lane's window: the anchor when it opened, else the new

@@ -149,6 +149,11 @@ class WindowProcess:
         threading.Thread(target=_read, args=(self._proc.stdout, self.inbox, self._on_ready),
                          name="crosscert-window-reader", daemon=True).start()
 
+    @property
+    def ready(self) -> bool:
+        """The child set up its model and takes frames."""
+        return self._ready
+
     def _on_ready(self) -> None:
         with self._lock:
             self._ready = True
