@@ -6,7 +6,7 @@ import math
 import pickle
 import sys
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
@@ -15,7 +15,7 @@ from crosscert.robots.errors import InputError
 from ..settings import TrackerSettings, Verdict
 from ..step import Backend, Event
 from ..tracker import Tracker
-from .lane import (CONTRADICTED, FIRST_ATTEMPT, ONLINE_FK_TOL, ONLINE_MAX_GEOMETRIES, RESEED_FK_TOL,  # noqa: F401
+from .lane import (FIRST_ATTEMPT, ONLINE_FK_TOL, ONLINE_MAX_GEOMETRIES, RESEED_FK_TOL,  # noqa: F401 (its names)
                    RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, due, next_attempt)
 from .results import OnlineEvent, OnlineResult, WindowState
 from .worker import WindowProcess, WindowWorkerStopped, pack_readings
