@@ -3,8 +3,8 @@
 Prints the table of the online-certification targets (docs/tracker.md, "Online: the anchored window"):
 
 1. simulated DexTAR crossings at 1.0 / 1.1 / 1.2 m/s (``--geometries`` true geometries each, the centre and
-   seeded draws in the calibration box, 0.5 s at rest after): the verdict of the monitor (the window on its
-   thread, the readings fed at the robot's rate, 1 kHz) against ``check``'s (the same monitor inline, then
+   seeded draws in the calibration box, 0.5 s at rest after): the verdict of the monitor (the window in its
+   worker process, the readings fed at the robot's rate, 1 kHz) against ``check``'s (the same monitor inline, then
    the window over the whole recording), runs where they differ, and wrong verdicts (must be 0);
 2. the decision delay at 1.1 m/s: the sample at which the change is known online minus the true singular
    instant, ms (median, max);

@@ -10,6 +10,8 @@ again in the new mode, and reports each change of a there-and-back run.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -23,6 +25,7 @@ from crosscert.verifier.step import Event
 from crosscert.verifier.tracker import Tracker, initial_box_from_mode
 from crosscert.verifier.settings import Verdict
 from crosscert.verifier.window import OnlineMonitor, WindowState
+from crosscert.verifier.window import lane as L
 from crosscert.verifier.window import online as O
 
 
@@ -138,12 +141,37 @@ def test_there_and_back_reports_both_changes(settings):
     assert mon.verdict() is Verdict.MODE_UNCHANGED
 
 
-def test_worker_thread_is_sound_and_decides(settings):
-    """The window on its thread: the same guarantees, and (after settle) the 1.1 m/s crossing decided."""
+@pytest.mark.parametrize("worker", ["thread", "process"])
+def test_worker_is_sound_and_decides(settings, worker):
+    """The window on its thread or in its process: the same guarantees, and (after settle) the 1.1 m/s
+    crossing decided; the process ends with the monitor."""
     run = _simulated(1.1, 1)
-    mon, _, events = _online(run, settings, worker=True)
+    mon, _, events = _online(run, settings, worker=worker)
     assert mon.verdict() is Verdict.MODE_CHANGED
     assert any(e.event is Event.MODE_CHANGED and e.by_window for e in events)
+    mon.close()
+    if worker == "process":
+        assert mon._proc._proc.poll() is not None
+
+
+def test_a_lane_crosses_processes_unchanged(settings):
+    """A decided lane sent as data (pickled, as from the worker process) and restored on another tracker
+    goes on with the same boxes, bit for bit, as the lane itself."""
+    import pickle
+
+    run = _simulated(1.1, 1)
+    mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker=False)
+    for q in run.q_meas[:run.k_sing]:
+        mon.update(q)
+    lane = mon._lane
+    data = pickle.loads(pickle.dumps(lane.export()))
+    other = Tracker(interval_model(), settings, _x0(run, settings))
+    copy = L.Lane.restore(data, other)
+    for q in run.q_meas[run.k_sing:run.k_sing + 60]:
+        assert lane.step(q) == copy.step(q)
+        assert all(np.array_equal(a, b) for a, b in zip(np.concatenate(lane.boxes()), np.concatenate(copy.boxes())))
+    assert lane.mode == copy.mode and lane.k == copy.k
+    mon.close()
 
 
 def test_horizon_bounds_the_window(settings, monkeypatch):
@@ -200,7 +228,7 @@ def test_decided_box_keeps_a_pose_on_the_locus(settings):
     mon = OnlineMonitor(model, settings, (bench.point - 1e-3, bench.point + 1e-3), worker=False)
     lo, hi = (np.asarray(v, dtype=float) for v in model.robot.x_bounds)
     for mode in (1, -1):
-        box = mon._decided_box(np.asarray(bench.q_point, dtype=float), mode, model.xi_box(), (lo, hi))
+        box = mon._reasoner.decided_box(np.asarray(bench.q_point, dtype=float), mode, model.xi_box(), (lo, hi))
         assert np.all(box[0] <= bench.point) and np.all(bench.point <= box[1]), (mode, box)
     mon.close()
 
@@ -224,9 +252,9 @@ def test_reseeded_tracker_finds_the_pose_in_a_tube_of_both_modes(settings):
                          XI[0][None], XI[1][None])
     mon = OnlineMonitor(model, settings, _x0(run, settings), worker=False)
     start = WindowStart(XI[0][None], XI[1][None], np.stack([lo, hi])[None], np.full((1, 2, 2), 3.0) * [[-1], [1]])
-    anchor = O._Anchor(j - 1, -mode, start, [run.q_meas[j - 1], run.q_meas[j]], [np.stack([lo, hi])] * 2)
-    at = O._Attempt(mon._lane, anchor, np.array(anchor.q), np.stack([lo, hi]), True)
-    lane, first = mon._reseeded(at, h)
+    anchor = L.Anchor(j - 1, -mode, start, [run.q_meas[j - 1], run.q_meas[j]], [np.stack([lo, hi])] * 2)
+    at = L.Attempt(mon._lane, anchor, np.array(anchor.q), np.stack([lo, hi]), True)
+    lane, first = mon._reasoner.reseeded(at, h)
     assert first.event is Event.MODE_CHANGED and first.k == j and first.mode == mode
     lane.step(run.q_meas[j])
     r = lane.tracker.state
@@ -271,9 +299,52 @@ def test_an_error_in_the_worker_reaches_the_caller(settings, monkeypatch):
         raise RuntimeError("attempt failed")
 
     monkeypatch.setattr(O.OnlineMonitor, "_run", broken)
-    mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker=True)
+    mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker="thread")
     with pytest.raises(RuntimeError, match="attempt failed"):
         for q in run.q_meas:
             mon.update(q)
         mon.settle()
+    mon.close()
+
+
+def test_the_worker_process_failing_reaches_the_caller(settings):
+    """An attempt that raises in the worker process reaches the next ``update`` as its exception; a worker
+    process that dies as :class:`WindowWorkerStopped`, a project error.  Neither is lost."""
+    from crosscert.robots.errors import CrosscertError
+    from crosscert.verifier.window.worker import WindowWorkerStopped
+
+    run = _simulated(1.1, 1)
+    mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker="process")
+    mon.update(run.q_meas[0])
+    # a window whose start is missing: its attempt raises AttributeError in the child
+    mon._proc.send(("open", 99, 0, 1, None, [run.q_meas[0]] * 3, [np.zeros((2, 2))] * 3))
+    with pytest.raises(AttributeError):
+        for q in run.q_meas[1:]:
+            mon.update(q)
+            time.sleep(1e-3)
+    mon.close()
+    mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker="process")
+    mon.update(run.q_meas[0])
+    mon._proc._proc.kill()
+    mon._proc._proc.wait()
+    with pytest.raises(WindowWorkerStopped) as err:
+        for q in run.q_meas[1:]:
+            mon.update(q)
+            time.sleep(1e-3)
+    assert isinstance(err.value, CrosscertError)
+    mon.close()
+
+
+def test_a_robot_that_cannot_cross_processes_gets_a_thread(settings):
+    """A robot whose loop closure does not pickle (defined in a script, a lambda) keeps its window on a
+    thread: the monitor works the same, its window beside it."""
+    import dataclasses
+
+    from crosscert.robots import DEXTAR
+    from crosscert.verifier.model import IntervalModel
+
+    robot = dataclasses.replace(DEXTAR, loop_closure=lambda *a, **k: DEXTAR.loop_closure(*a, **k))
+    run = _simulated(1.1, 1)
+    mon = OnlineMonitor(IntervalModel(robot), settings, _x0(run, settings))
+    assert mon._proc is None and mon._thread is not None
     mon.close()

@@ -48,7 +48,8 @@ import numpy as np
 from . import interval as I
 from crosscert.robots.errors import InputError
 from .settings import TrackerSettings, Verdict, VelocityModel
-from .step import Backend, Event, StepResult, advance, configure, init_state, pose_solutions, step
+from .state import ROW_FIELDS, SCENARIO_FIELDS
+from .step import Backend, Event, StepResult, advance, configure, init_state, kernel_array, pose_solutions, step
 
 __all__ = [
     "Verdict",
@@ -474,3 +475,32 @@ class Tracker:
         return StepResult(k=k, x=(st.x_hull[0, 0].copy(), st.x_hull[0, 1].copy()),
                           xd=(st.xd_hull[0, 0].copy(), st.xd_hull[0, 1].copy()), mode=mode,
                           consistent=consistent, events=tuple(events))
+
+    def step_reading(self, q) -> tuple:
+        """:meth:`update` for a caller that checked the reading (:class:`~verifier.window.OnlineMonitor`):
+        ``q`` an ``(n,)`` array of finite values, rad (copied unless a writable, C-contiguous float64 one).  Returns ``(k, mode,
+        consistent)``; the boxes are in :attr:`state`.  No second check and no copies: on the update path
+        every call into numpy costs again after the process slept between samples (caches cold)."""
+        st = self.state
+        if q.dtype != np.float64 or not (q.flags.c_contiguous and q.flags.writeable):  # the kernel's one signature
+            q = kernel_array(q)
+        self.config.impl.advance(self.config, st, q.reshape(1, 1, -1))
+        mode, consistent = int(st.mode[0]), bool(st.bad_at[0] < 0)
+        self._mode, self._consistent = mode, consistent
+        return st.k - 1, mode, consistent
+
+    def snapshot(self) -> dict:
+        """Copies of the state's arrays and counters, as plain (picklable) data: what :meth:`restore`
+        reads, in another process too."""
+        st = self.state
+        return {"arrays": {f: getattr(st, f).copy() for f in ROW_FIELDS + SCENARIO_FIELDS}, "k": st.k,
+                "mode": self._mode, "consistent": self._consistent}
+
+    def restore(self, snap: dict) -> None:
+        """Continue from ``snap``, a :meth:`snapshot` of a tracker of the same settings (up to ``xd0``, read
+        only by the first box) and shapes: copied into this tracker's arrays in place, so that the compiled
+        step's arguments, built once per state, stay valid."""
+        st = self.state
+        for f, v in snap["arrays"].items():
+            np.copyto(getattr(st, f), v)
+        st.k, self._mode, self._consistent = snap["k"], snap["mode"], snap["consistent"]

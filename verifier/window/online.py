@@ -2,20 +2,23 @@
 
 from __future__ import annotations
 
+import math
+import pickle
 import sys
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from crosscert.robots.errors import InputError
 
 from ..settings import TrackerSettings, Verdict
-from ..step import Backend, Event, pose_solution_arrays, reading_box
+from ..step import Backend, Event
 from ..tracker import Tracker
-from .offline import WindowStart, track_window
-from .passes import hull_of_mode
-from .results import HypothesisStatus, OnlineEvent, OnlineResult, WindowState
+from .lane import (FIRST_ATTEMPT, ONLINE_FK_TOL, ONLINE_MAX_GEOMETRIES, RESEED_FK_TOL,  # noqa: F401 (its names)
+                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, due, next_attempt)
+from .results import OnlineEvent, OnlineResult, WindowState
+from .worker import WindowProcess, WindowWorkerStopped, pack_readings
 
 __all__ = ["OnlineMonitor", "ONLINE_HORIZON", "online_boxes"]
 
@@ -24,141 +27,20 @@ __all__ = ["OnlineMonitor", "ONLINE_HORIZON", "online_boxes"]
 #: Bounds the readings kept (``n`` floats and a pose box each) and the work of one attempt (which grows
 #: with the window's length).
 ONLINE_HORIZON = 2000
-#: Resolution (m) of the enumeration of the newest reading's poses in an attempt (coarser than the offline
-#: window's :data:`~verifier.window.offline.WINDOW_FK_TOL`: near the locus a finer one costs tens of ms).
-ONLINE_FK_TOL = 1e-4
-#: Thread switch interval (s) an :class:`OnlineMonitor` with a worker sets (Python's default is 5 ms).
+#: Thread switch interval (s) an :class:`OnlineMonitor` with a worker thread sets (Python's default is 5 ms).
 SWITCH_INTERVAL = 1e-4
-#: Resolution (m) and bisection widths (m) of the enumeration of the decided mode's poses a re-seeded tracker
-#: starts from (as :func:`~verifier.tracker.initial_box_from_mode`'s: the box of a first sample).
-RESEED_FK_TOL = 1e-5
-RESEED_SMALL = (5e-3, 2e-2, 8e-2)
-#: Budget of geometry sub-boxes per hypothesis of a full attempt (the offline window's is 64: on the
-#: adversarial runs of tests/test_online.py, 16 decided the same runs at half the cost or less).
-ONLINE_MAX_GEOMETRIES = 16
 #: Window lengths (samples) at which an inline monitor makes a full attempt after its cheap one: a crossing
 #: the tracker alone decides a few samples after losing the mode pays cheap attempts only, decisions come
 #: within tens of samples of the crossing, and ``check`` runs the window over the whole recording after the
 #: monitor when it is still undecided.
 INLINE_FULL = (32, 128)
-#: Window length (samples from the anchor) of an inline :class:`OnlineMonitor`'s first attempt; the next
-#: ones double it, so the work of a window that never decides stays about twice that of its last attempt.
-FIRST_ATTEMPT = 8
-
-
-@dataclass
-class _Anchor:
-    """The last sample whose mode the tracker certified, its rows there, and the readings from it on."""
-
-    k: int
-    mode: int
-    start: WindowStart
-    q: list
-    x: list  # the tracker's pose box (2, n) at each of those samples: it holds the pose there
-    attempts: int = 0
-    tried: int = 0  # window length of the last attempt
-    tried_full: int = 0  # window length of the last full attempt
-
-
-#: What :meth:`OnlineMonitor._run` returns for a window that refuted both final modes.
-_CONTRADICTED = object()
-
-
-class _Lane:
-    """One tracker and what it certified: the mode, since when, the anchor of an open window.
-
-    A re-seeded lane starts at a window's decision (``offset``: the global index of its tracker's sample 0).
-    ``horizon``: longest window, samples (0: no window).
-    """
-
-    def __init__(self, tracker: Tracker, offset: int, mode: int, last_mode: int, horizon: int):
-        self.tracker, self.offset, self.horizon = tracker, offset, horizon
-        self.k = offset - 1
-        self.mode = mode  # certified at the newest sample
-        self.since = offset if mode else -1  # the sample from which it holds
-        self.last_mode = last_mode  # the last certified mode: events are about its changes
-        self.consistent = True
-        self.anchor = None
-        self.window = WindowState.IDLE
-        st = tracker.state
-        # the rows at the newest certified sample: the next anchor (copied in place: no allocation per sample)
-        self._snap = (st.x.copy(), st.xd.copy(), st.xi.copy(), st.row_bad.copy())
-        self._snap_k = -1
-        self._snap_mode = 0
-        self._prev_q = None  # the previous reading and pose box: an anchor's first sample
-        self._prev_x = st.x_hull[0].copy()  # overwritten in place at every sample
-        self._known = 0  # a re-seeded lane: the mode a window decided at its first sample
-
-    def step(self, q):
-        """Track the reading ``q``; returns the events it causes."""
-        if not self.consistent:  # an assumption was violated: nothing is certified any more
-            self.k += 1
-            return []
-        r = self.tracker.update(q)
-        k = self.k = self.offset + r.k
-        events = []
-        if self.anchor is not None:
-            self.anchor.q.append(q)
-            self.anchor.x.append(self.tracker.state.x_hull[0].copy())
-        if not r.consistent:
-            if self.consistent:
-                events.append(OnlineEvent(Event.INCONSISTENT, k, k, 0))
-            self.consistent, self.mode, self.since = False, 0, -1
-            self.anchor, self.window = None, WindowState.IDLE
-        elif r.mode != 0 or self._known:
-            mode = r.mode or self._known  # a window's decision holds at the sample it was made for
-            if self.anchor is not None or self.window is WindowState.GAVE_UP:
-                self.anchor, self.window = None, WindowState.IDLE  # decided by the tracker alone
-            if mode != self.mode:
-                events.append(self.certified(k, k, mode, False))
-            st = self.tracker.state
-            for buf, v in zip(self._snap, (st.x, st.xd, st.xi, st.row_bad)):
-                np.copyto(buf, v)
-            self._snap_k, self._snap_mode = k, mode
-        else:
-            if self.mode != 0:
-                events.append(OnlineEvent(Event.MODE_LOST, k, k, 0))
-                self.mode, self.since = 0, -1
-                if self.horizon and self._snap_k == k - 1 and self._prev_q is not None:
-                    self._open(q)
-            if self.anchor is not None and len(self.anchor.q) > self.horizon:
-                self.anchor, self.window = None, WindowState.GAVE_UP
-        self._prev_q = q
-        np.copyto(self._prev_x, self.tracker.state.x_hull[0])
-        self._known = 0
-        return events
-
-    def boxes(self):
-        """Copies of the pose and velocity boxes ``((lo, hi), (lo, hi))`` at the newest sample."""
-        st = self.tracker.state
-        x, xd = st.x_hull[0], st.xd_hull[0]
-        return (x[0].copy(), x[1].copy()), (xd[0].copy(), xd[1].copy())
-
-    def certified(self, k, known_at, mode, by_window):
-        """The event of ``mode`` certified from sample ``k`` on."""
-        event = Event.MODE_GAINED if self.last_mode in (0, mode) else Event.MODE_CHANGED
-        self.mode, self.since, self.last_mode = mode, k, mode
-        return OnlineEvent(event, k, known_at, mode, by_window)
-
-    def _open(self, q):
-        x, xd, xi, bad = self._snap
-        live = bad < 0
-        start = WindowStart(np.ascontiguousarray(xi[live, 0]), np.ascontiguousarray(xi[live, 1]), x[live].copy(),
-                            xd[live].copy(), self._snap_mode)
-        self.anchor = _Anchor(self._snap_k, self.last_mode, start, [self._prev_q, q],
-                              [self._prev_x.copy(), self.tracker.state.x_hull[0].copy()])
-        self.window = WindowState.OPEN
-
-
-@dataclass(frozen=True)
-class _Attempt:
-    """What one window attempt needs, taken under the lock: the lane, its anchor and the readings so far."""
-
-    lane: _Lane
-    anchor: _Anchor
-    q: np.ndarray
-    last_box: np.ndarray  # (2, n): the tracker's pose box at the last reading
-    full: bool
+#: Readings sent to the worker process at once: a frame costs the update path a few µs and wakes the
+#: worker; an attempt sees the readings at most this many samples late.
+FEED_EVERY = 4
+#: Longest wait (s) of the constructor for the worker process to start.
+START_WAIT_S = 60.0
+#: Where the window's attempts run (``worker``): a process of its own, a thread, or inside ``update``.
+WORKERS = ("process", "thread", "inline")
 
 
 class OnlineMonitor:
@@ -182,10 +64,12 @@ class OnlineMonitor:
     An attempt is *cheap* (the tracker's geometry sub-boxes, not halved, and
     no one-motion step: tens of ms) or *full* (up to
     :data:`ONLINE_MAX_GEOMETRIES` sub-boxes and the one-motion step: up to
-    seconds).  With ``worker=True`` the window runs on a thread of its own
-    (the kernels release the GIL) and :meth:`update` never waits for an
-    attempt: cheap attempts follow one another over all the readings there
-    are, with a full one each time the window has doubled since the last.
+    seconds).  With a worker (``worker=True``: a process of its own,
+    :mod:`verifier.window.worker`; ``"thread"``: a thread, whose Python code
+    shares the interpreter lock with :meth:`update`) :meth:`update` never
+    waits for an attempt: cheap attempts follow one another over all the
+    readings there are, with a full one each time the window has doubled
+    since the last (:func:`~verifier.window.lane.next_attempt`).
     With ``worker=False`` the attempts run inside :meth:`update`, at window
     lengths :data:`FIRST_ATTEMPT`, twice that, ... (cheap; full too at
     :data:`INLINE_FULL`): the answers do not depend on the
@@ -208,12 +92,14 @@ class OnlineMonitor:
     backend : {"compiled", "numpy"}
     horizon : int
         Longest window, samples (>= 2).
-    worker : bool
-        The window on a thread (online) or inside :meth:`update` (reproducible).
+    worker : {True, "process", "thread", False}
+        The window in a worker process (True, the default: the constructor waits 1-2 s for it to start;
+        a thread when the robot cannot cross to another process), on a thread, or inside :meth:`update`
+        (False: reproducible).
     window : bool
         False: the tracker alone (no window opens).
     switch_interval : float or None
-        With a worker: lower the interpreter's thread switch interval (``sys.setswitchinterval``, process
+        With a worker thread: lower the interpreter's thread switch interval (``sys.setswitchinterval``, process
         wide, s) to this, so that :meth:`update` waits at most about this long for the GIL while the
         window's Python code holds it; ``None`` leaves it.
     spread_hypotheses : bool
@@ -230,7 +116,7 @@ class OnlineMonitor:
     """
 
     def __init__(self, model, settings: TrackerSettings, x0, *, xi_box=None,
-                 backend: str | Backend = Backend.COMPILED, horizon: int = ONLINE_HORIZON, worker: bool = True,
+                 backend: str | Backend = Backend.COMPILED, horizon: int = ONLINE_HORIZON, worker: bool | str = True,
                  window: bool = True, spread_hypotheses: bool = False,
                  switch_interval: float | None = SWITCH_INTERVAL):
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 2:
@@ -238,8 +124,12 @@ class OnlineMonitor:
         self.model, self.backend = model, str(Backend(backend))
         self.settings = settings.validated(model.n)
         self.horizon, self._spread = int(horizon), bool(spread_hypotheses)
+        kind = {True: "process", False: "inline"}.get(worker, worker) if window else "inline"
+        if kind not in WORKERS:
+            raise InputError(f"worker must be one of {WORKERS} (True: process, False: inline), got {worker!r}")
+        self._reasoner = Reasoner(model, self.settings, self.backend, self.horizon, self._spread)
         tracker = Tracker(model, settings, x0, xi_box=xi_box, backend=backend, spread_hypotheses=spread_hypotheses)
-        self._lane = _Lane(tracker, 0, 0, 0, self.horizon if window else 0)
+        self._lane = Lane(tracker, 0, 0, 0, self.horizon if window else 0)
         self.initial_mode = 0
         self.decisions = 0  # windows that decided
         self.inconsistent_at = -1  # the sample at which every geometry hypothesis became empty (-1: none)
@@ -254,7 +144,10 @@ class OnlineMonitor:
         self._error = None  # an exception of the worker, raised by the next update or settle
         self._closed = False
         self._thread = None
-        if worker and window:
+        self._proc = None
+        if kind == "process" and not self._start_process(x0):
+            kind = "thread"  # the robot cannot cross to another process (a file the child cannot import, ...)
+        if kind == "thread":
             if switch_interval is not None and sys.getswitchinterval() > switch_interval:
                 # the window's Python code holds the GIL between kernels: update waits at most this long for it
                 sys.setswitchinterval(switch_interval)
@@ -264,19 +157,23 @@ class OnlineMonitor:
     # ------------------------------------------------------------------ the update path
     def update(self, q) -> OnlineResult:
         """Feed the reading ``q`` ``(n,)``, rad: the tracker's step, and what the window found meanwhile."""
-        q = np.array(q, dtype=np.float64).reshape(-1)
-        if q.shape != (self.model.n,) or not np.isfinite(q).all():
+        q = np.array(q, dtype=np.float64).reshape(-1)  # a copy of its own: kept by the window
+        if q.shape != (self.model.n,) or not all(map(math.isfinite, q.tolist())):  # Python floats: cheaper
             raise InputError(f"a reading must be {self.model.n} finite joint values, got {q!r}")
         with self._lock:
             self._raise_worker_error()
             if self._closed:
                 raise InputError("this OnlineMonitor is closed")
+            if self._proc is not None:
+                self._answers()
             lane = self._lane
             events, self._queued = self._queued, []
             events += lane.step(q)
             if lane.k == 0 and lane.mode:
                 self.initial_mode = lane.mode
-            if lane.anchor is not None:
+            if self._proc is not None:
+                self._feed(lane)
+            elif lane.anchor is not None:
                 if self._thread is None:
                     events += self._inline(lane)
                 else:
@@ -322,7 +219,7 @@ class OnlineMonitor:
 
     @property
     def tracker(self) -> Tracker:
-        """The tracker of the newest sample (a new one after each window decision)."""
+        """The tracker of the newest sample (another one after each window decision)."""
         return self._lane.tracker
 
     def verdict(self) -> Verdict:
@@ -341,11 +238,13 @@ class OnlineMonitor:
         ``timeout`` (s) bounds the wait for the worker; ``None`` waits as long as it takes.
         """
         with self._lock:
+            if self._proc is not None:
+                return self._settle_process(timeout)
             if self._thread is None:
                 lane = self._lane
                 events = []
                 if lane.anchor is not None and lane.anchor.tried_full < len(lane.anchor.q):
-                    events = self._decide(lane, self._attempt(lane, full=True))
+                    events = self._decide(lane, Attempt.of(lane, lane.anchor, full=True))
                 self._note(events)
                 return events
             self._settling = True
@@ -377,6 +276,8 @@ class OnlineMonitor:
             self._wake.notify_all()
         if self._thread is not None:
             self._thread.join(timeout)
+        if self._proc is not None:
+            self._proc.close(timeout)
 
     def __enter__(self):
         return self
@@ -385,98 +286,30 @@ class OnlineMonitor:
         self.close()
 
     # ------------------------------------------------------------------ the window
-    def _attempt(self, lane: _Lane, full: bool) -> _Attempt:
-        a = lane.anchor
-        a.attempts += 1
-        a.tried = len(a.q)
-        if full:
-            a.tried_full = a.tried
-        return _Attempt(lane, a, np.array(a.q), a.x[len(a.q) - 1].copy(), full)
+    def _run(self, at: Attempt):
+        """One window over the attempt's readings (no lock held): see :meth:`Reasoner.run`."""
+        return self._reasoner.run(at)
 
-    def _run(self, at: _Attempt):
-        """One window over the attempt's readings (no lock held): the surviving hypothesis of a decided
-        window, :data:`_CONTRADICTED` when the window refuted both (an assumption was violated), or None."""
-        rows = at.anchor.start.rows
-        opts = ({"max_geometries": max(rows, ONLINE_MAX_GEOMETRIES)} if at.full
-                else {"max_geometries": rows, "one_motion": 0})
-        w = track_window(self.model, at.q, self.settings, start=at.anchor.start, backend=self.backend,
-                         parallel=False, final_search=(at.last_box[0], at.last_box[1]), fk_tol=ONLINE_FK_TOL, **opts)
-        if w.verdict is Verdict.INCONSISTENT:
-            return _CONTRADICTED
-        if w.verdict not in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
-            return None
-        return next(h for h in w.hypotheses if h.status is not HypothesisStatus.REFUTED)
-
-    def _apply(self, lane: _Lane, at: _Attempt, h, backlog) -> tuple:
-        """The lane after an attempt's answer ``h`` (not None), with its first event and the events of
-        ``backlog`` (the readings from the attempt's last one on) through it."""
-        if h is _CONTRADICTED:
-            # the readings from the anchor on fit no motion under the assumptions: nothing more is certified
-            j = at.anchor.k + len(at.q) - 1
-            new = _Lane(lane.tracker, lane.offset, 0, lane.last_mode, 0)
-            new.consistent = False  # its tracker is the lane's, never stepped again
-            return new, OnlineEvent(Event.INCONSISTENT, j, -1, 0, True), []
-        new, first = self._reseeded(at, h)
-        return new, first, self._catch_up(new, backlog)
-
-    def _reseeded(self, at: _Attempt, h):
-        """A lane whose tracker starts at the attempt's last sample from hypothesis ``h``'s boxes there."""
-        j = at.anchor.k + len(at.q) - 1
-        xi = (h.xi_lo.min(axis=0), h.xi_hi.max(axis=0))
-        x0 = self._decided_box(at.q[-1], h.final_mode, xi, (h.x_lo[-1], h.x_hi[-1]))
-        # its velocity box comes from the window (set below), not from the settings' bound at rest
-        tracker = Tracker(self.model, replace(self.settings, xd0=None), x0, xi_box=xi, backend=self.backend,
-                          spread_hypotheses=self._spread)
-        tracker.state.xd[:, 0], tracker.state.xd[:, 1] = h.xd_lo[-1], h.xd_hi[-1]
-        lane = _Lane(tracker, j, 0, at.anchor.mode, self.horizon)
-        # the decided mode holds at j before the new tracker reads q_j (it may then fail to certify it: lost)
-        first = lane.certified(j, -1, h.final_mode, True)
-        lane._known = h.final_mode
-        return lane, first
-
-    def _decided_box(self, q, mode, xi, tube):
-        """The pose box of ``mode`` for the reading ``q`` and geometries ``xi`` inside the window's ``tube``
-        box there: the hull of that mode's forward-kinematics solutions (undecided ones included) within the
-        tube, enumerated finer than the attempt did; the tube itself when the enumeration gives up."""
-        search = (np.asarray(tube[0], dtype=np.float64), np.asarray(tube[1], dtype=np.float64))
-        Q = reading_box(q, self.settings.eps_q)
-        for small in RESEED_SMALL:
-            sols = pose_solution_arrays(self.model, Q, xi, search, tol=RESEED_FK_TOL, small=small,
-                                        backend=self.backend)
-            if sols is not None:
-                break
-        box = hull_of_mode(sols, mode, search)
-        if box is None:  # no pose of that mode in the tube: the tracker will find the assumptions violated
-            return search[0].copy(), search[1].copy()
-        return np.maximum(box[0], search[0]), np.minimum(box[1], search[1])
-
-    def _inline(self, lane: _Lane) -> list:
+    def _inline(self, lane: Lane) -> list:
         """``worker=False``: the attempts due at this window length (lock held)."""
         a = lane.anchor
         L = len(a.q)
         if L < FIRST_ATTEMPT or L & (L - 1):  # lengths 8, 16, 32, ...
             return []
-        events = self._decide(lane, self._attempt(lane, full=False))
+        events = self._decide(lane, Attempt.of(lane, lane.anchor, full=False))
         if self._lane is lane and lane.anchor is a and L in INLINE_FULL:
-            events += self._decide(lane, self._attempt(lane, full=True))
+            events += self._decide(lane, Attempt.of(lane, lane.anchor, full=True))
         return events
 
-    def _decide(self, lane: _Lane, at: _Attempt) -> list:
+    def _decide(self, lane: Lane, at: Attempt) -> list:
         """Run an attempt inline and apply its answer (lock held)."""
         h = self._run(at)
         if h is None:
             return []
-        new, first, events = self._apply(lane, at, h, at.anchor.q[len(at.q) - 1:])
+        new, first, events = self._reasoner.apply(lane, at, h, at.anchor.q[len(at.q) - 1:])
         return self._swap(new, first, events, known_at=lane.k)
 
-    @staticmethod
-    def _catch_up(new: _Lane, readings) -> list:
-        events = []
-        for q in readings:
-            events += new.step(q)
-        return events
-
-    def _swap(self, new: _Lane, first: OnlineEvent, events: list, known_at: int) -> list:
+    def _swap(self, new: Lane, first: OnlineEvent, events: list, known_at: int) -> list:
         """Make ``new`` the lane (lock held); the window's event first, known at sample ``known_at``."""
         if not new.consistent:
             new.k = self._lane.k
@@ -484,12 +317,9 @@ class OnlineMonitor:
         self.decisions += 1
         return [replace(first, known_at=known_at), *events]
 
-    def _pending_work(self, lane: _Lane) -> bool:
-        """An attempt is due: readings no attempt read, or a full attempt over them all when settling."""
-        a = lane.anchor
-        if a is None:
-            return False
-        return a.tried < len(a.q) or (self._settling and a.tried_full < len(a.q))
+    def _pending_work(self, lane: Lane) -> bool:
+        """An attempt is due (:func:`~verifier.window.lane.due`)."""
+        return due(lane.anchor, self._settling)
 
     def _work(self):
         """The worker thread: attempts over the open window (see the class) until closed."""
@@ -502,10 +332,7 @@ class OnlineMonitor:
                     return
                 lane = self._lane
                 a = lane.anchor
-                L = len(a.q)
-                # cheap ones back to back; a full one once the window doubled since the last, or when settling
-                full = (L >= FIRST_ATTEMPT and L >= 2 * a.tried_full) or (self._settling and L == a.tried)
-                at = self._attempt(lane, full=full)
+                at = Attempt.of(lane, a, *next_attempt(a, self._settling))
                 self._busy = True
             try:
                 h = self._run(at)
@@ -527,12 +354,111 @@ class OnlineMonitor:
                     continue  # the tracker decided by itself (or gave up) meanwhile: the answer is moot
                 done = len(at.q) - 1
                 readings = list(at.anchor.q[done:])
-            new, first, events = self._apply(lane, at, h, readings)
+            new, first, events = self._reasoner.apply(lane, at, h, readings)
             with self._lock:
                 if not valid():
                     continue
-                events += self._catch_up(new, at.anchor.q[done + len(readings):])
+                events += catch_up(new, at.anchor.q[done + len(readings):])
                 self._queued += self._swap(new, first, events, known_at=lane.k)
+
+
+    # ------------------------------------------------------------------ the window in a worker process
+    def _start_process(self, x0) -> bool:
+        """Start the child (:mod:`verifier.window.worker`) and build, ahead of any decision, the trackers a
+        decided lane's state is copied into: building one and its first step cost about 2 ms, which the
+        update path would otherwise pay at the decision.  False (no child) when the child could not set up
+        its model: the robot does not pickle, or does not load in a fresh interpreter."""
+        x0 = tuple(np.array(v, dtype=np.float64) for v in x0)
+        try:
+            proc = WindowProcess(self.model.robot, self.settings, self.backend, self.horizon, self._spread, x0)
+        except (pickle.PicklingError, TypeError, AttributeError):
+            return False
+        self._proc = proc
+        self._sent = None  # the anchor the child holds (the lane's, once sent)
+        self._sent_n = 0  # its readings sent
+        self._id = 0  # that anchor's number: answers about another one are moot
+        self._token = 0  # of the last settle request
+        self._spares = []
+        for _ in range(2):  # one for the decided lane, one for the next decision
+            t = Tracker(self.model, self._reasoner.reseed_settings(), x0, backend=self.backend,
+                        spread_hypotheses=self._spread)
+            t.update(np.zeros(self.model.n))  # its compiled entry point found now (the state is overwritten)
+            self._spares.append(t)
+        self._own = list(self._spares)
+        # the child's start (an interpreter, the model, the kernels from the cache: 1-2 s) before the
+        # first reading, so that a window opening early is worked on at once; past the bound, frames wait
+        self._proc.started.wait(START_WAIT_S)
+        if not self._proc.ready:
+            self._proc.close(0.0)
+            self._proc = None
+            return False
+        return True
+
+    def _feed(self, lane: Lane, flush: bool = False) -> None:
+        """Send the child what it lacks of the lane's window: the anchor when it opened, else the new
+        readings (every :data:`FEED_EVERY` samples, or now: ``flush``), or that it closed (lock held)."""
+        a = lane.anchor
+        if a is None:
+            if self._sent is not None:
+                self._proc.send(("drop",))
+                self._sent = None
+            return
+        if a is not self._sent:
+            self._id += 1
+            self._sent, self._sent_n = a, len(a.q)
+            self._proc.send(("open", self._id, a.k, a.mode, a.start, a.q, a.x))
+            return
+        if len(a.q) - self._sent_n >= (1 if flush else FEED_EVERY):
+            self._proc.send(("q", self._id, pack_readings(a.q[self._sent_n:], a.x[self._sent_n:])))
+            self._sent_n = len(a.q)
+
+    def _answers(self) -> None:
+        """Apply what the child answered since the last call (lock held): a decided lane takes the place of
+        the tracker's after the readings the child had not seen; a moot answer is dropped."""
+        inbox = self._proc.inbox
+        if not inbox.frames and inbox.ended is None:  # the update path's usual case: nothing to do
+            return
+        for frame in inbox.take(block=False):
+            kind = frame[0]
+            if kind == "error":
+                self._error, self._closed = frame[1], True
+            elif kind == "settled":
+                continue
+            elif frame[1] == self._id and self._sent is not None and self._lane.anchor is self._sent:
+                lane, used = self._lane, frame[2]
+                if kind == "contradicted":
+                    new, first, events = contradicted(lane, lane.anchor.k + used - 1)
+                else:
+                    new = Lane.restore(frame[3], self._spares.pop())
+                    first, events = frame[4], frame[5] + catch_up(new, lane.anchor.q[used:])
+                    if any(lane.tracker is t for t in self._own):
+                        self._spares.append(lane.tracker)
+                self._sent = None  # the child dropped it; a window of the new lane is sent as a new one
+                self._queued += self._swap(new, first, events, known_at=lane.k)
+        if inbox.ended is not None and self._error is None and not self._closed:
+            self._error, self._closed = WindowWorkerStopped(inbox.ended), True
+        self._raise_worker_error()
+
+    def _settle_process(self, timeout) -> list:
+        """:meth:`settle` with the child (lock held): until a settle request finds no attempt due; a lane a
+        decision re-seeded may open a window of its own, which is settled in turn."""
+        while True:
+            self._answers()
+            self._feed(self._lane, flush=True)
+            if self._sent is None:
+                break
+            self._token += 1
+            self._proc.send(("settle", self._token))
+            inbox, before = self._proc.inbox, self._lane
+            with inbox.cond:
+                done = inbox.cond.wait_for(lambda: inbox.ended is not None or any(
+                    f[0] == "error" or f == ("settled", self._token) for f in inbox.frames), timeout)
+            self._answers()
+            if not done or self._lane is before:
+                break
+        events, self._queued = self._queued, []
+        self._note(events)
+        return events
 
 
 def online_boxes(model, q, settings: TrackerSettings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
