@@ -135,6 +135,7 @@ def lanes(monkeypatch):
         return run, threads
 
     monkeypatch.setattr(driver.CompiledStep, "_threads", staticmethod(spy))
+    monkeypatch.setattr(driver, "LANES_COMPILE_HERE", True)  # compiled here if not cached
 
     def set_lanes(on):
         monkeypatch.setattr(driver, "LANES_MIN_ROWS", 1 if on else 10**9)

@@ -61,6 +61,7 @@ def test_the_child_compiles_the_lanes_signature_the_tracker_calls(name, monkeypa
 
     robot = get_robot(name)
     monkeypatch.setattr(driver, "LANES_MIN_ROWS", 1)
+    monkeypatch.setattr(driver, "LANES_COMPILE_HERE", True)
     config = configure(IntervalModel(robot), TrackerSettings.for_robot(robot, velocity_model="sound"), parallel=False)
     box = tuple(np.asarray(v, dtype=np.float64) for v in robot.x_bounds)
     st = init_state(config, box)
@@ -71,26 +72,45 @@ def test_the_child_compiles_the_lanes_signature_the_tracker_calls(name, monkeypa
     assert warm.lanes_signature() == tuple(numba.typeof(v) for v in args)
 
 
-def test_the_lanes_wait_ends_once_the_lanes_driver_is_cached(monkeypatch):
-    """The child says the driver is cached, then the lanes driver: ``wait_lanes`` returns on the second line
-    (not the first), and stops a child that says nothing in time."""
+def test_a_child_past_the_one_motion_kernels_is_left_to_compile_the_lanes_driver(monkeypatch):
+    """The child says the driver is cached, then the one-motion kernels: the one-motion wait (``finish``) ends
+    on that line, and at exit the child, compiling the lanes driver that nobody waits for, is not stopped;
+    a child that has not said it is stopped."""
     monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
     monkeypatch.setenv(warm.DISABLE, "1")
-    say = (f"import sys, time; print({warm.READY!r}, sys.argv[1], flush=True); time.sleep(%s); "
-           f"print({warm.LANES_READY!r}, sys.argv[1], flush=True); time.sleep(600)")
-    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 0.5])
+    say = (f"import sys, time; print({warm.READY!r}, sys.argv[1], flush=True); time.sleep(0.3); "
+           f"print({warm.ONE_MOTION_READY!r}, flush=True); sys.stdout.close(); time.sleep(%s)")
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 3])
     assert warm.start("sound")
     child = warm._CHILDREN[SOUND]
-    lanes = warm._LANES[child]
-    warm.wait_lanes(timeout=60)
-    assert lanes.is_set() and child.poll() is None and warm._LANES == {}
+    assert warm.wait(SOUND, timeout=60) == 0
+    warm.finish(timeout=60)
+    assert child.poll() is None and warm._FINISHING == []
     warm._stop_all()
-    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", say % 600])
+    assert child.poll() is None  # left to finish
+    child.wait(30)
+    monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import time; time.sleep(600)"])
     assert warm.start("sound")
     child = warm._CHILDREN[SOUND]
-    warm.wait_lanes(timeout=0.5)
-    assert child.poll() is not None  # stopped: the lanes driver then compiles in this process
     warm._stop_all()
+    assert child.poll() is not None
+
+
+def test_batches_run_row_by_row_until_the_lanes_driver_is_cached(monkeypatch):
+    """Without the lanes driver in the cache (and no leave to compile it here) a batch of many rows takes
+    the per-row driver; once it is cached, the lanes driver."""
+    from crosscert.verifier.compiled import driver
+    from crosscert.verifier.compiled.lanes.step import run_lanes
+
+    robot = get_robot("dextar")
+    config = configure(IntervalModel(robot), TrackerSettings.for_robot(robot), parallel=False)
+    lo, hi = (np.asarray(v, dtype=np.float64) for v in robot.x_bounds)
+    st = init_state(config, (np.tile(lo, (64, 1)), np.tile(hi, (64, 1))), batch=64)
+    monkeypatch.setattr(driver, "LANES_COMPILE_HERE", False)
+    monkeypatch.setattr(warm, "lanes_cached", lambda: False)
+    assert CompiledStep._threads(config, st)[0] is kernels.run_slot
+    monkeypatch.setattr(warm, "lanes_cached", lambda: True)
+    assert CompiledStep._threads(config, st)[0] is run_lanes
 
 
 def test_the_signatures_differ_by_velocity_model():

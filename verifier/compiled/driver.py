@@ -44,7 +44,8 @@ class CompiledStep:
         if threads > 1 and config.spread_hypotheses and st.batch < threads and st.hypotheses > 1:
             return kernels.run_hypotheses_parallel, min(threads, st.hypotheses)
         slots = min(threads, st.batch) if threads > 1 and config.parallel and st.batch > 1 else 1
-        if int(config.const.velocity_model) == SOUND and st.batch * st.hypotheses >= LANES_MIN_ROWS * slots:
+        if (int(config.const.velocity_model) == SOUND and st.batch * st.hypotheses >= LANES_MIN_ROWS * slots
+                and _lanes_ready()):
             from .lanes.step import run_lanes
 
             return run_lanes, slots
@@ -66,10 +67,6 @@ class CompiledStep:
             run, threads = self._threads(config, st)
             lanes = run is not kernels.run_slot and run is not kernels.run_hypotheses_parallel
             lane_scratch = _lane_scratch(model, c, st, threads) if lanes else None
-            if lanes and not run.overloads:
-                from . import warm
-
-                warm.wait_lanes()  # a child compiling it: load its cache entry, not a second compilation here
             if run is kernels.run_slot:
                 from . import warm
 
@@ -137,6 +134,22 @@ class CompiledStep:
         if count < 0:
             return None
         return out[:count].copy(), modes[:count].copy()
+
+
+#: Whether a batch may compile the lanes driver in this process when it is neither compiled here nor in
+#: numba's disk cache (tests and benchmarks set it).  By default such a batch runs row by row (the same boxes)
+#: while the compile child (:mod:`verifier.compiled.warm`) writes the lanes driver to the cache: its
+#: compilation (about 40 s of CPU) never lengthens a command.
+LANES_COMPILE_HERE = False
+
+
+def _lanes_ready() -> bool:
+    """Whether the lanes driver runs without a compilation in this process (or may compile here)."""
+    if LANES_COMPILE_HERE:
+        return True
+    from . import warm
+
+    return warm.lanes_cached()
 
 
 def _lane_scratch(model, c, st, threads):

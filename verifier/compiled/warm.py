@@ -10,7 +10,12 @@ velocity model in use, then the one-motion kernels, and writes them to numba's
 disk cache, while this process goes on; :func:`wait`, before the
 driver's first call, waits until the driver is in the cache (not for the
 one-motion kernels, which the child goes on compiling beside this process),
-and the call then loads the driver from the cache.
+and the call then loads the driver from the cache.  Last, for the ``SOUND``
+model, the child compiles the rows-in-lanes driver
+(:func:`verifier.compiled.lanes.step.run_lanes`, about 40 s of CPU), niced
+and with its output closed; nobody waits for it: batches run row by row (the
+same boxes) until it is in the cache (:func:`lanes_cached`), and it finishes
+even after the command that started it has exited.
 
 The child is never needed for correctness: whatever it does (fails, is
 killed, compiles another signature, writes nothing), the driver's first call
@@ -36,9 +41,9 @@ import numpy as np
 
 from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
 
-__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "LANES_READY", "LOADAVG", "PROBES", "PROBE_S",
-           "example_arguments", "signature", "lanes_signature", "cached", "runnable_now", "core_free", "start", "wait",
-           "wait_lanes", "finish", "pending", "main"]
+__all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "ONE_MOTION_READY", "LOADAVG", "PROBES", "PROBE_S",
+           "example_arguments", "signature", "lanes_signature", "cached", "lanes_cached", "runnable_now", "core_free",
+           "start", "wait", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -56,9 +61,9 @@ POLL_S = 0.05
 #: The line the child prints (with the velocity model code) once the driver is in numba's disk cache:
 #: ``Dispatcher.compile`` returns after numba wrote the entry's data and its index.
 READY = "driver-cached"
-#: The line the child prints next, for ``SOUND``, once the rows-in-lanes driver
-#: (:func:`verifier.compiled.lanes.step.run_lanes`) is in the cache too.
-LANES_READY = "lanes-cached"
+#: The line the child prints once the window's one-motion kernels are in the cache (then, for ``SOUND``, it
+#: compiles the rows-in-lanes driver, :func:`verifier.compiled.lanes.step.run_lanes`, which nobody waits for).
+ONE_MOTION_READY = "one-motion-cached"
 
 _LOCK = threading.Lock()
 #: velocity model code -> the child compiling the driver for it
@@ -69,8 +74,8 @@ _READY: dict[subprocess.Popen, threading.Event] = {}
 _FINISHING: list[subprocess.Popen] = []
 #: child -> the thread reading its output (joined once the child is stopped at exit)
 _READERS: dict[subprocess.Popen, threading.Thread] = {}
-#: child compiling the lanes driver (``SOUND``) -> set once it printed :data:`LANES_READY`
-_LANES: dict[subprocess.Popen, threading.Event] = {}
+#: child -> set once it printed :data:`ONE_MOTION_READY` (read by :func:`finish`)
+_ONE_MOTION: dict[subprocess.Popen, threading.Event] = {}
 
 
 def example_arguments(velocity_model: int = SOUND) -> tuple:
@@ -141,11 +146,26 @@ def cached(velocity_model: int = SOUND) -> bool:
 
     if not _in_cache(run_slot, signature(velocity_model)):
         return False
-    if int(velocity_model) != SOUND:
+    return int(velocity_model) != SOUND or lanes_cached()
+
+
+#: When :func:`lanes_cached` last found no entry (``time.monotonic``): it looks again at most every
+#: :data:`LANES_LOOK_S` s (a window asks at each of its passes).
+_LANES_LOOKED = [-float("inf"), False]
+LANES_LOOK_S = 1.0
+
+
+def lanes_cached() -> bool:
+    """Whether the rows-in-lanes driver is compiled in this process or in numba's disk cache."""
+    if _LANES_LOOKED[1]:
         return True
+    now = time.monotonic()
+    if now - _LANES_LOOKED[0] < LANES_LOOK_S:
+        return False
     from .lanes.step import run_lanes
 
-    return _in_cache(run_lanes, lanes_signature())
+    _LANES_LOOKED[:] = [now, _in_cache(run_lanes, lanes_signature())]
+    return _LANES_LOOKED[1]
 
 
 def start(velocity_model="sound") -> bool:
@@ -175,8 +195,8 @@ def start(velocity_model="sound") -> bool:
                                      stderr=subprocess.DEVNULL)
             _CHILDREN[code] = child
             ready = _READY[child] = threading.Event()
-            lanes = _LANES[child] = threading.Event() if code == SOUND else None
-            reader = _READERS[child] = threading.Thread(target=_watch, args=(child, code, ready, lanes),
+            one_motion = _ONE_MOTION[child] = threading.Event()
+            reader = _READERS[child] = threading.Thread(target=_watch, args=(child, code, ready, one_motion),
                                                         name="crosscert-compile-child", daemon=True)
             reader.start()
         except Exception:  # no child: the driver compiles in this process
@@ -184,9 +204,9 @@ def start(velocity_model="sound") -> bool:
     return True
 
 
-def _watch(child, code: int, ready: threading.Event, lanes: threading.Event | None = None) -> None:
+def _watch(child, code: int, ready: threading.Event, one_motion: threading.Event | None = None) -> None:
     """Read the child's output to its end; set ``ready`` when it says the driver of ``code`` is cached,
-    ``lanes`` when it says the lanes driver is."""
+    ``one_motion`` when it says the one-motion kernels are."""
     stream = getattr(child, "stdout", None)
     if stream is None:
         return
@@ -195,8 +215,8 @@ def _watch(child, code: int, ready: threading.Event, lanes: threading.Event | No
             words = line.split()
             if words == [READY.encode(), str(code).encode()]:
                 ready.set()
-            elif lanes is not None and words == [LANES_READY.encode(), str(code).encode()]:
-                lanes.set()
+            elif one_motion is not None and words == [ONE_MOTION_READY.encode()]:
+                one_motion.set()
 
 
 #: Linux's snapshot of the scheduler: the fourth field of this file counts the threads runnable at this instant
@@ -285,21 +305,6 @@ def wait(velocity_model: int, timeout: float | None = None) -> int | None:
             time.sleep(POLL_S)
 
 
-def wait_lanes(timeout: float | None = None) -> None:
-    """Before the lanes driver's first call: wait for a child that compiles it (until it says it is cached,
-    or exits; at most ``timeout`` s, default :data:`WAIT_S`, then it is stopped), so that this process loads
-    it instead of compiling it beside the child.  Nothing to do when no child compiles it."""
-    with _LOCK:
-        waiting = [(child, event) for child, event in _LANES.items() if event is not None]
-        _LANES.clear()
-    deadline = time.monotonic() + (WAIT_S if timeout is None else timeout)
-    for child, event in waiting:
-        while not event.wait(POLL_S) and child.poll() is None:
-            if time.monotonic() >= deadline:
-                _stop(child)
-                break
-
-
 def finish(timeout: float | None = None) -> None:
     """Before a call of the one-motion kernels: wait for the children that put their driver in the cache and
     still compile those kernels (:func:`wait`), at most ``timeout`` s each (default :data:`WAIT_S`; then they
@@ -310,11 +315,18 @@ def finish(timeout: float | None = None) -> None:
     with _LOCK:
         children = list(_FINISHING)
         _FINISHING[:] = []
+    deadline = time.monotonic() + (WAIT_S if timeout is None else timeout)
     for child in children:
-        try:
-            child.wait(WAIT_S if timeout is None else timeout)
-        except subprocess.TimeoutExpired:
-            _stop(child)
+        # until it says the kernels are cached (it then compiles the lanes driver) or exits
+        with _LOCK:
+            said = _ONE_MOTION.get(child)
+        while child.poll() is None and not (said is not None and said.wait(POLL_S)):
+            if said is None:
+                time.sleep(POLL_S)
+            if time.monotonic() >= deadline:
+                _stop(child)
+                break
+        # a child past the one-motion kernels compiles the lanes driver, niced, and is left to finish it
 
 
 def _stop(child) -> None:
@@ -327,17 +339,20 @@ def _stop(child) -> None:
 
 @atexit.register
 def _stop_all() -> None:
-    """A child still compiling when the process ends (the command failed, or never ran the driver)
-    is stopped: numba writes its files through a rename, so at worst a temporary file stays."""
+    """A child still compiling the driver or the one-motion kernels when the process ends (the command
+    failed, or never ran the driver) is stopped: numba writes its files through a rename, so at worst a
+    temporary file stays.  A child past the one-motion kernels is left to finish the lanes driver (niced, it
+    closed its output): stopping it would lose a compilation no command waits for."""
     with _LOCK:
         children = list(_CHILDREN.values()) + _FINISHING
         _CHILDREN.clear()
         _FINISHING[:] = []
         readers = list(_READERS.values())
         _READERS.clear()
-        _LANES.clear()
+        past = {child for child, said in _ONE_MOTION.items() if said.is_set()}
+        _ONE_MOTION.clear()
     for child in children:
-        if child.poll() is None:
+        if child.poll() is None and child not in past:
             _stop(child)
     for reader in readers:  # the pipes are at their end: no thread reads while the interpreter finalises
         reader.join(2.0)
@@ -345,9 +360,9 @@ def _stop_all() -> None:
 
 def main(argv=None) -> int:
     """The child: compile the driver for each velocity model code of ``argv`` and write it to numba's
-    disk cache (for ``SOUND`` then the lanes driver), then the window's one-motion kernels (:func:`verifier.compiled.one_motion.compile_kernels`:
-    their first call in the parent comes later, and loads them when the child was first); exit code 0 when
-    every one is compiled (or was cached)."""
+    disk cache, then the window's one-motion kernels (:func:`verifier.compiled.one_motion.compile_kernels`:
+    their first call in the parent comes later, and loads them when the child was first), then (``SOUND``)
+    the rows-in-lanes driver; exit code 0 when every one is compiled (or was cached)."""
     args = sys.argv[1:] if argv is None else list(argv)
     try:
         from .one_motion import compile_kernels
@@ -355,13 +370,17 @@ def main(argv=None) -> int:
 
         for code in args:
             run_slot.compile(signature(int(code)))
-            print(READY, int(code), flush=True)  # the parent's wait ends: the lanes and one-motion kernels follow
-            if int(code) == SOUND:
-                from .lanes.step import run_lanes
-
-                run_lanes.compile(lanes_signature())
-                print(LANES_READY, int(code), flush=True)
+            print(READY, int(code), flush=True)  # the parent's wait ends: the one-motion kernels follow
         compile_kernels()
+        print(ONE_MOTION_READY, flush=True)
+        if SOUND in [int(code) for code in args]:
+            # last, and no command waits for it (batches run row by row until it is cached): output closed
+            # (the parent's reader ends), niced, finished even after the parent exits
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            os.nice(10)
+            from .lanes.step import run_lanes
+
+            run_lanes.compile(lanes_signature())
     except KeyboardInterrupt:  # the user's Ctrl-C reaches the whole process group: quietly
         return 130
     return 0
