@@ -346,3 +346,25 @@ def test_the_pair_contraction_is_loaded_while_the_child_compiles(monkeypatch):
     config = configure(model, TrackerSettings.for_robot(robot), parallel=False)
     CompiledStep()._args(config, init_state(config, tuple(np.asarray(v, float) for v in robot.x_bounds)))
     assert order == ["pair", "wait"]
+
+
+def test_one_child_at_a_time_compiles_the_lanes_driver(monkeypatch, tmp_path):
+    """While a live process holds the lanes compile lock, a command whose per-row driver is cached starts no
+    second child for the lanes driver; a lock left by a dead process does not count."""
+    from crosscert.verifier.compiled.step import run_slot
+
+    lock = tmp_path / "lanes.compiling"
+    monkeypatch.setattr(warm, "_lanes_lock", lambda: lock)
+    monkeypatch.setenv(warm.DISABLE, "1")
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)  # the lanes driver is missing
+    monkeypatch.setattr(warm, "_in_cache", lambda dispatcher, sig: dispatcher is run_slot)
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    try:
+        lock.write_text(str(holder.pid))
+        assert warm.lanes_compiling() and not warm.start("sound")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not warm.lanes_compiling()  # a dead holder
+    lock.write_text("not a pid")
+    assert not warm.lanes_compiling()

@@ -155,6 +155,23 @@ _LANES_LOOKED = [-float("inf"), False]
 LANES_LOOK_S = 1.0
 
 
+def _lanes_lock():
+    """The file a child holds while it compiles the lanes driver (its pid), beside the driver's cache."""
+    from pathlib import Path
+
+    return Path(__file__).resolve().parent / "lanes" / "__pycache__" / "lanes.compiling"
+
+
+def lanes_compiling() -> bool:
+    """Whether a live process holds the lanes driver's compile lock (:func:`_lanes_lock`)."""
+    try:
+        pid = int(_lanes_lock().read_text())
+        os.kill(pid, 0)
+    except (OSError, ValueError):
+        return False
+    return True
+
+
 def lanes_cached() -> bool:
     """Whether the rows-in-lanes driver is compiled in this process or in numba's disk cache."""
     if _LANES_LOOKED[1]:
@@ -191,6 +208,10 @@ def start(velocity_model="sound") -> bool:
         try:
             if cached(code) or (choice != "1" and not core_free()):  # the probe (about 16 ms) only on a first run
                 return False
+            from .step import run_slot
+
+            if _in_cache(run_slot, signature(code)) and lanes_compiling():  # only the lanes driver is missing,
+                return False  # and another child compiles it
             child = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL)
             _CHILDREN[code] = child
@@ -378,12 +399,32 @@ def main(argv=None) -> int:
             # (the parent's reader ends), niced, finished even after the parent exits
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
             os.nice(10)
-            from .lanes.step import run_lanes
-
-            run_lanes.compile(lanes_signature())
+            _compile_lanes()
     except KeyboardInterrupt:  # the user's Ctrl-C reaches the whole process group: quietly
         return 130
     return 0
+
+
+def _compile_lanes() -> None:
+    """Compile the lanes driver into the cache unless it is cached or another child holds the lock."""
+    from .lanes.step import run_lanes
+
+    lock = _lanes_lock()
+    if lanes_cached() or lanes_compiling():
+        return
+    try:
+        lock.parent.mkdir(exist_ok=True)
+        lock.write_text(str(os.getpid()))
+    except OSError:  # a read-only install: compile without the lock
+        pass
+    try:
+        run_lanes.compile(lanes_signature())
+    finally:
+        try:
+            if lock.read_text() == str(os.getpid()):
+                lock.unlink()
+        except OSError:
+            pass
 
 
 if __name__ == "__main__":
