@@ -69,6 +69,11 @@ ROOT = Path(__file__).resolve().parents[1]
 import numpy as np  # noqa: E402
 
 from crosscert.planner.sweep import cruise_for as sweep_cruise_for  # noqa: E402
+from crosscert.verifier.compiled import driver as _driver  # noqa: E402
+
+# batches of many rows run in lanes once that driver is cached (a command's compile child writes it):
+# measure the library as it runs then, compiling it here on a first run
+_driver.LANES_COMPILE_HERE = True
 from crosscert.planner.simulate import random_geometry, simulate_crossing  # noqa: E402
 from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
 from crosscert.robots.dextar import benchmark_crossing  # noqa: E402

@@ -63,6 +63,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from problems import default_settings, interval_model, kinematics  # noqa: E402
 from crosscert.planner.simulate import random_geometry, simulate_bounce, simulate_crossing  # noqa: E402
 from crosscert.planner.sweep import cruise_for  # noqa: E402
+from crosscert.verifier.compiled import driver as _driver  # noqa: E402
+
+# batches of many rows run in lanes once that driver is cached (a command's compile child writes it):
+# measure the library as it runs then, compiling it here on a first run
+_driver.LANES_COMPILE_HERE = True
 from crosscert.robots import DEXTAR  # noqa: E402
 from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
 from crosscert.verifier.tracker import initial_box_from_mode, track  # noqa: E402
