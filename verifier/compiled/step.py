@@ -467,13 +467,12 @@ def row_end(prog, c, rows, r, k, q, b, kk, sc, dead, modes, qdd, iqdd):
 @inline_jit
 def row_step(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, modes, qdd, iqdd):
     """Advance row ``r`` by the reading ``q[b, kk]`` ``(n,)`` with the velocity strategy ``vel`` (its hooks
-    :func:`velocity_info`, :func:`velocity_contract`, chosen by its type).  Writes
-    its mode to ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used
-    to row 0 of ``qdd[iqdd]`` (rad/s^2, ``inf``: none; row 1 is scratch).
-    Results are written rather than returned because an assignment of a
-    call's result inside a ``prange`` body went wrong (test_backends); with
-    ``use_prior``, the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to
-    hold the truth at this sample are intersected with the prediction.
+    :func:`velocity_info`, :func:`velocity_contract`, chosen by its type).  Writes its mode to
+    ``modes[iqdd]`` and the magnitude of the joint-acceleration bound used to row 0 of ``qdd[iqdd]``
+    (rad/s^2, ``inf``: none; row 1 is scratch).  Results are written rather than returned because an
+    assignment of a call's result inside a ``prange`` body went wrong (test_backends); with ``use_prior``,
+    the boxes ``prior.x[b, kk]``, ``prior.xd[b, kk]`` known to hold the truth at this sample are
+    intersected with the prediction.
     Its parts (:func:`row_begin`, :func:`hc4_round`, :func:`round_end`, :func:`row_end`) are those the
     rows-in-lanes driver (:mod:`verifier.compiled.lanes.step`) runs row by row around its Newton step
     and velocity contraction over lanes."""
