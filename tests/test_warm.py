@@ -368,3 +368,26 @@ def test_one_child_at_a_time_compiles_the_lanes_driver(monkeypatch, tmp_path):
     assert not warm.lanes_compiling()  # a dead holder
     lock.write_text("not a pid")
     assert not warm.lanes_compiling()
+
+
+def test_a_batch_that_finds_the_lanes_driver_missing_asks_once_for_a_child(monkeypatch):
+    """Outside a command (a script's batches), the first batch that would run in lanes but finds the driver
+    missing starts one child compiling it alone (argument ``lanes``); later batches do not ask again; none
+    when the driver is cached or another child holds the lock."""
+    from crosscert.verifier.compiled import driver
+
+    started = []
+    monkeypatch.setenv(warm.DISABLE, "1")
+    monkeypatch.setattr(warm.subprocess, "Popen", lambda args, **kw: started.append(list(args)))
+    monkeypatch.setattr(warm, "lanes_cached", lambda: False)
+    monkeypatch.setattr(warm, "lanes_compiling", lambda: False)
+    monkeypatch.setattr(driver, "LANES_COMPILE_HERE", False)
+    monkeypatch.setattr(driver, "_ASKED_FOR_LANES", [])
+    assert not driver._lanes_ready() and not driver._lanes_ready()
+    assert started == [[*warm.CHILD, "lanes"]]
+    monkeypatch.setattr(warm, "lanes_compiling", lambda: True)
+    assert not warm.start_lanes()
+    monkeypatch.setattr(warm, "lanes_compiling", lambda: False)
+    monkeypatch.setattr(warm, "lanes_cached", lambda: True)
+    assert not warm.start_lanes() and driver._lanes_ready()
+    assert len(started) == 1

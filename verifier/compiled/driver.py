@@ -143,13 +143,23 @@ class CompiledStep:
 LANES_COMPILE_HERE = False
 
 
+_ASKED_FOR_LANES = []
+
+
 def _lanes_ready() -> bool:
-    """Whether the lanes driver runs without a compilation in this process (or may compile here)."""
+    """Whether the lanes driver runs without a compilation in this process (or may compile here).  The first
+    time a batch finds it missing, a child that compiles it is asked for (:func:`verifier.compiled.warm.start_lanes`:
+    one when a core is free and none runs), so that a script's later batches run in lanes."""
     if LANES_COMPILE_HERE:
         return True
     from . import warm
 
-    return warm.lanes_cached()
+    if warm.lanes_cached():
+        return True
+    if not _ASKED_FOR_LANES:
+        _ASKED_FOR_LANES.append(True)
+        warm.start_lanes()
+    return False
 
 
 def _lane_scratch(model, c, st, threads):

@@ -43,7 +43,7 @@ from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, Step
 
 __all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "ONE_MOTION_READY", "LOADAVG", "PROBES", "PROBE_S",
            "example_arguments", "signature", "lanes_signature", "cached", "lanes_cached", "runnable_now", "core_free",
-           "start", "wait", "finish", "pending", "main"]
+           "start", "start_lanes", "wait", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -225,6 +225,22 @@ def start(velocity_model="sound") -> bool:
     return True
 
 
+def start_lanes() -> bool:
+    """Start a child that compiles only the lanes driver (niced, output discarded, left to finish), unless it
+    is cached, another child compiles it, ``$CROSSCERT_COMPILE_CHILD`` is ``0``, or no core is free (unless
+    it is ``1``).  For a batch that finds it missing outside a command (a script's first batches); nobody
+    waits for it.  Returns whether a child was started.  Never raises."""
+    choice = os.environ.get(DISABLE, "").strip()
+    try:
+        if choice == "0" or lanes_cached() or lanes_compiling() or (choice != "1" and not core_free()):
+            return False
+        subprocess.Popen([*CHILD, "lanes"], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    except Exception:
+        return False
+    return True
+
+
 def _watch(child, code: int, ready: threading.Event, one_motion: threading.Event | None = None) -> None:
     """Read the child's output to its end; set ``ready`` when it says the driver of ``code`` is cached,
     ``one_motion`` when it says the one-motion kernels are."""
@@ -385,6 +401,10 @@ def main(argv=None) -> int:
     their first call in the parent comes later, and loads them when the child was first), then (``SOUND``)
     the rows-in-lanes driver; exit code 0 when every one is compiled (or was cached)."""
     args = sys.argv[1:] if argv is None else list(argv)
+    if args == ["lanes"]:  # start_lanes: the lanes driver alone
+        os.nice(10)
+        _compile_lanes()
+        return 0
     try:
         from .one_motion import compile_kernels
         from .step import run_slot
