@@ -391,3 +391,13 @@ def test_a_batch_that_finds_the_lanes_driver_missing_asks_once_for_a_child(monke
     monkeypatch.setattr(warm, "lanes_cached", lambda: True)
     assert not warm.start_lanes() and driver._lanes_ready()
     assert len(started) == 1
+
+
+def test_the_lanes_path_can_be_switched_off(monkeypatch):
+    """``CROSSCERT_LANES=0``: no batch takes the lanes path, even when its driver may compile here."""
+    from crosscert.verifier.compiled import driver
+
+    monkeypatch.setattr(driver, "LANES_COMPILE_HERE", True)
+    assert driver._lanes_ready()
+    monkeypatch.setenv(driver.LANES_ENV, "0")
+    assert not driver._lanes_ready()

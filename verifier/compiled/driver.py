@@ -8,6 +8,7 @@ use only: importing this module imports no numba.
 
 from __future__ import annotations
 
+import os
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
@@ -144,12 +145,16 @@ LANES_COMPILE_HERE = False
 
 
 _ASKED_FOR_LANES = []
+#: Environment variable: ``0`` keeps every batch on the per-row path (the same boxes; for comparisons).
+LANES_ENV = "CROSSCERT_LANES"
 
 
 def _lanes_ready() -> bool:
     """Whether the lanes driver runs without a compilation in this process (or may compile here).  The first
     time a batch finds it missing, a child that compiles it is asked for (:func:`verifier.compiled.warm.start_lanes`:
     one when a core is free and none runs), so that a script's later batches run in lanes."""
+    if os.environ.get(LANES_ENV, "").strip() == "0":
+        return False
     if LANES_COMPILE_HERE:
         return True
     from . import warm
