@@ -37,8 +37,8 @@ class LaneScratch(NamedTuple):
 
     Attributes
     ----------
-    lane_row, lane_b, lane_p : int64 (N,)
-        Each lane's row, its scenario's place in the chunk, its hypothesis.
+    lane_row : int64 (N,)
+        Each lane's row ``r = b P + p`` (scenario ``b``, hypothesis ``p``).
     act, act_row : int64 (N,)
         The lanes still contracting in this round, and their rows.
     dead : bool (N,)
@@ -63,8 +63,6 @@ class LaneScratch(NamedTuple):
     """
 
     lane_row: np.ndarray
-    lane_b: np.ndarray
-    lane_p: np.ndarray
     act: np.ndarray
     act_row: np.ndarray
     dead: np.ndarray
@@ -91,7 +89,7 @@ def lane_scratch_arrays(threads, chunk, hypotheses, n_nodes, n, m, baselines):
     N = C * P
     i64 = lambda *s: np.zeros((T, *s), np.int64)  # noqa: E731
     f64 = lambda *s: np.zeros((T, *s))  # noqa: E731
-    return LaneScratch(i64(N), i64(N), i64(N), i64(N), i64(N), np.zeros((T, N), np.bool_), f64(N), f64(N), i64(J),
+    return LaneScratch(i64(N), i64(N), i64(N), np.zeros((T, N), np.bool_), f64(N), f64(N), i64(J),
                        f64(J, 2, n, N), f64(N, 2, m), i64(C, P), f64(C, P, 2, n), f64(3 * n + m, N),
                        f64(3 * n + m, N), f64(n_nodes, N), f64(n_nodes, N), f64(work_rows(n), N), f64(3 * n * n),
                        np.zeros((T, N), np.bool_))
@@ -101,7 +99,7 @@ def lane_scratch_arrays(threads, chunk, hypotheses, n_nodes, n, m, baselines):
 def _thread_lanes(LS, t):
     """The :class:`LaneScratch` of thread slot ``t``."""
     return LaneScratch(
-        LS.lane_row[t], LS.lane_b[t], LS.lane_p[t], LS.act[t], LS.act_row[t], LS.dead[t], LS.wx0[t], LS.wv0[t],
+        LS.lane_row[t], LS.act[t], LS.act_row[t], LS.dead[t], LS.wx0[t], LS.wv0[t],
         LS.idx[t], LS.dq[t], LS.xiw[t], LS.modes[t], LS.qdd[t], LS.il[t], LS.ih[t], LS.nl[t], LS.nh[t], LS.w[t],
         LS.mat[t], LS.flag[t])
 
@@ -128,8 +126,6 @@ def _sample(vel, prog, c, rows, scen, sc, ls, b0, b1, k, kk, q, use_prior, prior
                     ls.dq[jb, 1, i, L] = sc.tb[TB_DQ + jb, 1, i]
             copy_box(sc.tb, TB_XIW, ls.xiw, L, m)
             ls.lane_row[L] = r
-            ls.lane_b[L] = b - b0
-            ls.lane_p[L] = p
             ls.dead[L] = False
             ls.act[L] = L
             L += 1
@@ -163,9 +159,9 @@ def _sample(vel, prog, c, rows, scen, sc, ls, b0, b1, k, kk, q, use_prior, prior
         A = kept
     # modes, branch and prune, the window of past boxes; then each scenario's rows combined
     for l in range(L):
-        bi = ls.lane_b[l]
-        row_end(prog, c, rows, ls.lane_row[l], k, q, b0 + bi, kk, sc, ls.dead[l], ls.modes[bi], ls.qdd[bi],
-                ls.lane_p[l])
+        r = ls.lane_row[l]
+        b = r // P
+        row_end(prog, c, rows, r, k, q, b, kk, sc, ls.dead[l], ls.modes[b - b0], ls.qdd[b - b0], r - b * P)
     for b in range(b0, b1):
         combine(b, k, kk, P, rows, scen, ls.modes[b - b0], ls.qdd[b - b0], use_record, rec)
 
