@@ -188,7 +188,7 @@ def readings(rng, q_true, eps_q, patterns):
     return q
 
 
-def scenario(name, seed, *, xi, t_end, x0, refs, gain=30.0, t_s=DEXTAR.t_s):
+def scenario(name, seed, *, xi, t_end, x0, refs, gain=30.0, t_s=DEXTAR.t_s, times=None):
     """Draw one scenario (see :class:`Scenario`).
 
     Parameters
@@ -208,6 +208,9 @@ def scenario(name, seed, *, xi, t_end, x0, refs, gain=30.0, t_s=DEXTAR.t_s):
         bang-bang decisions (s), see :func:`bang_bang`.
     gain : float
         Position feedback gain, 1/s.
+    times : array (K,), optional
+        The true sample times, s (an uneven recording: jitter, dropped
+        samples); ``k t_s`` up to ``t_end`` by default.
 
     The initial velocity is ``V0_FRACTION xd0`` with a random sign per axis.
     """
@@ -215,8 +218,8 @@ def scenario(name, seed, *, xi, t_end, x0, refs, gain=30.0, t_s=DEXTAR.t_s):
     n = DEXTAR.n
     accel = A_FRACTION * np.asarray(DEXTAR.a_max, dtype=float)
     v0 = V0_FRACTION * np.asarray(DEXTAR.xd0, dtype=float) * rng.choice([-1.0, 1.0], size=n)
-    K = int(round(t_end / t_s)) + 1
-    t = np.arange(K) * t_s
+    t = np.arange(int(round(t_end / t_s)) + 1) * t_s if times is None else np.asarray(times, dtype=float)
+    K = len(t)
     x = np.empty((K, n))
     xd = np.empty((K, n))
     for i, (ref, dwell) in enumerate(refs):
@@ -259,7 +262,7 @@ def far_scenarios(count, seed, t_end=0.2):
     return out
 
 
-def near_scenarios(count, seed, t_end=0.16, a_ref=55.0, v_cross=(1.3, 1.6), v_bounce=(1.0, 1.5)):
+def near_scenarios(count, seed, t_end=0.16, a_ref=55.0, v_cross=(1.3, 1.6), v_bounce=(1.0, 1.5), times=None):
     """Bang-bang runs through (even ``i``) or up to and back from (odd ``i``) the Type 2 locus.
 
     The ``Y`` coordinate follows a reference down the ``Y`` axis through the
@@ -274,6 +277,7 @@ def near_scenarios(count, seed, t_end=0.16, a_ref=55.0, v_cross=(1.3, 1.6), v_bo
     The ``Y`` dwells are short (1-6 ms) so the speed stays within ~0.3 m/s of
     the reference; ``X`` wanders around a small offset with long dwells.
     Every coordinate accelerates at ``+-A_FRACTION a_max`` at every instant.
+    ``times``: the true sample times, as for :func:`scenario`.
     """
     rng = np.random.default_rng(seed)
     y_s = float(benchmark_crossing().point[1])
@@ -295,5 +299,5 @@ def near_scenarios(count, seed, t_end=0.16, a_ref=55.0, v_cross=(1.3, 1.6), v_bo
             phases = ((T, -a_ref), (cruise, 0.0), (T, a_ref), (T, a_ref), (cruise, 0.0), (T, -a_ref))
             name = f"bounce{i}"
         refs = [(reference(x_off, ()), LONG_DWELL), (reference(y0, phases), SHORT_DWELL)]
-        out.append(scenario(name, seed * 1000 + 500 + i, xi=xi, t_end=t_end, x0=(x_off, y0), refs=refs))
+        out.append(scenario(name, seed * 1000 + 500 + i, xi=xi, t_end=t_end, x0=(x_off, y0), refs=refs, times=times))
     return out

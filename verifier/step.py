@@ -233,11 +233,10 @@ def _rows(a):
     return a[:, 0], a[:, 1]
 
 
-def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
-    model, c = config.model, config.const
+def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None, const=None):
+    model, c = config.model, config.const if const is None else const
     B, P, n, k = st.batch, st.hypotheses, model.n, st.k
     R, D = B * P, c.depth
-    ts = c.t_s
     ax = c.axis
     qk = np.repeat(qk, P, axis=0)
     eps = ax["eps_q"]
@@ -250,7 +249,9 @@ def _numpy_step(config: StepConfig, st: TrackerState, qk, prior=None):
     QDD, info = vel.info(model, c, st, qk, Q, X, XD, XI, QDD)
     if k > 0:
         # prediction (Taylor with Lagrange remainder)
-        Xn = I.add(*I.add(*X, *I.scale(ts, *XD)), ax["half_ts2_a_lo"], ax["half_ts2_a_hi"])
+        # a constant period is one float; an uneven recording's step an interval (verifier.clock)
+        move = I.scale(c.step_lo, *XD) if c.step_lo == c.step_hi else I.mul(c.step_lo, c.step_hi, *XD)
+        Xn = I.add(*I.add(*X, *move), ax["half_ts2_a_lo"], ax["half_ts2_a_hi"])
         XD = I.intersect(*I.add(*XD, ax["ts_a_lo"], ax["ts_a_hi"]), -ax["v_max"], ax["v_max"])
         X = Xn
     if prior is not None:
@@ -387,22 +388,22 @@ class JointRates:
         self.with_qdd = with_qdd
 
     def info(self, model, c, st, qk, Q, X, XD, XI, QDD):
-        k, ts, ax = st.k, c.t_s, c.axis
+        k, ax = st.k, c.axis
         QD = (np.full_like(QDD[0], -np.inf), np.full_like(QDD[1], np.inf))
         if k > 0:
             prev = (k - 1) % c.depth
             if self.with_qdd:
                 A = (np.broadcast_to(-ax["a_max"], QD[0].shape), np.broadcast_to(ax["a_max"], QD[0].shape))
-                QDD = _qdd_over_step(model, ts, X, XD, _rows(st.past_q[:, prev]), Q, XI, A)
+                QDD = _qdd_over_step(model, c.step_hi, X, XD, _rows(st.past_q[:, prev]), Q, XI, A)
                 if c.has_qdd_bound:
                     QDD = I.intersect(*QDD, -ax["qdd_bound"], ax["qdd_bound"])
             qp = st.past_r[:, prev]
-            fd = I.div(*I.sub(qk, qk, qp, qp), ts, ts)
+            fd = I.div(*I.sub(qk, qk, qp, qp), c.step_lo, c.step_hi)
             QD = I.add(*fd, ax["quant_lo"], ax["quant_hi"])
             if self.with_qdd:
                 # q_{k-1} = q_k - t_s qd_k + (t_s^2/2) qdd(zeta), per component, so
                 # qd_k = FD + (t_s/2) qdd(zeta)
-                QD = I.add(*QD, *I.mul(0.5 * ts, 0.5 * ts, *QDD))
+                QD = I.add(*QD, *I.mul(0.5 * c.step_lo, 0.5 * c.step_hi, *QDD))
                 QD = (np.where(np.isnan(QD[0]), -np.inf, QD[0]), np.where(np.isnan(QD[1]), np.inf, QD[1]))
         return QDD, (QD if np.any(np.isfinite(QD[0])) else None)
 
@@ -424,7 +425,7 @@ def _qdd_over_step(model, ts, X, XD, Q_prev, Q_now, XI, A):
     box if the contracted result lies strictly inside it.  Then
     ``qd = -J_q^{-1} J_x xd`` and ``qdd = -J_q^{-1}(J_x xdd + h)`` are enclosed
     by :func:`linear_enclosure`.  Returns ``(lo, hi)`` of ``qdd`` (``-inf, inf``
-    where no bound could be proved); ``ts`` the sampling period, s.
+    where no bound could be proved); ``ts`` the step's upper bound, s.
     """
     Xs = I.add(*X, *I.mul(0.0, ts, *XD))
     half_ts2 = I.scale(0.5, *I.mul(ts, ts, ts, ts))  # t_s^2 / 2, rounded outward
@@ -454,8 +455,9 @@ class StepImpl(Protocol):
     """What an implementation of the step provides (:class:`NumpyStep` here, its twin
     :class:`verifier.compiled.driver.CompiledStep` beside the kernels)."""
 
-    def advance(self, config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
-        """Advance ``state`` over checked readings ``q`` ``(B, Kc, n)`` (see :func:`advance`)."""
+    def advance(self, config: StepConfig, state: TrackerState, q, record=None, prior=None, const=None) -> None:
+        """Advance ``state`` over checked readings ``q`` ``(B, Kc, n)`` (see :func:`advance`), with the step's
+        constants ``const`` (``config.const`` when None)."""
 
     def pose_solutions(self, model, Q, XI, X_search, tol: float, small: float, max_boxes: int, sweeps: int):
         """See :func:`pose_solution_arrays`."""
@@ -464,10 +466,11 @@ class StepImpl(Protocol):
 class NumpyStep:
     """The reference: the step vectorised over rows with numpy, one sample at a time."""
 
-    def advance(self, config, state, q, record=None, prior=None):
+    def advance(self, config, state, q, record=None, prior=None, const=None):
         for kk in range(q.shape[1]):
             with I.quiet_fp():
-                _numpy_step(config, state, q[:, kk], None if prior is None else (prior[0][:, kk], prior[1][:, kk]))
+                _numpy_step(config, state, q[:, kk], None if prior is None else (prior[0][:, kk], prior[1][:, kk]),
+                            const)
             if record is not None:
                 record[0][:, kk] = state.x_hull
                 record[1][:, kk] = state.xd_hull
@@ -528,7 +531,7 @@ def step(config: StepConfig, state: TrackerState, q) -> None:
     config.impl.advance(config, state, kernel_array(q[:, None, :]))
 
 
-def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None) -> None:
+def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None, clock=None) -> None:
     """Advance ``state`` over a block of readings ``q`` ``(B, Kc, n)``.
 
     The compiled backend runs the whole block in one kernel call, scenarios in
@@ -539,6 +542,10 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None)
     (m) and velocity (m/s) at each sample: they are intersected with the
     predicted boxes before the contraction (the passes of
     :mod:`verifier.window`; an infinite box leaves a sample unconstrained).
+    ``clock`` (a :class:`verifier.clock.SampleClock` of the samples from the
+    state's first, or None for the constant period ``t_s``) gives each sample
+    the constants of its own steps; runs of samples whose steps are one
+    period each go through in one call as without it.
     """
     q = np.asarray(q, dtype=np.float64)
     B, Kc = state.batch, q.shape[1]
@@ -550,4 +557,20 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None)
         prior = tuple(kernel_array(a) for a in prior)
         if any(a.shape != (B, Kc, 2, config.model.n) for a in prior):
             raise InputError(f"prior boxes must have shape ({B}, {Kc}, 2, {config.model.n})")
-    config.impl.advance(config, state, kernel_array(q), record, prior)
+    if clock is None:
+        config.impl.advance(config, state, kernel_array(q), record, prior)
+        return
+    start = 0
+    while start < Kc:
+        const = clock.constants(config.const, config.settings, state.k)
+        stop = start + 1
+        while stop < Kc and const is config.const and clock.constants(config.const, config.settings, state.k + stop - start) is const:
+            stop += 1  # one call for a run of one-period steps
+        part = slice(start, stop)
+        rec = None if record is None else tuple(np.empty(a[:, part].shape, a.dtype) for a in record)
+        pri = None if prior is None else tuple(kernel_array(a[:, part]) for a in prior)
+        config.impl.advance(config, state, kernel_array(q[:, part]), rec, pri, const)
+        if record is not None:
+            for a, r in zip(record, rec):
+                a[:, part] = r
+        start = stop

@@ -212,7 +212,7 @@ def verdict_of(initial_mode: int, final_mode: int, inconsistent: bool) -> Verdic
 
 
 def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, record: bool = False, progress=None,
-                backend: str = "compiled", parallel: bool = True, spread_hypotheses: bool = False):
+                backend: str = "compiled", parallel: bool = True, spread_hypotheses: bool = False, clock=None):
     """Run the tracker on ``B`` scenarios at once.
 
     Parameters
@@ -240,6 +240,10 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
         geometry hypotheses of each sample over numba's threads; the same
         results either way (see
         :class:`verifier.step.StepConfig`).
+    clock : verifier.clock.SampleClock, optional
+        When the samples were taken (the same for every scenario): an uneven
+        recording's stamps, dropped samples or jitter (:mod:`verifier.clock`);
+        every ``settings.t_s`` when None.
 
     Returns
     -------
@@ -250,9 +254,10 @@ def track_batch(model, q_meas, settings: TrackerSettings, x0, xi_box=None, recor
     config = configure(model, settings, backend, parallel=parallel, spread_hypotheses=spread_hypotheses)
     q_meas = _sample_stream(model, q_meas)
     B, K, n = q_meas.batch, q_meas.steps, model.n
+    _check_clock(clock, K, settings)
     state = init_state(config, x0, batch=B, xi_box=xi_box)
     rec = _record_arrays(B, K, n) if record else None
-    _run_blocks(config, state, q_meas, n, rec, progress)
+    _run_blocks(config, state, q_meas, n, rec, progress, clock)
     res = _batch_result(state, B, K, t0)
     return (res, rec) if record else res
 
@@ -275,7 +280,17 @@ def _record_arrays(B: int, K: int, n: int) -> dict:
     return rec
 
 
-def _run_blocks(config, state, q_meas: SampleStream, n: int, rec, progress) -> None:
+def _check_clock(clock, K: int, settings) -> None:
+    """Refuse a clock of another length or period than the readings and settings it comes with."""
+    if clock is None:
+        return
+    if len(clock) != K:
+        raise InputError(f"the clock has {len(clock)} sample times for {K} samples")
+    if clock.t_s != float(settings.t_s):
+        raise InputError(f"the clock's period {clock.t_s!r} s is not the settings' t_s {float(settings.t_s)!r} s")
+
+
+def _run_blocks(config, state, q_meas: SampleStream, n: int, rec, progress, clock=None) -> None:
     """Advance ``state`` (pose dimension ``n``) over every sample of ``q_meas``, a block of :data:`_BLOCK`
     samples per call with the compiled backend (one sample with numpy), writing the boxes into ``rec`` (unless
     ``None``) and calling ``progress(k)`` for each sample after its block."""
@@ -289,7 +304,7 @@ def _run_blocks(config, state, q_meas: SampleStream, n: int, rec, progress) -> N
         if record:
             block = (np.empty((B, k1 - k0, 2, n)), np.empty((B, k1 - k0, 2, n)), np.empty((B, k1 - k0), np.int64),
                      np.empty((B, k1 - k0, n)))
-        advance(config, state, q, block)
+        advance(config, state, q, block, clock=clock)
         if record:
             rec["x_lo"][:, k0:k1], rec["x_hi"][:, k0:k1] = block[0][:, :, 0], block[0][:, :, 1]
             rec["xd_lo"][:, k0:k1], rec["xd_hi"][:, k0:k1] = block[1][:, :, 0], block[1][:, :, 1]
@@ -353,7 +368,7 @@ class SampleStream:
 
 
 def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=None, xi_box=None, progress=None,
-          backend: str = "compiled", spread_hypotheses: bool = False) -> TrackResult:
+          backend: str = "compiled", spread_hypotheses: bool = False, clock=None) -> TrackResult:
     """Track one recorded joint trajectory and give a verdict.
 
     Parameters
@@ -371,7 +386,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
     xi_box : (lo, hi), optional
         Calibration box, the robot's by default.
     backend : {"compiled", "numpy"}
-    spread_hypotheses : bool
+    spread_hypotheses, clock
         See :func:`track_batch`.
 
     Returns
@@ -398,7 +413,7 @@ def track(model, q_meas, settings: TrackerSettings, *, x0=None, initial_mode=Non
             raise InputError(f"initial pose box must be {model.n} intervals with lo <= hi, got {x0}")
         x0 = (lo, hi)
     res, rec = track_batch(model, q_meas[None], settings, x0, xi_box=xi_box, record=True, progress=progress,
-                           backend=backend, spread_hypotheses=spread_hypotheses)
+                           backend=backend, spread_hypotheses=spread_hypotheses, clock=clock)
     verdict = res.verdict[0]
     if initial_mode is not None and verdict is not Verdict.INCONSISTENT and res.initial_mode[0] != initial_mode:
         # the given mode's box did not certify at step 0 after contraction
@@ -438,6 +453,10 @@ class Tracker:
     spread_hypotheses : bool
         Spread the hypotheses of each sample over numba's threads: lower
         latency on dedicated cores, erratic on busy ones (see :class:`StepConfig`).
+    clock : verifier.clock.SampleClock, optional
+        An empty clock of the settings' ``t_s`` when the readings come with
+        stamps (:meth:`update`'s ``t``): dropped samples, or jitter within its
+        ``stamp_error``.  Every ``t_s`` when None.
 
     Examples
     --------
@@ -447,16 +466,26 @@ class Tracker:
     """
 
     def __init__(self, model, settings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
-                 spread_hypotheses: bool = False):
+                 spread_hypotheses: bool = False, clock=None):
         self.config = configure(model, settings, backend, spread_hypotheses=spread_hypotheses)
         self.state = init_state(self.config, x0, batch=1, xi_box=xi_box)
+        _check_clock(clock, 0, settings)
+        self.clock = clock
         self._mode = 0
         self._consistent = True
 
-    def update(self, q) -> StepResult:
-        """Advance by one reading ``q`` ``(n,)``, rad; returns the new boxes and events."""
+    def update(self, q, t: float | None = None) -> StepResult:
+        """Advance by one reading ``q`` ``(n,)``, rad, stamped ``t`` (s; only with a :attr:`clock`); returns
+        the new boxes and events."""
         st = self.state
-        step(self.config, st, np.asarray(q, dtype=np.float64).reshape(1, -1))
+        q = np.asarray(q, dtype=np.float64).reshape(1, -1)
+        if self.clock is None:
+            if t is not None:
+                raise InputError("a stamp t needs a tracker made with a clock (Tracker(..., clock=SampleClock(t_s)))")
+            step(self.config, st, q)
+        else:
+            self._tick(t)
+            advance(self.config, st, q[:, None], clock=self.clock)
         k = st.k - 1
         mode = int(st.mode[0])
         consistent = bool(st.bad_at[0] < 0)
@@ -476,7 +505,14 @@ class Tracker:
                           xd=(st.xd_hull[0, 0].copy(), st.xd_hull[0, 1].copy()), mode=mode,
                           consistent=consistent, events=tuple(events))
 
-    def step_reading(self, q) -> tuple:
+    def _tick(self, t) -> None:
+        """Append stamp ``t`` to the clock (which keeps the last ``depth`` samples' times only)."""
+        if t is None:
+            raise InputError("this tracker has a clock: give each reading's stamp t (s)")
+        self.clock.append(t)
+        self.clock.forget_before(self.state.k - self.config.depth)
+
+    def step_reading(self, q, t: float | None = None) -> tuple:
         """:meth:`update` for a caller that checked the reading (:class:`~verifier.window.OnlineMonitor`):
         ``q`` an ``(n,)`` array of finite values, rad (copied unless a writable, C-contiguous float64 one).  Returns ``(k, mode,
         consistent)``; the boxes are in :attr:`state`.  No second check and no copies: on the update path
@@ -484,7 +520,11 @@ class Tracker:
         st = self.state
         if q.dtype != np.float64 or not (q.flags.c_contiguous and q.flags.writeable):  # the kernel's one signature
             q = kernel_array(q)
-        self.config.impl.advance(self.config, st, q.reshape(1, 1, -1))
+        if self.clock is None:
+            self.config.impl.advance(self.config, st, q.reshape(1, 1, -1))
+        else:
+            self._tick(t)
+            advance(self.config, st, q.reshape(1, 1, -1), clock=self.clock)
         mode, consistent = int(st.mode[0]), bool(st.bad_at[0] < 0)
         self._mode, self._consistent = mode, consistent
         return st.k - 1, mode, consistent

@@ -96,10 +96,11 @@ class CompiledStep:
                 Record=kernels.Record, Prior=kernels.Prior)
         return a
 
-    def advance(self, config, st, q, record=None, prior=None):
+    def advance(self, config, st, q, record=None, prior=None, const=None):
         a = self._args(config, st)
         slots = a["slots"]
-        head = (config.model.program, config.const, a["vel"], a["rows"], a["scen"], a["scratch"])
+        head = (config.model.program, config.const if const is None else const, a["vel"], a["rows"], a["scen"],
+                a["scratch"])
         if record is None and prior is None and len(slots) == 1:
             # the online path: every argument's type is fixed for this state (q is a
             # C-contiguous float64 copy), so after the first call the compiled entry

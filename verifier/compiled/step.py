@@ -110,7 +110,7 @@ def _qdd_over_step(prog, c, X, r, XD, past_q, pq, XI, n, m, sc, qdd, iqdd):
     bh = bl + n
     dl = bh + n
     dh = dl + n
-    ts = c.t_s
+    ts = c.step_hi  # the whole step: [0, t] for every t it may last
     h2l, h2h = ops.scale(0.5, *ops.mul(ts, ts, ts, ts))
     h2l, h2h = ops.hull(0.0, 0.0, h2l, h2h)
     for i in range(n):
@@ -260,7 +260,7 @@ def _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
     tb = sc.tb
     n = rows.x.shape[2]
     D = rows.past_x.shape[1]
-    ts = c.t_s
+    sl, sh = c.step_lo, c.step_hi
     for i in range(n):
         tb[TB_QD, 0, i] = -np.inf
         tb[TB_QD, 1, i] = np.inf
@@ -270,10 +270,10 @@ def _joint_rates(c, rows, r, k, q, b, kk, sc, qdd, iqdd, with_qdd):
             qk = q[b, kk, i]
             qp = rows.past_r[r, prev, i]
             dl, dh = ops.sub(qk, qk, qp, qp)
-            fl, fh = ops.div(dl, dh, ts, ts)
+            fl, fh = ops.div(dl, dh, sl, sh)
             ql, qh = ops.add(fl, fh, c.axis[i].quant_lo, c.axis[i].quant_hi)
             if with_qdd:
-                tl, th = ops.mul(0.5 * ts, 0.5 * ts, qdd[iqdd, 0, i], qdd[iqdd, 1, i])
+                tl, th = ops.mul(0.5 * sl, 0.5 * sh, qdd[iqdd, 0, i], qdd[iqdd, 1, i])
                 ql, qh = ops.add(ql, qh, tl, th)
                 ql = -np.inf if ql != ql else ql
                 qh = np.inf if qh != qh else qh
@@ -353,14 +353,11 @@ def row_begin(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqd
     """The part of :func:`row_step` before the contraction rounds: the reading's box into ``rows.q[r]``,
     the velocity information (returned: what :func:`velocity_contract` reads), the prediction, the
     prior, the calibration sub-box into the scratch slot ``TB_XIW``."""
-    X = rows.x
-    XD = rows.xd
-    XI = rows.xi
-    Q = rows.q
+    X, XD, XI, Q = rows.x, rows.xd, rows.xi, rows.q
     tb = sc.tb
     n = X.shape[2]
     m = XI.shape[2]
-    ts = c.t_s
+    point = c.step_lo == c.step_hi  # a constant period: one float, no interval product
     for i in range(n):
         qk = q[b, kk, i]
         e = c.axis[i].eps_q
@@ -373,7 +370,8 @@ def row_begin(vel, prog, c, rows, r, k, q, b, kk, sc, use_prior, prior, qdd, iqd
     if k > 0:
         for i in range(n):
             ax = c.axis[i]
-            pl, ph = ops.scale(ts, XD[r, 0, i], XD[r, 1, i])
+            vl, vh = XD[r, 0, i], XD[r, 1, i]
+            pl, ph = ops.scale(c.step_lo, vl, vh) if point else ops.mul(c.step_lo, c.step_hi, vl, vh)
             xl, xh = ops.add(X[r, 0, i], X[r, 1, i], pl, ph)
             X[r, 0, i], X[r, 1, i] = ops.add(xl, xh, ax.half_ts2_a_lo, ax.half_ts2_a_hi)
             vl, vh = ops.add(XD[r, 0, i], XD[r, 1, i], ax.ts_a_lo, ax.ts_a_hi)

@@ -94,7 +94,7 @@ def example_arguments(velocity_model: int = SOUND) -> tuple:
         return np.zeros(shape, dtype)
 
     prog = Program(z(1, 3, dtype=i), z(1), z(1, dtype=i), z(1, 3, dtype=i), 1, z(2, 1, dtype=i))
-    const = StepConstants(0.0, 0.0, 0.0, 0.0, int(velocity_model), 0, 0, 1, False, False, np.zeros(1, AXIS_DTYPE),
+    const = StepConstants(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, int(velocity_model), 0, 0, 1, False, False, np.zeros(1, AXIS_DTYPE),
                           np.zeros(1, BASELINE_DTYPE), z(1, 2, 1), 1)
     rows = kernels.Rows(z(1, 2, 1), z(1, 2, 1), z(1, 2, 1), z(1, 2, 1), z(1, 1, 2, 1), z(1, 1, 2, 1), z(1, 1, 1),
                         z(1, dtype=i))

@@ -1,0 +1,159 @@
+"""Uneven recordings: dropped samples and jittered stamps enter the tracker as step intervals (verifier.clock).
+
+* A clock whose steps are one period each gives the boxes of the constant period bit for bit, and
+  :func:`verifier.constants.for_step` of a one-period step gives :func:`pack_constants`' floats.
+* Adversarial runs (the acceleration budget spent, readings at the edges of ``eps_q``, corner
+  geometries; :mod:`adversarial`) sampled at jittered true times, with dropped samples and stamps off
+  the truth by ``delta`` in the worst alternating pattern: the truth stays inside every box.  The same
+  run with the stamp error ignored lets it out (the removal check of ``delta``).
+* The numpy reference and the compiled kernels agree on such a run, and the clock refuses what it
+  cannot enclose (a step that is not a whole number of periods without ``--stamp-error``, stamps closer
+  than ``2 delta``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from adversarial import near_scenarios
+from problems import interval_model
+from crosscert.robots.errors import InputError, TrajectoryFileError
+from crosscert.verifier.clock import SampleClock
+from crosscert.verifier.constants import for_step, pack_constants
+from crosscert.verifier.tracker import Tracker, initial_box_from_mode, track_batch
+from test_containment import _violations
+
+#: Jitter of the true sample times and stamp error bound, s: stamps alternate at +-delta around the truth,
+#: so that ignoring delta misreads every step by 2 delta (0.1 t_s).
+JITTER, DELTA = 100e-6, 50e-6
+#: Samples the controller dropped (one alone, two in a row).
+DROPPED = (40, 90, 91)
+K = 201
+
+
+def _run(scenarios, settings, clock=None, backend="compiled"):
+    m = interval_model()
+    boxes = [initial_box_from_mode(m, sc.q_meas[0], int(sc.mode[0]), settings, backend=backend) for sc in scenarios]
+    x0 = (np.array([b[0] for b in boxes]), np.array([b[1] for b in boxes]))
+    return track_batch(m, np.stack([sc.q_meas for sc in scenarios]), settings, x0, record=True, backend=backend,
+                       clock=clock)
+
+
+def _jittered(settings, seed=5):
+    """True times (jittered, with dropped samples) and stamps at +-DELTA around them, alternating."""
+    rng = np.random.default_rng(seed)
+    t_true = np.arange(K) * settings.t_s + rng.uniform(-JITTER, JITTER, K)
+    t_true[0] = 0.0
+    keep = np.setdiff1d(np.arange(K), DROPPED)
+    t_true = t_true[keep]
+    stamps = t_true + DELTA * (1.0 - 1e-9) * np.where(np.arange(len(t_true)) % 2 == 0, 1.0, -1.0)
+    return t_true, stamps
+
+
+@pytest.fixture(scope="module")
+def jittered(settings):
+    t_true, stamps = _jittered(settings)
+    return near_scenarios(4, 11, t_end=0.2, times=t_true), stamps
+
+
+def test_one_period_steps_give_the_constant_period_bit_for_bit(settings):
+    sc = near_scenarios(2, 11, t_end=0.08)
+    plain = _run(sc, settings)[1]
+    clocked = _run(sc, settings, SampleClock.from_stamps(sc[0].t, settings.t_s))[1]
+    for key in plain:
+        np.testing.assert_array_equal(clocked[key], plain[key], err_msg=key)
+
+
+def test_for_step_of_one_period_is_pack_constants(imodel, settings):
+    s = settings.validated(imodel.n)
+    c = pack_constants(s, imodel.n)
+    spans = np.array([[c.baseline["h_lo"][i], c.baseline["h_hi"][i]] for i in range(len(c.baseline))])
+    d = for_step(c, s, (s.t_s, s.t_s), spans)
+    for name in c.axis.dtype.names:
+        np.testing.assert_array_equal(d.axis[name], c.axis[name], err_msg=name)
+    np.testing.assert_array_equal(d.baseline, c.baseline)
+    np.testing.assert_array_equal(d.diff_err, c.diff_err)
+    assert (d.step_lo, d.step_hi) == (c.step_lo, c.step_hi) == (s.t_s, s.t_s)
+
+
+def test_dropped_samples_keep_the_truth_inside(settings):
+    """A fixed-period controller that dropped samples: steps of 2 and 3 periods, stamp error 0."""
+    keep = np.setdiff1d(np.arange(161), DROPPED)
+    times = keep * settings.t_s
+    sc = near_scenarios(4, 11, times=times)
+    clock = SampleClock.from_stamps(times, settings.t_s)
+    assert not clock.even
+    res, rec = _run(sc, settings, clock)
+    assert _violations(sc, res, rec) == []
+
+
+def test_jittered_stamps_keep_the_truth_inside(jittered, settings):
+    sc, stamps = jittered
+    res, rec = _run(sc, settings, SampleClock.from_stamps(stamps, settings.t_s, DELTA))
+    assert _violations(sc, res, rec) == []
+
+
+def test_the_stamp_error_is_needed(jittered, settings):
+    """Removal check of ``delta``: the same stamps read as exact let the truth out (or empty a box)."""
+    sc, stamps = jittered
+    res, rec = _run(sc, settings, SampleClock.from_stamps(stamps, settings.t_s, 1e-15))
+    assert _violations(sc, res, rec)
+
+
+def test_numpy_and_compiled_agree_on_a_jittered_run(settings):
+    t_true, stamps = _jittered(settings, seed=7)
+    sc = near_scenarios(2, 13, t_end=0.05, times=t_true[:45])
+    clock = SampleClock.from_stamps(stamps[:45], settings.t_s, DELTA)
+    a = _run(sc, settings, clock, "compiled")[1]
+    b = _run(sc, settings, clock, "numpy")[1]
+    for key in a:
+        np.testing.assert_allclose(a[key], b[key], rtol=0, atol=1e-12, err_msg=key)  # sin/cos' last bits only
+
+
+def test_online_tracker_with_stamps_matches_the_batch(jittered, settings):
+    sc, stamps = jittered
+    one = sc[0]
+    m = interval_model()
+    x0 = initial_box_from_mode(m, one.q_meas[0], int(one.mode[0]), settings)
+    batch = track_batch(m, one.q_meas[None], settings, (x0[0][None], x0[1][None]), record=True,
+                        clock=SampleClock.from_stamps(stamps, settings.t_s, DELTA))[1]
+    tr = Tracker(m, settings, x0, clock=SampleClock(settings.t_s, DELTA))
+    for k, (q, t) in enumerate(zip(one.q_meas, stamps)):
+        r = tr.update(q, t)
+        np.testing.assert_array_equal(r.x[0], batch["x_lo"][0, k])
+        np.testing.assert_array_equal(r.xd[1], batch["xd_hi"][0, k])
+    with pytest.raises(InputError, match="stamp"):
+        tr.update(one.q_meas[-1])
+
+
+def test_a_step_between_periods_needs_a_stamp_error():
+    clock = SampleClock(1e-3)
+    clock.append(0.0)
+    clock.append(1e-3)
+    clock.append(3e-3)  # one dropped sample: fine
+    with pytest.raises(TrajectoryFileError, match="--stamp-error"):
+        clock.append(3.5e-3)
+
+
+def test_stamps_closer_than_twice_the_error_are_refused():
+    clock = SampleClock(1e-3, 1e-4)
+    clock.append(0.0)
+    with pytest.raises(TrajectoryFileError, match="closer than twice --stamp-error"):
+        clock.append(1.5e-4)
+
+
+def test_spans_enclose_the_true_steps():
+    rng = np.random.default_rng(3)
+    t_true = np.cumsum(rng.uniform(0.8e-3, 1.2e-3, 50))
+    stamps = t_true + rng.uniform(-1e-5, 1e-5, 50)
+    clock = SampleClock.from_stamps(stamps, 1e-3, 1e-5)
+    for k in range(1, 50):
+        for j in (1, 2, 7):
+            if j <= k:
+                lo, hi = clock.span(k, k - j)
+                assert lo <= t_true[k] - t_true[k - j] <= hi and lo > 0
+    rev = clock.window(10, 30, reverse=True)
+    for k in range(1, 20):
+        lo, hi = rev.span(k, k - 1)
+        assert lo <= t_true[29 - k + 1] - t_true[29 - k] <= hi
