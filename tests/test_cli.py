@@ -117,7 +117,7 @@ GOOD_HEAD = "t,q1,q2\n0.000,2.0,1.1\n0.001,2.0,1.1\n0.002,2.0,1.1\n"
         ("t,q1,q2\n0,1,inf\n0.001,1,1\n", "NaN and infinities"),
         ("t,q1,q2\n0,1,1\n0.001,1\n", "values for"),
         ("t,q1,q2\n0,1,1\n0,1,1\n", "does not increase"),
-        ("t,q1,q2\n0,1,1\n0.001,1,1\n0.003,1,1\n", "uneven sampling"),
+        ("t,q1,q2\n0,1,1\n0.001,1,1\n0.0025,1,1\n", "is not a whole number of periods"),
         ("t,q1,q2\n0,1,1\n", "at least two"),
         ("t,q1,q2,qd1\n0,1,1,0\n0.001,1,1,0\n", "or none"),
     ],

@@ -93,7 +93,7 @@ def test_text_output_from_a_named_pipe(tmp_path, capsys, csv_text):
         ("0.1,abc,1.0", "'abc' in column q1 is not a number"),
         ("0.1,1.0", "2 values for 3 columns"),
         ("0.1,1.0,nan", "NaN and infinities"),
-        ("0.0995,1.0,1.0", "uneven sampling"),
+        ("0.0995,1.0,1.0", "is not a whole number of periods"),
         ("0.099,1.0,1.0", "does not increase"),
     ],
 )

@@ -317,7 +317,7 @@ def test_the_worker_process_failing_reaches_the_caller(settings):
     mon = OnlineMonitor(interval_model(), settings, _x0(run, settings), worker="process")
     mon.update(run.q_meas[0])
     # a window whose start is missing: its attempt raises AttributeError in the child
-    mon._proc.send(("open", 99, 0, 1, None, [run.q_meas[0]] * 3, [np.zeros((2, 2))] * 3))
+    mon._proc.send(("open", 99, 0, 1, None, [run.q_meas[0]] * 3, [np.zeros((2, 2))] * 3, None))
     with pytest.raises(AttributeError):
         for q in run.q_meas[1:]:
             mon.update(q)

@@ -4,7 +4,10 @@ The bags are written here with rosbags' writer: ``sensor_msgs/msg/JointState``
 on ``/joint_states``, the joints named in an order of their own (two orders,
 alternating) with a joint the robot does not have.  Each format's verdict is
 the verdict of the same readings as CSV; what a user can get wrong is one line
-on stderr and exit 2.
+on stderr and exit 2.  A bag of an adversarial crossing sampled at jittered
+times, its header stamps off the truth by up to ``--stamp-error`` and one
+message dropped, gets the verdict of the same motion sampled every period, with
+the truth inside every box (:mod:`verifier.clock`).
 """
 
 import contextlib
@@ -15,8 +18,12 @@ import sys
 import numpy as np
 import pytest
 
-from problems import CATALOGUE, run_of
+from adversarial import near_scenarios
+from problems import CATALOGUE, interval_model, run_of
 from crosscert.planner.cli import main
+from crosscert.robots import DEXTAR
+from crosscert.verifier.tracker import Tracker, TrackerSettings, initial_box_from_mode
+from crosscert.verifier.window import online_boxes
 from crosscert.robots.errors import TrajectoryFileError
 from crosscert.verifier.recordings import NpzReader, open_recording
 from crosscert.verifier.trajfile import write_trajectory
@@ -65,8 +72,8 @@ def csv_verdict(crossing, tmp_path_factory):
 
 
 def _write_bag(folder, t, q, *, storage="mcap", topic="/joint_states", latency_ns=None, drop=None, empty=False):
-    """A rosbag2 folder with JointState messages of ``q`` stamped ``EPOCH_NS + t`` (header) and logged
-    ``latency_ns[k]`` later; ``drop``: a message index left out.  Returns the folder."""
+    """A rosbag2 folder with JointState messages of ``q`` stamped ``EPOCH_NS + t`` (header, to the ns) and
+    logged ``latency_ns[k]`` later; ``drop``: a message index left out.  Returns the folder."""
     rosbags = pytest.importorskip("rosbags")  # noqa: F841
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
@@ -125,26 +132,28 @@ def test_monitor_reads_a_bag(bags, csv_verdict, capsys):
     assert events and all(e["line"] == e["k"] + 1 for e in events)
 
 
-def test_log_times_with_jitter_get_the_csv_message(crossing, tmp_path, capsys):
-    """The bag's receive times come 50-90 us after the header stamps: refused by the one step check, with the
-    file, the message and the advice; the header stamps of the same bag are even."""
+def test_log_times_with_jitter_need_a_stamp_error(crossing, tmp_path, capsys):
+    """The bag's receive times come 50-90 us after the header stamps: refused with a stamp error of 0 (a
+    fixed-period controller), naming --stamp-error and --stamp header; read with a stamp error that bounds the
+    latency, and the header stamps of the same bag are even."""
     t, q = crossing
     latency = np.random.default_rng(7).integers(50_000, 90_000, size=len(t))
     assert latency[0] != latency[1]
     bag = _storage_file(_write_bag(tmp_path / "jitter", t, q, latency_ns=latency))
     assert main(["check", str(bag), "--joints", JOINTS, "--stamp", "log", *FLAGS]) == 2
     err = _one_line_error(capsys)
-    assert f"{bag}, message 2: uneven sampling (step" in err, err
-    assert "jittered stamps are not supported yet" in err and "--stamp header" in err and "resample or" not in err
+    assert f"{bag}, message 2: the step" in err and "is not a whole number of periods" in err, err
+    assert "--stamp-error" in err and "--stamp header" in err and "resample or" not in err
+    out = _verdict(capsys, bag, "--joints", JOINTS, "--stamp", "log", "--stamp-error", "9e-5")
+    assert out["verdict"] == "mode-changed"
     assert _verdict(capsys, bag, "--joints", JOINTS, "--stamp", "header")["verdict"] == "mode-changed"
 
 
-def test_a_dropped_message_is_uneven_sampling(crossing, tmp_path, capsys):
+def test_a_dropped_message_is_a_step_of_two_periods(crossing, tmp_path, capsys, csv_verdict):
     bag = _storage_file(_write_bag(tmp_path / "drop", *crossing, storage="db3", drop=100))
-    assert main(["check", str(bag), "--joints", JOINTS, *FLAGS]) == 2
-    err = _one_line_error(capsys)
-    assert "message 101: uneven sampling (step 0.002 s, sampling period 0.001 s)" in err, err
-    assert "split the recording where the period changes" in err
+    out = _verdict(capsys, bag, "--joints", JOINTS)
+    assert out["verdict"] == csv_verdict["verdict"] == "mode-changed"
+    assert out["steps"] == csv_verdict["steps"] - 1
 
 
 @pytest.mark.parametrize("args, message", [
@@ -205,7 +214,7 @@ def test_npz_gets_the_verdict_of_the_same_readings_as_csv(crossing, csv_verdict,
     ({"time": np.arange(3.0), "q": np.ones((3, 2))}, "no array t; expected t (K,) in s and q (K, 2) (arrays: time, q)"),
     ({"t": np.arange(3.0), "q": np.ones((2, 3))}, "t has shape (3,) and q (2, 3); expected (K,) and (K, 2)"),
     ({"t": np.array([0.0, np.nan, 0.002]), "q": np.ones((3, 2))}, "index 1: t is not finite"),
-    ({"t": np.array([0.0, 0.001, 0.0025]), "q": np.ones((3, 2))}, "index 2: uneven sampling (step 0.0015 s"),
+    ({"t": np.array([0.0, 0.001, 0.0025]), "q": np.ones((3, 2))}, "index 2: the step 0.0015 s is not a whole number"),
 ])
 def test_npz_mistakes_are_one_line(tmp_path, capsys, arrays, message):
     path = tmp_path / "run.npz"
@@ -227,3 +236,66 @@ def test_bag_options_are_refused_by_the_api_for_npz(tmp_path):
     with pytest.raises(TrajectoryFileError, match="topic apply to ROS 2 bags"):
         with open_recording(path, 2, topic="/joint_states"):
             pass
+
+
+#: The jittered bag: true sample times within JITTER of k t_s, header stamps within DELTA of them (1 ns
+#: kept for the stamps' rounding to ns), message DROPPED left out.
+JITTER, DELTA, DROPPED = 100e-6, 50e-6, 60
+
+
+@pytest.fixture(scope="module")
+def jittered_bag(tmp_path_factory):
+    """An adversarial crossing (:mod:`adversarial`) sampled every period (a CSV) and at jittered times (a bag
+    with one message dropped): ``(csv, bag, scenario at the jittered times, true sample of each message)``."""
+    ts = DEXTAR.t_s
+    even = near_scenarios(1, 11)[0]
+    K = len(even.t)
+    rng = np.random.default_rng(21)
+    t_true = np.arange(K) * ts + rng.uniform(-JITTER, JITTER, K)
+    t_true[0], t_true[-1] = 0.0, even.t[-1]  # the same span: the generator draws the same motion
+    sc = near_scenarios(1, 11, times=t_true)[0]
+    np.testing.assert_array_equal(sc.x[[0, -1]], even.x[[0, -1]])
+    stamps = t_true + (DELTA - 1e-9) * np.where(np.arange(K) % 2 == 0, 1.0, -1.0)
+    root = tmp_path_factory.mktemp("jittered")
+    csv = root / "even.csv"
+    write_trajectory(csv, even.t, even.q_meas)
+    bag = _storage_file(_write_bag(root / "bag", stamps, sc.q_meas, drop=DROPPED))
+    return csv, bag, sc, np.setdiff1d(np.arange(K), [DROPPED])
+
+
+def test_a_jittered_bag_with_a_dropped_message_gets_the_csv_verdict(jittered_bag, capsys):
+    csv, bag, sc, _ = jittered_bag
+    mode = str(int(sc.mode[0]))
+    flags = ["--initial-mode", mode, "--json", "--no-progress"]
+    assert main(["check", str(csv), *flags]) == 0
+    even = json.loads(capsys.readouterr().out)
+    assert main(["check", str(bag), "--joints", JOINTS, "--stamp-error", str(DELTA), *flags]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["verdict"] == even["verdict"] == "mode-changed"
+    assert out["steps"] == even["steps"] - 1
+    # the stamps taken as exact (a fixed period): refused, with what to state
+    assert main(["check", str(bag), "--joints", JOINTS, *flags]) == 2
+    assert "--stamp-error" in _one_line_error(capsys)
+
+
+def test_a_jittered_bag_keeps_the_truth_in_every_box(jittered_bag):
+    """The boxes of the tracker and of the online monitor (its windows' re-seeded trackers) on the bag's
+    readings and stamps, against the true pose and velocity at each message's true time."""
+    _, bag, sc, true_k = jittered_bag
+    model = interval_model()
+    settings = TrackerSettings.for_robot(DEXTAR)
+    with open_recording(bag, 2, joints=JOINTS.split(","), stamp_error=DELTA, nominal_t_s=DEXTAR.t_s) as reader:
+        samples = list(reader.samples())
+        clock = reader.clock
+    q = np.array([s[2] for s in samples])
+    assert len(q) == len(true_k) and not clock.even
+    x0 = initial_box_from_mode(model, q[0], int(sc.mode[0]), settings)
+    tracker = Tracker(model, settings, x0, clock=type(clock)(DEXTAR.t_s, DELTA))
+    rows = [tracker.update(qk, float(s[1])) for qk, s in zip(q, samples)]
+    boxes = {"x_lo": [r.x[0] for r in rows], "x_hi": [r.x[1] for r in rows], "xd_lo": [r.xd[0] for r in rows],
+             "xd_hi": [r.xd[1] for r in rows]}
+    for what, got in (("tracker", boxes), ("online", online_boxes(model, q, settings, x0, clock=clock))):
+        for key, truth in (("x", sc.x[true_k]), ("xd", sc.xd[true_k])):
+            lo, hi = np.asarray(got[f"{key}_lo"]), np.asarray(got[f"{key}_hi"])
+            bad = np.flatnonzero(~np.all((lo <= truth) & (truth <= hi), axis=1))
+            assert bad.size == 0, f"{what}: {key} outside its box at messages {bad[:5]}"

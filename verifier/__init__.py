@@ -12,7 +12,8 @@ What a user calls, by task (explicit re-exports, no star imports):
 * **the interval model** of a robot — :class:`IntervalModel`;
 * **recordings** — :class:`Trajectory`, :func:`read_trajectory`,
   :func:`write_trajectory`, and :func:`open_recording` (a CSV, a ROS 2 bag
-  or an ``.npz``, sample by sample);
+  or an ``.npz``, sample by sample); :class:`SampleClock` (the samples'
+  times of an uneven recording: dropped samples, jittered stamps);
 * **check a robot definition** — :func:`validate` (every check, the interval
   ones included).
 
@@ -24,6 +25,7 @@ classes are :mod:`robots.errors`'s.
 
 import logging
 
+from .clock import SampleClock
 from .model import IntervalModel
 from .settings import TrackerSettings, VelocityModel, Verdict
 from .step import Backend
@@ -58,6 +60,7 @@ __all__ = [
     # the interval model
     "IntervalModel",
     # recordings
+    "SampleClock",
     "Trajectory",
     "read_trajectory",
     "write_trajectory",

@@ -62,6 +62,7 @@ class SampleClock:
         self._ticks: list[int] = []  # stamp_error = 0: periods since the first sample
         self._lo: list[float] = []  # stamp_error > 0: the true time's enclosure
         self._hi: list[float] = []
+        self._stamps: list[float] = []  # as given
         self._last: float | None = None
         self._base = 0  # samples forgotten (forget_before): the lists start at this sample
 
@@ -72,7 +73,7 @@ class SampleClock:
         """Drop the times of the samples before ``k`` (an online tracker reads ``depth`` samples back only)."""
         drop = min(k - self._base, len(self) - self._base - 1)
         if drop > 256:  # in chunks: one list copy per 256 samples
-            for lst in (self._ticks, self._lo, self._hi):
+            for lst in (self._ticks, self._lo, self._hi, self._stamps):
                 del lst[:drop]
             self._base += drop
 
@@ -84,17 +85,19 @@ class SampleClock:
             clock.append(float(v))
         return clock
 
-    def append(self, t: float) -> None:
-        """The next sample's stamp ``t`` (s, strictly later than the last)."""
+    def append(self, t: float, where: str | None = None) -> None:
+        """The next sample's stamp ``t`` (s, strictly later than the last); ``where`` names its position in
+        messages (``sample k`` by default)."""
         t = float(t)
         k, last = len(self), self._last
+        at = f"{self.name}, {where or f'sample {k}'}"
         if last is not None and not t > last:
-            raise TrajectoryFileError(f"{self.name}, sample {k}: time {t!r} does not increase (previous {last!r})")
+            raise TrajectoryFileError(f"{at}: time {t!r} does not increase (previous {last!r})")
         if self.stamp_error == 0.0:
             if last is None:
                 self._ticks.append(0)
             else:
-                m = self._periods(last, t, k)
+                m = self._periods(last, t, at)
                 self.even &= m == 1
                 self._ticks.append(self._ticks[-1] + m)
         else:
@@ -103,24 +106,28 @@ class SampleClock:
             lo, hi = I.sub(t, t, e, e)[0], I.add(t, t, e, e)[1]
             if self._hi and not I.sub(lo, lo, self._hi[-1], self._hi[-1])[0] > 0.0:
                 raise TrajectoryFileError(
-                    f"{self.name}, sample {k}: stamps {last!r} and {t!r} s are closer than twice --stamp-error "
+                    f"{at}: stamps {last!r} and {t!r} s are closer than twice --stamp-error "
                     f"({self.stamp_error:.3g} s): the step between them may be zero; state a smaller stamp error if "
                     "the stamps are better than that")
             self._lo.append(lo)
             self._hi.append(hi)
+        self._stamps.append(t)
         self._last = t
 
-    def _periods(self, last: float, t: float, k: int) -> int:
+    def _periods(self, last: float, t: float, at: str) -> int:
         """The whole number of periods the step ``t - last`` is, or an error naming ``--stamp-error``."""
-        from .trajfile import step_tolerance
+        from .trajfile import JITTER_RTOL, step_tolerance
 
         step = t - last
         m = max(1, int(round(step / self.t_s)))
-        if abs(step - m * self.t_s) > step_tolerance(last, t, m * self.t_s):
+        off = abs(step - m * self.t_s)
+        if off > step_tolerance(last, t, m * self.t_s):
+            why = (f"it is {off:.3g} s off {m} period{'s' if m > 1 else ''} only (float32 stamps or clock jitter?)"
+                   if off <= JITTER_RTOL * self.t_s else
+                   "a fixed-period controller drops samples, it does not shift them")
             raise TrajectoryFileError(
-                f"{self.name}, sample {k}: the step {step:.9g} s is not a whole number of periods of {self.t_s:.9g} s "
-                "(a fixed-period controller drops samples, it does not shift them): if the stamps jitter, state "
-                "their error bound with --stamp-error (s); never resample the readings")
+                f"{at}: the step {step:.9g} s is not a whole number of periods of {self.t_s:.9g} s ({why}): if the "
+                "stamps jitter, state their error bound with --stamp-error (s); never resample the readings")
         return m
 
     def span(self, k: int, l: int) -> tuple[float, float]:
@@ -143,8 +150,7 @@ class SampleClock:
         """The step's constants for sample ``k``: ``c`` itself (those of settings ``s`` for the period
         ``t_s``) when the steps it reads are one period each, else :func:`verifier.constants.for_step`
         of this clock's enclosures."""
-        depth = max(1, int(np.max(s.baselines)) if len(s.baselines) else 1)
-        if k == 0 or self.step_even(k, depth):
+        if k == 0 or self.step_even(k, c.depth):  # the samples the step reads back
             return c
         step = self.span(k, k - 1)
         spans = np.array([self.span(k, k - int(j)) if int(j) <= k else step for j in s.baselines]).reshape(-1, 2)
@@ -157,12 +163,18 @@ class SampleClock:
             return np.array([_ticks_span(float(t), self.t_s) for t in self._ticks]).reshape(-1, 2)
         return np.stack([np.asarray(self._lo), np.asarray(self._hi)], axis=1)
 
+    def stamps(self) -> np.ndarray:
+        """The stamps as given (those not forgotten), s."""
+        return np.asarray(self._stamps, dtype=np.float64)
+
     def window(self, start: int, stop: int | None = None, *, reverse: bool = False) -> SampleClock:
         """The clock of samples ``start .. stop - 1`` (time-reversed with ``reverse``: the backward passes)."""
         out = SampleClock(self.t_s, self.stamp_error, name=self.name)
         if start < self._base:
             raise ValueError(f"the times before sample {self._base} were forgotten")
         start, stop = start - self._base, None if stop is None else stop - self._base
+        stamps = self._stamps[start:stop]
+        out._stamps = [-v for v in stamps[::-1]] if reverse else list(stamps)
         if self.stamp_error == 0.0:
             ticks = np.asarray(self._ticks[start:stop], dtype=np.int64)
             if reverse:
@@ -171,6 +183,7 @@ class SampleClock:
             out.even = bool(np.all(np.diff(ticks) == 1))
         else:
             lo, hi = self._lo[start:stop], self._hi[start:stop]
+            out.even = False
             # negation is exact: the reversed times' enclosures are those of -t, in reverse order
             out._lo, out._hi = ([-v for v in hi[::-1]], [-v for v in lo[::-1]]) if reverse else (list(lo), list(hi))
         return out

@@ -127,8 +127,10 @@ class BagReader(SampleReader):
         self.path, self.topic, self.stamp = Path(path), topic, Stamp(stamp)
         self.joints = None if joints is None else tuple(joints)
         self.restamp = ("write the bag's readings with the stamps t_k = t_0 + k t_s to a CSV or .npz file (readings "
-                        "unchanged)" + (", or read the publisher's stamps with --stamp header (--stamp log reads when "
-                                        "the recorder received each message)" if self.stamp is Stamp.LOG else ""))
+                        "unchanged)")
+        if self.stamp is Stamp.LOG:
+            self.uneven_hint = ("; or read the publisher's stamps with --stamp header (--stamp log reads when the "
+                                "recorder received each message)")
         self._stack = None
         self._errors = ()  # rosbags' read errors, once it is imported
         self._bag = None

@@ -40,6 +40,7 @@ box, the joint-acceleration bound) was violated: the scenario is reported
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 
@@ -524,7 +525,10 @@ class Tracker:
             self.config.impl.advance(self.config, st, q.reshape(1, 1, -1))
         else:
             self._tick(t)
-            advance(self.config, st, q.reshape(1, 1, -1), clock=self.clock)
+            c = self.clock.constants(self.config.const, self.config.settings, st.k)
+            # a step of one period: the constant period's constants, the same call as without a clock
+            self.config.impl.advance(self.config, st, q.reshape(1, 1, -1), None, None,
+                                     None if c is self.config.const else c)
         mode, consistent = int(st.mode[0]), bool(st.bad_at[0] < 0)
         self._mode, self._consistent = mode, consistent
         return st.k - 1, mode, consistent
@@ -534,7 +538,7 @@ class Tracker:
         reads, in another process too."""
         st = self.state
         return {"arrays": {f: getattr(st, f).copy() for f in ROW_FIELDS + SCENARIO_FIELDS}, "k": st.k,
-                "mode": self._mode, "consistent": self._consistent}
+                "mode": self._mode, "consistent": self._consistent, "clock": copy.deepcopy(self.clock)}
 
     def restore(self, snap: dict) -> None:
         """Continue from ``snap``, a :meth:`snapshot` of a tracker of the same settings (up to ``xd0``, read
@@ -544,3 +548,4 @@ class Tracker:
         for f, v in snap["arrays"].items():
             np.copyto(getattr(st, f), v)
         st.k, self._mode, self._consistent = snap["k"], snap["mode"], snap["consistent"]
+        self.clock = copy.deepcopy(snap.get("clock"))  # the stamps the snapshot's tracker read (None: none)

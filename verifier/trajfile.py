@@ -157,6 +157,11 @@ class SampleReader:
         is read; :func:`read_trajectory` checks against the mean step instead.
     nominal_t_s : float, optional
         The robot's sampling period, s: a recording whose period differs gets a warning.
+    stamp_error : float, optional
+        The stamps' error bound, s (``--stamp-error``): an uneven recording is
+        read, its steps checked by a :class:`~verifier.clock.SampleClock`
+        (:attr:`clock`; dropped samples of a fixed period with 0, jittered
+        stamps with more).  None: every step must be ``t_s``.
     q_range : (lo, hi) arrays (n,), optional
         The robot's joint range, rad: the first sample outside it gets a warning.
 
@@ -179,11 +184,15 @@ class SampleReader:
     where = "line"
     #: The advice for imprecise stamps of a fixed period: how to write them again, readings unchanged.
     restamp = "re-stamp the time column at it (t_k = t_0 + k t_s, readings unchanged)"
+    #: What a format adds to the clock's refusal of a step (another stamp to read, ...).
+    uneven_hint = ""
 
     def __init__(self, n: int, name, *, t_s: float | None = None, even: bool = True,
-                 nominal_t_s: float | None = None, q_range=None):
+                 nominal_t_s: float | None = None, q_range=None, stamp_error: float | None = None):
         self.name, self.n, self.t_s, self.even = str(name), n, t_s, even
         self.nominal_t_s, self.q_range = nominal_t_s, q_range
+        self.stamp_error = None if stamp_error is None else float(stamp_error)
+        self.clock = None  # with a stamp error: the samples' times, checked by it (verifier.clock)
         self.line = 0
         self.warnings: list[str] = []
         self._out_of_range = False
@@ -241,8 +250,8 @@ class SampleReader:
 
         The advice never is to resample: interpolated readings are no longer
         within ``eps_q`` of the true joints.  Stamps that are merely imprecise
-        (float32, clock jitter) are re-stamped at the nominal period instead
-        (:attr:`restamp`): jittered stamps are not supported yet.
+        (float32, clock jitter) are read with their error bound
+        (``--stamp-error``), or re-stamped at the nominal period (:attr:`restamp`).
         """
         step = t - t_prev
         if abs(step - t_s) > step_tolerance(t_prev, t, t_s):
@@ -250,13 +259,13 @@ class SampleReader:
             if unit:
                 advice = f"{unit}; the time column is read in s"
             elif abs(step - t_s) <= JITTER_RTOL * t_s:
-                advice = (f"; the steps differ by {abs(step - t_s):.3g} s only (float32 stamps or clock jitter?), "
-                          "and jittered stamps are not supported yet: if the samples were taken at a fixed period, "
-                          f"{self.restamp}; never resample the readings")
+                advice = (f"; the steps differ by {abs(step - t_s):.3g} s only (float32 stamps or clock jitter?): "
+                          "state the stamps' error bound with --stamp-error (s), or, if the samples were taken at a "
+                          f"fixed period, {self.restamp}; never resample the readings")
             else:
-                advice = ("; the tracker assumes one constant sampling period (a dropped sample makes a step of two periods): "
-                          "split the recording where the period changes (do not resample: interpolated readings "
-                          "break the eps_q bound)")
+                advice = ("; this reader needs one constant sampling period: split the recording where the period "
+                          "changes, or track it with crosscert check, which reads dropped samples and jittered "
+                          "stamps (--stamp-error); do not resample: interpolated readings break the eps_q bound")
             raise TrajectoryFileError(
                 f"{self.name}, {self.where} {line}: uneven sampling (step {step:.9g} s, {what} {t_s:.9g} s){advice}")
 
@@ -276,10 +285,27 @@ class SampleReader:
                         self._first_step(t_prev, t, line)
                     elif first:
                         self._stated_step(t_prev, t, line)
-                    self.check_step(t_prev, t, self.t_s, line)
+                    if self.stamp_error is None or _unit_hint(t - t_prev, self.t_s):
+                        self.check_step(t_prev, t, self.t_s, line)
+                    else:
+                        self._clocked(t_prev, t, line)
                 first = False
             yield line, t, q, values
             t_prev = t
+
+    def _clocked(self, t_prev: float, t: float, line: int) -> None:
+        """Steps of whole periods (dropped samples) or, with a positive stamp error, any positive ones:
+        :class:`~verifier.clock.SampleClock` checks each as it is read."""
+        from .clock import SampleClock
+
+        try:
+            if self.clock is None:
+                self.clock = SampleClock(self.t_s, self.stamp_error, name=self.name)
+                self.clock.append(t_prev, where="the first sample")
+            self.clock.append(t, where=f"{self.where} {line}")
+        except TrajectoryFileError as exc:
+            restamp = f"; or, if the samples were taken every period, {self.restamp}" if self.stamp_error == 0 else ""
+            raise TrajectoryFileError(f"{exc}{restamp}{self.uneven_hint}") from None
 
     def samples(self):
         """Yield ``(position, t, q)``: where the sample was read, its time (s) and readings ``(n,)``, checked."""
@@ -316,8 +342,9 @@ class TrajectoryReader(SampleReader):
     """
 
     def __init__(self, stream, n: int, name, *, t_s: float | None = None, even: bool = True,
-                 nominal_t_s: float | None = None, q_range=None):
-        super().__init__(n, name, t_s=t_s, even=even, nominal_t_s=nominal_t_s, q_range=q_range)
+                 nominal_t_s: float | None = None, q_range=None, stamp_error: float | None = None):
+        super().__init__(n, name, t_s=t_s, even=even, nominal_t_s=nominal_t_s, q_range=q_range,
+                         stamp_error=stamp_error)
         self.header = None
         self._rows = csv.reader(stream)
         self._cols = {"q": [f"q{i + 1}" for i in range(n)], "qd": [f"qd{i + 1}" for i in range(n)],

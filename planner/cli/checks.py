@@ -63,6 +63,8 @@ MAX_ACCELERATION = 1e6
 MAX_INITIAL_SPEED = 1e3
 #: Longest sampling period accepted, s.
 MAX_T_S = 10.0
+#: Largest time stamp error accepted, s (half of the longest period: two stamps of one step would touch).
+MAX_STAMP_ERROR = MAX_T_S / 2
 #: Speeds at the singularity accepted, m/s (a plan or simulation beyond is a typo).
 MAX_SPEED = 20.0
 #: Finest resolution of v_min and of the refutation bound, m/s: each halving
@@ -184,6 +186,10 @@ def _tracker(a, robot) -> None:
     _bound("--a-max", "a_max", a.a_max, robot, MAX_ACCELERATION)
     _bound("--xd0", "xd0", a.xd0, robot, MAX_INITIAL_SPEED)
     _bound("--t-s", "t_s", getattr(a, "t_s", None), robot, MAX_T_S)
+    _in("--stamp-error", getattr(a, "stamp_error", None), 0.0, MAX_STAMP_ERROR, lo_open=False, unit=" s")
+    if getattr(a, "certificate", None) and getattr(a, "stamp_error", 0.0):
+        raise InputError("--certificate pairs each reading with the certified plan's sample of the same index, so it "
+                         "covers executions sampled every period of the plan: drop --stamp-error, or --certificate")
     if a.x0 is not None:
         v = floats_option(a.x0, 2 * robot.n, "--x0")
         for i, (lo, hi) in enumerate(zip(v[0::2], v[1::2])):

@@ -138,9 +138,14 @@ def _tracker_options(p, robot):
     p.add_argument("--eps-q", type=number, help=f"encoder error bound, {_unit(robot, 'eps_q')} (" + _robot_default(robot, "eps_q") + ")")
     p.add_argument("--xd0", type=number, help="initial velocity bound, m/s, every pose axis (robots whose axes are all "
                                               "lengths; " + _robot_default(robot, "xd0") + ")")
-    p.add_argument("--t-s", type=number, help="sampling period, s: every step of the time column (in s) must equal "
-                                              "it (default: inferred from the time column, the first step fixing it; "
+    p.add_argument("--t-s", type=number, help="sampling period, s: every step of the time column (in s) is a whole "
+                                              "number of it, or within --stamp-error (default: inferred from the time "
+                                              "column, the first step fixing it; "
                                               + _robot_default(robot, "t_s") + ")")
+    p.add_argument("--stamp-error", type=number, default=0.0, metavar="S",
+                   help="bound on each time stamp's error, s: 0 for a fixed-period controller (every step a whole "
+                        "number of periods: a dropped sample is a step of two); more for jittered stamps, each "
+                        "sample's true time within it of its stamp (docs/soundness.md, 'Time stamps')")
     p.add_argument("--velocity-model", choices=[m.value for m in VelocityModel], default=VelocityModel.SOUND.value,
                    help="joint-data error model (paper = quantisation only, NOT sound)")
     p.add_argument("--backend", choices=[b.value for b in Backend], default=Backend.COMPILED.value,

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from crosscert.robots.errors import CrosscertError, InputError, TrajectoryFileError
+from crosscert.verifier.clock import SampleClock
 from crosscert.verifier.plots import plot_run
 from crosscert.verifier.step import Backend
 from crosscert.verifier.tracker import Tracker
@@ -63,13 +64,15 @@ def _recording(a, robot):
     ``samples()`` are ``(position, t, q)``, every format's times checked alike."""
     return open_recording(a.trajectory, robot.n, topic=a.topic, stamp=a.stamp,
                           joints=None if a.joints is None else joint_names(a.joints, robot.n),
-                          t_s=a.t_s, nominal_t_s=robot.t_s, q_range=(robot.q_lo_array, robot.q_hi_array))
+                          t_s=a.t_s, nominal_t_s=robot.t_s, q_range=(robot.q_lo_array, robot.q_hi_array),
+                          stamp_error=a.stamp_error)
 
 
 def _tracked(a, robot, model, run, bar):
     """The recording through ``run`` (the forward pass), then the window passes when they may decide:
     ``(summary, file name)``; ``bar`` (a :class:`PhaseBar` or None) is told each phase."""
     readings = [] if a.reasoning == Reasoning.WINDOW.value else None
+    stamps = []
     enter(bar, Phase.FORWARD, unit="sample")
     with _recording(a, robot) as reader:
         name = reader.name
@@ -78,6 +81,7 @@ def _tracked(a, robot, model, run, bar):
             run.feed(line, t, q, reader.t_s)
             if readings is not None:
                 readings.append(q)
+                stamps.append(t)
                 if len(readings) > WINDOW_MAX_SAMPLES:
                     readings = None  # too long for the window: the forward verdict stands
             if bar is not None:
@@ -99,8 +103,10 @@ def _tracked(a, robot, model, run, bar):
             # stops the window early on a recording no sound method can decide (both final modes explained)
             explainer = RefutingExplainer()
             # the run's own settings: a tracker re-seeded by a window starts with no bound on its velocity
+            # the samples' times as the tracker read them (steps of t_s: the constant-period window)
+            clock = SampleClock.from_stamps(stamps, run.t_s, a.stamp_error, name=name)
             win = track_window(model, np.asarray(readings, dtype=float), run.online.settings,
-                               x0=run.x0_used, backend=a.backend, explainer=explainer)
+                               x0=run.x0_used, backend=a.backend, explainer=explainer, clock=clock)
             out["window"] = win.summary()
             out["window"]["explainer"] = [
                 {"final_mode": e.final_mode, "search": None if e.kind is None else e.kind.value,
@@ -238,6 +244,7 @@ class Monitor:
                  envelope=None):
         self.a, self.model, self.make_settings, self.x0 = a, model, make_settings, x0
         self.envelope = envelope  # --certificate: planner.certify.envelope.EnvelopeMonitor
+        self._env_clock = None  # --certificate: the stamps, which must come every t_s
         self.record, self.echo, self.worker = record, echo, worker
         self.online = None  # the verifier's OnlineMonitor, once the sampling period is known
         self.x0_used = None  # the initial box the tracker started from
@@ -265,7 +272,8 @@ class Monitor:
         self.x0_used = x0
         self.online = OnlineMonitor(self.model, settings, x0, backend=self.a.backend, horizon=self.a.horizon,
                                     worker=self.worker, window=self.a.reasoning == Reasoning.WINDOW.value,
-                                    spread_hypotheses=getattr(self.a, "spread_hypotheses", False))
+                                    spread_hypotheses=getattr(self.a, "spread_hypotheses", False),
+                                    clock=SampleClock(self.t_s, self.a.stamp_error))
 
     def feed(self, line: int, t: float, q, t_s: float | None) -> None:
         """Track the sample read on ``line`` (time ``t`` s, readings ``q`` rad) and print its events."""
@@ -289,7 +297,7 @@ class Monitor:
     def _track(self, line: int, t: float, q, latency) -> None:
         """One sample through the online monitor: its latency, its boxes when recorded, its events."""
         t0 = time.perf_counter_ns()
-        r = self.online.update(q)
+        r = self.online.update(q, t)
         latency.add(time.perf_counter_ns() - t0)
         self.times[r.k] = (t, line)
         if self.record:
@@ -330,6 +338,13 @@ class Monitor:
 
     def _feed_envelope(self, line: int, t: float, q) -> None:
         """``--certificate``: the reading against the certified envelope; an event when the state changes."""
+        if self._env_clock is None:
+            self._env_clock = SampleClock(self.t_s, name=self.a.trajectory)
+        self._env_clock.append(t, where=f"line {line}")
+        if not self._env_clock.even:
+            raise InputError(f"{self.a.trajectory}, line {line}: a sample was dropped before this one, and "
+                             "--certificate pairs each reading with the certified plan's sample of the same index: "
+                             "track this recording without --certificate")
         before = self.envelope.status.state
         t0 = time.perf_counter_ns()
         st = self.envelope.update(q)

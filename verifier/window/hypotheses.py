@@ -123,15 +123,18 @@ class Hypothesis:
             return np.maximum(self.final[:, 0], end[:, 0]), np.minimum(self.final[:, 1], end[:, 1])
         return self.tx[:, 0, 0], self.tx[:, 0, 1]
 
-    def take(self, x, xd, md, bad, xi):
+    def take(self, x, xd, md, bad, xi, times=None):
         """The tubes and contracted calibration sub-boxes ``xi`` (``(lo, hi)`` ``(R, m)``) of a pass over this
-        hypothesis' rows (forward time); drop the rows it refutes."""
+        hypothesis' rows (forward time); drop the rows it refutes.  ``times``: the samples' time enclosures
+        ``(K, 2)`` of an uneven recording (s), None for steps of ``t_s``."""
         self.passes += 1
         last, first = md[:, -1], md[:, 0]
         other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
         s = self.finals.s
         # empty tubes, or tubes no motion within a_max fits (contracted between samples: step 8)
-        dead = (bad >= 0) | contract_tubes(x, xd, s.t_s, s.a_max, compiled=self.finals.backend == Backend.COMPILED)
+        uneven = {} if times is None else {"times": times}
+        dead = (bad >= 0) | contract_tubes(x, xd, s.t_s, s.a_max, compiled=self.finals.backend == Backend.COMPILED,
+                                           **uneven)
         live = ~dead & ~other
         self.tx, self.txd = x, xd
         # the pass started from these sub-boxes and only contracted them; intersecting is exact and keeps

@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..clock import SampleClock
 from ..settings import TrackerSettings, Verdict
 from ..step import Event, pose_solution_arrays, reading_box
 from ..tracker import Tracker
@@ -19,7 +20,7 @@ from .results import HypothesisStatus, OnlineEvent, WindowState
 
 __all__ = ["Anchor", "Attempt", "Lane", "Reasoner", "CONTRADICTED", "ONLINE_FK_TOL", "ONLINE_MAX_GEOMETRIES",
            "RESEED_FK_TOL", "RESEED_SMALL", "FIRST_ATTEMPT",
-           "catch_up", "contradicted", "due", "next_attempt"]
+           "catch_up", "contradicted", "due", "next_attempt", "stamps_from"]
 
 #: Resolution (m) of the enumeration of the newest reading's poses in an attempt (coarser than the offline
 #: window's :data:`~verifier.window.offline.WINDOW_FK_TOL`: near the locus a finer one costs tens of ms).
@@ -46,6 +47,7 @@ class Anchor:
     start: WindowStart
     q: list
     x: list  # the tracker's pose box (2, n) at each of those samples: it holds the pose there
+    t: list | None = None  # their stamps, s, when the readings come with stamps (a tracker with a clock)
     attempts: int = 0
     tried: int = 0  # window length of the last attempt
     tried_full: int = 0  # window length of the last full attempt
@@ -77,7 +79,8 @@ class Lane:
         self._snap = (st.x.copy(), st.xd.copy(), st.xi.copy(), st.row_bad.copy())
         self._snap_k = -1
         self._snap_mode = 0
-        self._prev_q = None  # the previous reading and pose box: an anchor's first sample
+        self._prev_q = None  # the previous reading, its stamp and pose box: an anchor's first sample
+        self._prev_t = None
         self._prev_x = st.x_hull[0].copy()  # overwritten in place at every sample
         self._known = 0  # a re-seeded lane: the mode a window decided at its first sample
 
@@ -94,17 +97,20 @@ class Lane:
         vars(lane).update(data["fields"], tracker=tracker)
         return lane
 
-    def step(self, q):
-        """Track the reading ``q`` (checked: see :meth:`Tracker.step_reading`); returns the events it causes."""
+    def step(self, q, t=None):
+        """Track the reading ``q`` stamped ``t`` (s; None without a clock; checked: see
+        :meth:`Tracker.step_reading`); returns the events it causes."""
         if not self.consistent:  # an assumption was violated: nothing is certified any more
             self.k += 1
             return []
-        rk, r_mode, r_consistent = self.tracker.step_reading(q)
+        rk, r_mode, r_consistent = self.tracker.step_reading(q, t)
         k = self.k = self.offset + rk
         events = []
         if self.anchor is not None:
             self.anchor.q.append(q)
             self.anchor.x.append(self.tracker.state.x_hull[0].copy())
+            if self.anchor.t is not None:
+                self.anchor.t.append(t)
         if not r_consistent:
             if self.consistent:
                 events.append(OnlineEvent(Event.INCONSISTENT, k, k, 0))
@@ -125,10 +131,10 @@ class Lane:
                 events.append(OnlineEvent(Event.MODE_LOST, k, k, 0))
                 self.mode, self.since = 0, -1
                 if self.horizon and self._snap_k == k - 1 and self._prev_q is not None:
-                    self._open(q)
+                    self._open(q, t)
             if self.anchor is not None and len(self.anchor.q) > self.horizon:
                 self.anchor, self.window = None, WindowState.GAVE_UP
-        self._prev_q = q
+        self._prev_q, self._prev_t = q, t
         np.copyto(self._prev_x, self.tracker.state.x_hull[0])
         self._known = 0
         return events
@@ -145,13 +151,14 @@ class Lane:
         self.mode, self.since, self.last_mode = mode, k, mode
         return OnlineEvent(event, k, known_at, mode, by_window)
 
-    def _open(self, q):
+    def _open(self, q, t):
         x, xd, xi, bad = self._snap
         live = bad < 0
         start = WindowStart(np.ascontiguousarray(xi[live, 0]), np.ascontiguousarray(xi[live, 1]), x[live].copy(),
                             xd[live].copy(), self._snap_mode)
         self.anchor = Anchor(self._snap_k, self.last_mode, start, [self._prev_q, q],
-                             [self._prev_x.copy(), self.tracker.state.x_hull[0].copy()])
+                             [self._prev_x.copy(), self.tracker.state.x_hull[0].copy()],
+                             None if self.tracker.clock is None else [self._prev_t, t])
         self.window = WindowState.OPEN
 
 
@@ -164,6 +171,7 @@ class Attempt:
     q: np.ndarray
     last_box: np.ndarray  # (2, n): the tracker's pose box at the last reading
     full: bool
+    t: np.ndarray | None = None  # the readings' stamps, s (None: every t_s)
 
     @classmethod
     def of(cls, lane: Lane | None, anchor: Anchor, full: bool, length: int | None = None) -> "Attempt":
@@ -177,7 +185,8 @@ class Attempt:
             anchor.tried = n
             if full:
                 anchor.tried_full = n
-        return cls(lane, anchor, np.array(anchor.q[:n]), anchor.x[n - 1].copy(), full)
+        return cls(lane, anchor, np.array(anchor.q[:n]), anchor.x[n - 1].copy(), full,
+                   None if anchor.t is None else np.array(anchor.t[:n]))
 
 
 @dataclass(frozen=True)
@@ -189,6 +198,11 @@ class Reasoner:
     backend: str
     horizon: int
     spread: bool
+    stamp_error: float | None = None  # the readings' stamps' error bound, s (None: readings every t_s)
+
+    def clock(self):
+        """An empty clock for a tracker of stamped readings (:mod:`verifier.clock`), None without stamps."""
+        return None if self.stamp_error is None else SampleClock(self.settings.t_s, self.stamp_error)
 
     def run(self, at: Attempt):
         """One window over the attempt's readings: the surviving hypothesis of a decided window,
@@ -196,8 +210,10 @@ class Reasoner:
         rows = at.anchor.start.rows
         opts = ({"max_geometries": max(rows, ONLINE_MAX_GEOMETRIES)} if at.full
                 else {"max_geometries": rows, "one_motion": 0})
+        clock = None if at.t is None else SampleClock.from_stamps(at.t, self.settings.t_s, self.stamp_error)
         w = track_window(self.model, at.q, self.settings, start=at.anchor.start, backend=self.backend,
-                         parallel=False, final_search=(at.last_box[0], at.last_box[1]), fk_tol=ONLINE_FK_TOL, **opts)
+                         parallel=False, final_search=(at.last_box[0], at.last_box[1]), fk_tol=ONLINE_FK_TOL,
+                         clock=clock, **opts)
         if w.verdict is Verdict.INCONSISTENT:
             return CONTRADICTED
         if w.verdict not in (Verdict.MODE_CHANGED, Verdict.MODE_UNCHANGED):
@@ -215,7 +231,7 @@ class Reasoner:
         xi = (h.xi_lo.min(axis=0), h.xi_hi.max(axis=0))
         x0 = self.decided_box(at.q[-1], h.final_mode, xi, (h.x_lo[-1], h.x_hi[-1]))
         tracker = Tracker(self.model, self.reseed_settings(), x0, xi_box=xi, backend=self.backend,
-                          spread_hypotheses=self.spread)
+                          spread_hypotheses=self.spread, clock=self.clock())
         tracker.state.xd[:, 0], tracker.state.xd[:, 1] = h.xd_lo[-1], h.xd_hi[-1]
         lane = Lane(tracker, j, 0, at.anchor.mode, self.horizon)
         # the decided mode holds at j before the new tracker reads q_j (it may then fail to certify it: lost)
@@ -239,13 +255,13 @@ class Reasoner:
             return search[0].copy(), search[1].copy()
         return np.maximum(box[0], search[0]), np.minimum(box[1], search[1])
 
-    def apply(self, lane: Lane, at: Attempt, h, backlog) -> tuple:
+    def apply(self, lane: Lane, at: Attempt, h, backlog, stamps=None) -> tuple:
         """The lane after an attempt's answer ``h`` (not None), with its first event and the events of
-        ``backlog`` (the readings from the attempt's last one on) through it."""
+        ``backlog`` (the readings from the attempt's last one on, stamped ``stamps``) through it."""
         if h is CONTRADICTED:
             return contradicted(lane, at.anchor.k + len(at.q) - 1)
         new, first = self.reseeded(at, h)
-        return new, first, catch_up(new, backlog)
+        return new, first, catch_up(new, backlog, stamps)
 
 
 def next_attempt(anchor: Anchor, settling: bool) -> tuple:
@@ -277,9 +293,14 @@ def contradicted(lane: Lane, j: int) -> tuple:
     return new, OnlineEvent(Event.INCONSISTENT, j, -1, 0, True), []
 
 
-def catch_up(new: Lane, readings) -> list:
-    """Step ``new`` over ``readings``; their events."""
+def catch_up(new: Lane, readings, stamps=None) -> list:
+    """Step ``new`` over ``readings`` (stamped ``stamps``, s, when its tracker has a clock); their events."""
     events = []
-    for q in readings:
-        events += new.step(q)
+    for i, q in enumerate(readings):
+        events += new.step(q, None if stamps is None else stamps[i])
     return events
+
+
+def stamps_from(anchor: Anchor, start: int, stop: int | None = None):
+    """The stamps of the anchor's readings ``start .. stop - 1`` (None when its readings carry none)."""
+    return None if anchor.t is None else anchor.t[start:stop]

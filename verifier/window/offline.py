@@ -113,7 +113,8 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
                  max_geometries: int = WINDOW_MAX_GEOMETRIES, backend: str | Backend = Backend.COMPILED,
                  parallel: bool = True, goal: Verdict | None = None,
                  one_motion: int = ONE_MOTION_SAMPLES, explainer: Explainer | None = None,
-                 start: WindowStart | None = None, final_search=None, fk_tol: float = WINDOW_FK_TOL) -> WindowResult:
+                 start: WindowStart | None = None, final_search=None, fk_tol: float = WINDOW_FK_TOL,
+                 clock=None) -> WindowResult:
     """Verdict of a whole recording by forward-backward window passes (:mod:`verifier.window`).
 
     Parameters
@@ -175,6 +176,11 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
         hypotheses are enumerated inside it rather than in the robot's ``x_bounds``.
     fk_tol : float
         Resolution (m) of that enumeration: coarser is faster, with wider final boxes.
+    clock : verifier.clock.SampleClock, optional
+        When the samples were taken, for an uneven recording (dropped samples, jittered stamps): the
+        passes and the pair contraction use its step enclosures.  The one-motion step and the explainer
+        assume samples every ``t_s`` and are not run on an uneven clock (a refutation not tried only
+        leaves a verdict open).  Every ``settings.t_s`` when None.
 
     Returns
     -------
@@ -184,7 +190,7 @@ def track_window(model, q_meas, settings: TrackerSettings, *, x0=None, initial_m
     req = _checked_request(model, q_meas, settings, x0=x0, initial_mode=initial_mode, xi_box=xi_box,
                            max_passes=max_passes, rel_tol=rel_tol, max_geometries=max_geometries, backend=backend,
                            parallel=parallel, goal=goal, one_motion=one_motion, explainer=explainer, start=start,
-                           final_search=final_search, fk_tol=fk_tol)
+                           final_search=final_search, fk_tol=fk_tol, clock=clock)
     return _run_window(req, t0)
 
 
@@ -204,6 +210,8 @@ class _Request:
         The search box of the last pose, float64 arrays ``(n,)``, m.
     goal : Verdict or None
         The goal as a :class:`Verdict`.
+    clock : verifier.clock.SampleClock or None
+        An uneven clock of the ``K`` samples; None for steps of ``t_s`` (an even clock is dropped).
 
     The other attributes are :func:`track_window`'s arguments as given.
     """
@@ -225,10 +233,11 @@ class _Request:
     start: WindowStart | None
     final_search: object
     fk_tol: float
+    clock: object = None
 
 
 def _checked_request(model, q_meas, settings, *, x0, initial_mode, xi_box, max_passes, rel_tol, max_geometries,
-                     backend, parallel, goal, one_motion, explainer, start, final_search, fk_tol) -> _Request:
+                     backend, parallel, goal, one_motion, explainer, start, final_search, fk_tol, clock=None) -> _Request:
     """Check :func:`track_window`'s arguments (raising :class:`InputError`) and convert them: a :class:`_Request`."""
     s = settings.validated(model.n)
     q = np.ascontiguousarray(np.asarray(q_meas, dtype=np.float64))
@@ -255,8 +264,16 @@ def _checked_request(model, q_meas, settings, *, x0, initial_mode, xi_box, max_p
     goal = _goal(goal)
     if sum(v is not None for v in (x0, initial_mode, start)) != 1:
         raise InputError("give exactly one of x0, initial_mode and start")
+    if clock is not None:
+        if len(clock) != q.shape[0] or clock.t_s != float(s.t_s):
+            raise InputError(f"the clock has {len(clock)} times at a period of {clock.t_s!r} s for {q.shape[0]} "
+                             f"readings at t_s = {float(s.t_s)!r} s")
+        if clock.even:
+            clock = None  # steps of t_s: the constant-period window, bit for bit
+        else:
+            one_motion, explainer = 0, None  # both read samples every t_s (docstring)
     return _Request(model, q, s, x0, initial_mode, xi_box, max_passes, rel_tol, max_geometries, backend, parallel,
-                    goal, one_motion, explainer, start, final_search, fk_tol)
+                    goal, one_motion, explainer, start, final_search, fk_tol, clock)
 
 
 def _start_rows(req: _Request, XI):
@@ -333,7 +350,7 @@ class _Forward:
 def _forward_pass(req: _Request, cfg_f, x0, xi_rows, first_prior) -> _Forward:
     """Run the first forward pass from the boxes ``x0`` of the rows ``xi_rows`` and read its modes and verdict."""
     start, K = req.start, req.q.shape[0]
-    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, req.q, x0, xi_rows, first_prior)
+    fx, fxd, fmode, fbad, fxi = run_pass(cfg_f, req.q, x0, xi_rows, first_prior, req.clock)
     # the rows' sub-boxes after the tracker (contracted only when the settings keep them, keep_xi)
     xi_rows = (np.maximum(xi_rows[0], fxi[0]), np.minimum(xi_rows[1], fxi[1]))
     f_alive = fbad < 0
@@ -399,7 +416,7 @@ def _hypotheses_verdict(req: _Request, XI, x0, fwd: _Forward, cfg_wf, cfg_b):
     if not any(h.refuted for h in hyps):
         full_w = XI[1] - XI[0]  # halving measures widths against the calibration box
         ask = _asker(req, XI, x0, m0)
-        decide(hyps, Passes(q, cfg_wf, cfg_b), req.max_passes, req.rel_tol, req.max_geometries, full_w,
+        decide(hyps, Passes(q, cfg_wf, cfg_b, req.clock), req.max_passes, req.rel_tol, req.max_geometries, full_w,
                _targets(hyps, m0, req.goal), int(req.one_motion), ask)
     else:  # refuted by the last reading alone: the other ran no pass
         for h in hyps:

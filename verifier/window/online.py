@@ -12,11 +12,13 @@ import numpy as np
 
 from crosscert.robots.errors import InputError
 
+from ..clock import SampleClock
 from ..settings import TrackerSettings, Verdict
 from ..step import Backend, Event
 from ..tracker import Tracker
 from .lane import (FIRST_ATTEMPT, ONLINE_FK_TOL, ONLINE_MAX_GEOMETRIES, RESEED_FK_TOL,  # noqa: F401 (its names)
-                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, due, next_attempt)
+                   RESEED_SMALL, Attempt, Lane, Reasoner, catch_up, contradicted, due, next_attempt,
+                   stamps_from)
 from .results import OnlineEvent, OnlineResult, WindowState
 from .worker import WindowProcess, WindowWorkerStopped, pack_readings
 
@@ -104,6 +106,10 @@ class OnlineMonitor:
         window's Python code holds it; ``None`` leaves it.
     spread_hypotheses : bool
         See :class:`~verifier.tracker.Tracker`.
+    clock : verifier.clock.SampleClock, optional
+        An empty clock of ``settings.t_s`` when every reading comes with its stamp (:meth:`update`'s ``t``):
+        dropped samples, or stamps within its ``stamp_error`` (:mod:`verifier.clock`).  Readings every
+        ``t_s`` when None.
 
     Examples
     --------
@@ -118,7 +124,7 @@ class OnlineMonitor:
     def __init__(self, model, settings: TrackerSettings, x0, *, xi_box=None,
                  backend: str | Backend = Backend.COMPILED, horizon: int = ONLINE_HORIZON, worker: bool | str = True,
                  window: bool = True, spread_hypotheses: bool = False,
-                 switch_interval: float | None = SWITCH_INTERVAL):
+                 switch_interval: float | None = SWITCH_INTERVAL, clock=None):
         if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 2:
             raise InputError(f"horizon must be at least 2 samples, got {horizon!r}")
         self.model, self.backend = model, str(Backend(backend))
@@ -127,8 +133,10 @@ class OnlineMonitor:
         kind = {True: "process", False: "inline"}.get(worker, worker) if window else "inline"
         if kind not in WORKERS:
             raise InputError(f"worker must be one of {WORKERS} (True: process, False: inline), got {worker!r}")
-        self._reasoner = Reasoner(model, self.settings, self.backend, self.horizon, self._spread)
-        tracker = Tracker(model, settings, x0, xi_box=xi_box, backend=backend, spread_hypotheses=spread_hypotheses)
+        self._reasoner = Reasoner(model, self.settings, self.backend, self.horizon, self._spread,
+                                  None if clock is None else clock.stamp_error)
+        tracker = Tracker(model, settings, x0, xi_box=xi_box, backend=backend, spread_hypotheses=spread_hypotheses,
+                          clock=clock)
         self._lane = Lane(tracker, 0, 0, 0, self.horizon if window else 0)
         self.initial_mode = 0
         self.decisions = 0  # windows that decided
@@ -155,8 +163,9 @@ class OnlineMonitor:
             self._thread.start()
 
     # ------------------------------------------------------------------ the update path
-    def update(self, q) -> OnlineResult:
-        """Feed the reading ``q`` ``(n,)``, rad: the tracker's step, and what the window found meanwhile."""
+    def update(self, q, t: float | None = None) -> OnlineResult:
+        """Feed the reading ``q`` ``(n,)``, rad, stamped ``t`` (s; only with a ``clock``): the tracker's step,
+        and what the window found meanwhile."""
         q = np.array(q, dtype=np.float64).reshape(-1)  # a copy of its own: kept by the window
         if q.shape != (self.model.n,) or not all(map(math.isfinite, q.tolist())):  # Python floats: cheaper
             raise InputError(f"a reading must be {self.model.n} finite joint values, got {q!r}")
@@ -168,7 +177,7 @@ class OnlineMonitor:
                 self._answers()
             lane = self._lane
             events, self._queued = self._queued, []
-            events += lane.step(q)
+            events += lane.step(q, t)
             if lane.k == 0 and lane.mode:
                 self.initial_mode = lane.mode
             if self._proc is not None:
@@ -306,7 +315,8 @@ class OnlineMonitor:
         h = self._run(at)
         if h is None:
             return []
-        new, first, events = self._reasoner.apply(lane, at, h, at.anchor.q[len(at.q) - 1:])
+        new, first, events = self._reasoner.apply(lane, at, h, at.anchor.q[len(at.q) - 1:],
+                                                  stamps_from(at.anchor, len(at.q) - 1))
         return self._swap(new, first, events, known_at=lane.k)
 
     def _swap(self, new: Lane, first: OnlineEvent, events: list, known_at: int) -> list:
@@ -354,11 +364,12 @@ class OnlineMonitor:
                     continue  # the tracker decided by itself (or gave up) meanwhile: the answer is moot
                 done = len(at.q) - 1
                 readings = list(at.anchor.q[done:])
-            new, first, events = self._reasoner.apply(lane, at, h, readings)
+                stamps = stamps_from(at.anchor, done, done + len(readings))
+            new, first, events = self._reasoner.apply(lane, at, h, readings, stamps)
             with self._lock:
                 if not valid():
                     continue
-                events += catch_up(new, at.anchor.q[done + len(readings):])
+                events += catch_up(new, at.anchor.q[done + len(readings):], stamps_from(at.anchor, done + len(readings)))
                 self._queued += self._swap(new, first, events, known_at=lane.k)
 
 
@@ -370,7 +381,8 @@ class OnlineMonitor:
         its model: the robot does not pickle, or does not load in a fresh interpreter."""
         x0 = tuple(np.array(v, dtype=np.float64) for v in x0)
         try:
-            proc = WindowProcess(self.model.robot, self.settings, self.backend, self.horizon, self._spread, x0)
+            proc = WindowProcess(self.model.robot, self.settings, self.backend, self.horizon, self._spread, x0,
+                                 self._reasoner.stamp_error)
         except (pickle.PicklingError, TypeError, AttributeError):
             return False
         self._proc = proc
@@ -406,10 +418,11 @@ class OnlineMonitor:
         if a is not self._sent:
             self._id += 1
             self._sent, self._sent_n = a, len(a.q)
-            self._proc.send(("open", self._id, a.k, a.mode, a.start, a.q, a.x))
+            self._proc.send(("open", self._id, a.k, a.mode, a.start, a.q, a.x, a.t))
             return
         if len(a.q) - self._sent_n >= (1 if flush else FEED_EVERY):
-            self._proc.send(("q", self._id, pack_readings(a.q[self._sent_n:], a.x[self._sent_n:])))
+            self._proc.send(("q", self._id, pack_readings(a.q[self._sent_n:], a.x[self._sent_n:],
+                                                          stamps_from(a, self._sent_n))))
             self._sent_n = len(a.q)
 
     def _answers(self) -> None:
@@ -430,7 +443,8 @@ class OnlineMonitor:
                     new, first, events = contradicted(lane, lane.anchor.k + used - 1)
                 else:
                     new = Lane.restore(frame[3], self._spares.pop())
-                    first, events = frame[4], frame[5] + catch_up(new, lane.anchor.q[used:])
+                    first, events = frame[4], frame[5] + catch_up(new, lane.anchor.q[used:],
+                                                                  stamps_from(lane.anchor, used))
                     if any(lane.tracker is t for t in self._own):
                         self._spares.append(lane.tracker)
                 self._sent = None  # the child dropped it; a window of the new lane is sent as a new one
@@ -462,14 +476,18 @@ class OnlineMonitor:
 
 
 def online_boxes(model, q, settings: TrackerSettings, x0, *, xi_box=None, backend: str | Backend = Backend.COMPILED,
-                 horizon: int = ONLINE_HORIZON) -> dict:
+                 horizon: int = ONLINE_HORIZON, clock=None) -> dict:
     """The boxes an inline :class:`OnlineMonitor` reports at every sample of the readings ``q`` ``(K, n)``
     (rad): ``x_lo, x_hi, xd_lo, xd_hi`` ``(K, n)`` (m, m/s), ``mode`` ``(K,)`` (from a window's decision on,
-    the decided mode's boxes), and ``decided`` (the samples its windows decided), for a figure."""
+    the decided mode's boxes), and ``decided`` (the samples its windows decided), for a figure; ``clock``: the
+    readings' uneven times (a :class:`~verifier.clock.SampleClock` of ``K`` samples), None for steps of ``t_s``."""
     rows, decided = [], []
-    with OnlineMonitor(model, settings, x0, xi_box=xi_box, backend=backend, horizon=horizon, worker=False) as mon:
-        for qk in np.asarray(q, dtype=np.float64):
-            r = mon.update(qk)
+    stamps = None if clock is None else clock.stamps()
+    fresh = None if clock is None else SampleClock(clock.t_s, clock.stamp_error)
+    with OnlineMonitor(model, settings, x0, xi_box=xi_box, backend=backend, horizon=horizon, worker=False,
+                       clock=fresh) as mon:
+        for k, qk in enumerate(np.asarray(q, dtype=np.float64)):
+            r = mon.update(qk, None if stamps is None else stamps[k])
             rows.append((r.x[0], r.x[1], r.xd[0], r.xd[1], r.mode))
             decided += [e.k for e in r.events if e.by_window and e.mode]
     out = {key: np.array([row[i] for row in rows]) for i, key in enumerate(("x_lo", "x_hi", "xd_lo", "xd_hi", "mode"))}

@@ -24,15 +24,16 @@ def _reverse(x, xd):
     return np.ascontiguousarray(xr), np.ascontiguousarray(xdr)
 
 
-def run_pass(config, q, x0, xi_rows, prior):
+def run_pass(config, q, x0, xi_rows, prior, clock=None):
     """One pass over readings ``q`` ``(K, n)`` for rows ``R``: tubes ``(R, K, 2, n)``, modes ``(R, K)``, death
     ``(R,)`` and the rows' calibration sub-boxes ``(lo, hi)`` ``(R, m)`` at the end of the pass (contracted by
-    every sample's loop closure when ``config`` keeps them, ``keep_xi``; meaningless for a dead row)."""
+    every sample's loop closure when ``config`` keeps them, ``keep_xi``; meaningless for a dead row); ``clock``
+    the samples' uneven times (:mod:`verifier.clock`), None for steps of ``t_s``."""
     lo, hi = xi_rows
     R, (K, n) = lo.shape[0], q.shape
     st = init_state(config, x0, batch=R, xi_box=(lo, hi))
     rec = (np.empty((R, K, 2, n)), np.empty((R, K, 2, n)), np.empty((R, K), np.int64), np.empty((R, K, n)))
-    advance(config, st, np.broadcast_to(q, (R, K, n)), rec, prior)
+    advance(config, st, np.broadcast_to(q, (R, K, n)), rec, prior, clock)
     return rec[0], rec[1], rec[2], st.bad_at.copy(), (st.xi[:, 0].copy(), st.xi[:, 1].copy())
 
 
@@ -106,9 +107,12 @@ class Passes:
     """The passes of the window: one ``advance`` call per pass over a hypothesis' rows, spread over the
     threads (each row is its own scenario: the rows batched with it change none of its boxes)."""
 
-    def __init__(self, q, cfg_f, cfg_b):
+    def __init__(self, q, cfg_f, cfg_b, clock=None):
         self.q, self.cfg_f, self.cfg_b = q, cfg_f, cfg_b
         self.q_rev = np.ascontiguousarray(q[::-1])
+        # an uneven recording's times: forward, reversed for the backward passes, and the samples' enclosures
+        self.clock, self.clock_rev = clock, None if clock is None else clock.window(0, reverse=True)
+        self.times = None if clock is None else clock.times()
         self.rows = 0  # rows run by every pass so far: the cost :func:`~verifier.window.hypotheses.decide` balances
 
     def run(self, h, backward):
@@ -116,9 +120,9 @@ class Passes:
         x0, xi = h.starts(backward), (h.xlo, h.xhi)
         self.rows += len(h.xlo)
         if backward:
-            x, xd, md, bad, xi = run_pass(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd))
+            x, xd, md, bad, xi = run_pass(self.cfg_b, self.q_rev, x0, xi, _reverse(h.tx, h.txd), self.clock_rev)
             x, xd = _reverse(x, xd)
             md = md[:, ::-1]
         else:
-            x, xd, md, bad, xi = run_pass(self.cfg_f, self.q, x0, xi, (h.tx, h.txd))
-        h.take(x, xd, md, bad, xi)
+            x, xd, md, bad, xi = run_pass(self.cfg_f, self.q, x0, xi, (h.tx, h.txd), self.clock)
+        h.take(x, xd, md, bad, xi, self.times)

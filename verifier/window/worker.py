@@ -41,7 +41,7 @@ from crosscert.robots.errors import CrosscertError
 from crosscert.robots.kinematics import KinematicModel
 
 from ..tracker import Tracker
-from .lane import CONTRADICTED, FIRST_ATTEMPT, Anchor, Attempt, Reasoner, catch_up, due, next_attempt
+from .lane import CONTRADICTED, FIRST_ATTEMPT, Anchor, Attempt, Reasoner, catch_up, due, next_attempt, stamps_from
 from .offline import WindowStart
 
 __all__ = ["WindowProcess", "WindowWorkerStopped", "pack_readings", "serve"]
@@ -59,14 +59,17 @@ class WindowWorkerStopped(CrosscertError):
     """The window's worker process ended (or could not start) while the monitor still needed it."""
 
 
-def pack_readings(q: list, x: list) -> bytes:
-    """Readings ``(n,)`` and the tracker's pose boxes ``(2, n)`` there, as one frame's bytes (float64)."""
-    return np.concatenate([np.concatenate([qi.ravel(), xi.ravel()]) for qi, xi in zip(q, x)]).tobytes()
+def pack_readings(q: list, x: list, t: list | None = None) -> bytes:
+    """Readings ``(n,)``, the tracker's pose boxes ``(2, n)`` there and, when the readings are stamped, their
+    stamps ``t`` (s), as one frame's bytes (float64)."""
+    stamps = [()] * len(q) if t is None else [(ti,) for ti in t]
+    return np.concatenate([np.concatenate([qi.ravel(), xi.ravel(), ti]) for qi, xi, ti in zip(q, x, stamps)]).tobytes()
 
 
-def _unpack_readings(data: bytes, n: int):
-    v = np.frombuffer(data, dtype=np.float64).reshape(-1, 3 * n)
-    return [(row[:n].copy(), row[n:].reshape(2, n).copy()) for row in v]
+def _unpack_readings(data: bytes, n: int, stamped: bool):
+    """``(q, x, t)`` of each reading :func:`pack_readings` packed (``t`` None when not ``stamped``)."""
+    v = np.frombuffer(data, dtype=np.float64).reshape(-1, 3 * n + int(stamped))
+    return [(row[:n].copy(), row[n:3 * n].reshape(2, n).copy(), float(row[3 * n]) if stamped else None) for row in v]
 
 
 class _Inbox:
@@ -134,7 +137,7 @@ class WindowProcess:
     it is collected, or at the latest when the interpreter exits.
     """
 
-    def __init__(self, robot, settings, backend: str, horizon: int, spread: bool, x0):
+    def __init__(self, robot, settings, backend: str, horizon: int, spread: bool, x0, stamp_error=None):
         self._proc = subprocess.Popen([sys.executable, "-c", "from crosscert.verifier.window.worker import serve; serve()"],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
         self.pid = self._proc.pid
@@ -145,7 +148,7 @@ class WindowProcess:
         self.inbox = _Inbox()
         self.inbox.on_end.append(self.started.set)
         self._stopper = weakref.finalize(self, _stop, self._proc, 1.0)
-        self._write(pickle.dumps((robot, settings, backend, horizon, spread, x0)))  # small: the pipe holds it
+        self._write(pickle.dumps((robot, settings, backend, horizon, spread, x0, stamp_error)))  # small: the pipe holds it
         threading.Thread(target=_read, args=(self._proc.stdout, self.inbox, self._on_ready),
                          name="crosscert-window-reader", daemon=True).start()
 
@@ -194,13 +197,16 @@ class _Child:
     def take(self, frame) -> None:
         kind = frame[0]
         if kind == "open":
-            _, self.id, k, mode, start, q, x = frame
-            self.anchor = Anchor(k, mode, start, list(q), list(x))
+            _, self.id, k, mode, start, q, x, t = frame
+            self.anchor = Anchor(k, mode, start, list(q), list(x), None if t is None else list(t))
         elif kind == "q":
             if frame[1] == self.id and self.anchor is not None:
-                for q, x in _unpack_readings(frame[2], self.reasoner.model.n):
-                    self.anchor.q.append(q)
-                    self.anchor.x.append(x)
+                a = self.anchor
+                for q, x, t in _unpack_readings(frame[2], self.reasoner.model.n, a.t is not None):
+                    a.q.append(q)
+                    a.x.append(x)
+                    if a.t is not None:
+                        a.t.append(t)
         elif kind == "drop":
             self.anchor = self.id = None
         elif kind == "settle":
@@ -232,7 +238,7 @@ class _Child:
         included, then send it (unless the parent's window closed meanwhile: the answer is moot)."""
         a, id_ = self.anchor, self.id
         new, first = self.reasoner.reseeded(at, h)
-        events = catch_up(new, a.q[len(at.q) - 1:])
+        events = catch_up(new, a.q[len(at.q) - 1:], stamps_from(a, len(at.q) - 1))
         used = len(a.q)
         for _ in range(CATCH_UP_ROUNDS):  # each round is shorter: readings keep coming, the parent does the rest
             frames = self.inbox.take(block=False)
@@ -240,7 +246,7 @@ class _Child:
                 self.take(frame)
             if self.anchor is not a:
                 return
-            events += catch_up(new, a.q[used:])
+            events += catch_up(new, a.q[used:], stamps_from(a, used))
             used = len(a.q)
         self.send(("decided", id_, used, new.export(), first, events))
         self.anchor = self.id = None
@@ -302,10 +308,10 @@ def serve() -> None:
 
     stream = sys.stdin.buffer
     try:
-        robot, settings, backend, horizon, spread, x0 = pickle.load(stream)
+        robot, settings, backend, horizon, spread, x0, stamp_error = pickle.load(stream)
         from ..model import IntervalModel
 
-        reasoner = Reasoner(IntervalModel(robot), settings, backend, horizon, spread)
+        reasoner = Reasoner(IntervalModel(robot), settings, backend, horizon, spread, stamp_error)
         _warm(reasoner, x0)
     except EOFError:
         return
