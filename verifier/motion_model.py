@@ -22,6 +22,13 @@ vectorised over ``k``, with outward rounding (:mod:`verifier.interval`); with ``
 (the window's compiled backend) the pairs are contracted by the same operations compiled
 (:mod:`verifier.compiled.motion_model`), the same floats at a fraction of numpy's cost per call.  Shapes:
 ``R`` rows, ``K`` samples, pose dimension ``n``; SI units.
+
+Samples at stamped times (``times``: jitter, dropped samples): the pair's ``tau`` is not known, only an
+enclosure of it.  The true ``t_k`` and ``t_l`` lie in their stamps' enclosures, so the true ``tau`` lies
+in their difference (outward rounded), and ``(*)`` holds with that enclosure wherever the constant step
+used ``j t_s``: its right side grows with ``tau`` (the upper bound takes ``tau``'s upper end), and the
+projections multiply by enclosures of ``tau / 2`` and ``2 / tau``.  A pair whose enclosure reaches 0 or
+below is not contracted (the bound needs ``tau > 0``).
 """
 
 from __future__ import annotations
@@ -47,7 +54,13 @@ def _pm(box, r):
 def _constants(j: int, t_s: float, a):
     """For pairs ``j`` samples apart: enclosures of ``tau = j t_s``, ``2 / tau`` and ``4 a``, and an upper
     bound of ``a tau^2 / 4`` (``a`` ``(n,)``)."""
-    tau = I.scale(float(j), t_s, t_s)
+    return _constants_of_tau(I.scale(float(j), t_s, t_s), a)
+
+
+def _constants_of_tau(tau, a):
+    """:func:`_constants` from an enclosure ``tau`` (``tau_lo > 0``) of the time between the two samples:
+    floats, or ``(P, 1)`` arrays (one pair a row; the results broadcast over ``(R, P, n)``)."""
+    # a tau * (tau / 4): the upper end of the product of two positive enclosures, from tau's upper end
     e4 = I.mul(*I.mul(a, a, *tau), *I.scale(0.25, *tau))[1]
     return tau, I.div(2.0, 2.0, *tau), e4, I.scale(4.0, a, a)
 
@@ -75,8 +88,8 @@ def _remainder(vk, vl, e4, four_a):
 
 def _pair(x, xd, k, l, tau, inv_tau2, e4, four_a):
     """Contract the boxes of samples ``k`` and ``l`` (index arrays of equal length, ``l`` later) with ``(*)``,
-    in place (:func:`_constants` gives the other arguments).  Returns where the remainder bound is
-    negative ``(R, *, n)``."""
+    in place (:func:`_constants` gives the other arguments, or :func:`_constants_of_tau` per pair).  Returns
+    where the remainder bound is negative ``(R, *, n)``."""
     xk, xl = (x[:, k, 0], x[:, k, 1]), (x[:, l, 0], x[:, l, 1])
     vk, vl = (xd[:, k, 0], xd[:, k, 1]), (xd[:, l, 0], xd[:, l, 1])
     r = _remainder(vk, vl, e4, four_a)
@@ -96,25 +109,64 @@ def _pair(x, xd, k, l, tau, inv_tau2, e4, four_a):
     return r < 0.0
 
 
-def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled: bool = False):
+def _taus(times, j: int):
+    """Enclosures ``(lo, hi)`` ``(K - j,)`` of ``t_{k+j} - t_k`` from enclosures ``times`` ``(K, 2)`` of the
+    true times: each true time lies in its enclosure, so their difference lies in the difference of the
+    enclosures (rounded outward)."""
+    K = times.shape[0]
+    return I.sub(times[j:, 0], times[j:, 1], times[:K - j, 0], times[:K - j, 1])
+
+
+def _stamped_times(times, K: int):
+    """``times`` checked: float64 ``(K, 2)``, finite, ``lo <= hi`` in every row."""
+    t = np.asarray(times, dtype=np.float64)
+    if t.shape != (K, 2):
+        raise ValueError(f"times: shape {t.shape}, expected ({K}, 2) (one enclosure [lo, hi] per sample)")
+    if not np.all(np.isfinite(t)) or np.any(t[:, 0] > t[:, 1]):
+        raise ValueError("times: every enclosure must be finite with lo <= hi")
+    return t
+
+
+def _per_pair(v, P: int, shape=()):
+    """``v`` (a float, or per pair ``(P, 1)`` / ``(P, n)``) as a new C-contiguous ``(P, *shape)`` array.
+    Always a writable copy: a broadcast view is read-only, a different type to numba, and the kernel's
+    argument types must not depend on ``times`` or on ``P`` (one compilation, tests/test_warm.py)."""
+    v = np.asarray(v, dtype=np.float64)
+    if not shape:
+        v = v.reshape(-1)
+    return np.array(np.broadcast_to(v, (P, *shape)), dtype=np.float64, order="C")
+
+
+def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled: bool = False, times=None):
     """Contract pose and velocity tubes with the acceleration bound between pairs of samples (module docstring).
 
     Parameters
     ----------
     x, xd : ndarray, shape (R, K, 2, n)
         Pose (m) and velocity (m/s) tubes, ``[..., 0, :]`` the lower and
-        ``[..., 1, :]`` the upper bounds, at ``t_k = t_0 + k t_s``.
-        Contracted in place.
+        ``[..., 1, :]`` the upper bounds, at ``t_k = t_0 + k t_s`` (or at
+        the times of ``times``).  Contracted in place.
     t_s : float
-        Sampling period, s (assumption A6: exactly this float).
+        Sampling period, s (assumption A6: exactly this float).  Unused
+        with ``times``.
     a_max : array_like, shape (n,)
         Bound on ``|x''|`` per pose coordinate, m/s^2 (assumption A2), > 0.
     offsets : sequence of int
-        Sample distances of the coupled pairs.
+        Sample distances of the coupled pairs (in samples of the arrays:
+        with ``times``, a dropped sample is no sample).
     compiled : bool
         Contract the pairs with :func:`verifier.compiled.motion_model.pair_kernel`
         (numba; the same floats bit for bit, without numpy's cost per call)
         instead of :func:`_pair`.
+    times : array_like, shape (K, 2), optional
+        For each sample an enclosure ``[lo, hi]`` of its true time, s (any
+        origin common to all samples), finite, ``lo <= hi``, increasing
+        in ``k``: recordings with jittered stamps or dropped samples.  The
+        pair ``(k, l)`` then uses ``tau`` in
+        ``[times[l, 0] - times[k, 1], times[l, 1] - times[k, 0]]`` (rounded
+        outward), which holds the true ``t_l - t_k`` since each true time
+        lies in its enclosure; pairs whose enclosure is not positive are not
+        contracted.  None (default): the constant step ``t_s``.
 
     Returns
     -------
@@ -122,10 +174,18 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
         Rows that no motion within ``a_max`` fits: a box became empty (or
         NaN), or two samples are farther apart in velocity than ``a_max``
         allows.  Their tubes are meaningless.
+
+    Raises
+    ------
+    ValueError
+        ``times`` is not ``(K, 2)``, not finite, or has an enclosure with
+        ``lo > hi``.
     """
     R, K, n = x.shape[0], x.shape[1], x.shape[3]
     a = np.asarray(a_max, dtype=np.float64)
     empty = np.zeros(R, dtype=bool)
+    if times is not None:
+        times = _stamped_times(times, K)
     if compiled:
         from .compiled.motion_model import pair_kernel  # numba loaded on first use only
     with I.quiet_fp():
@@ -135,16 +195,27 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
             # cost: only the pairs whose velocity boxes are disjoint in some row (a choice of pairs, no bound);
             # elsewhere the square's lower bound is 0 and (*) is the plain trapezoid, which bought nothing
             gap = np.maximum(xd[:, j:, 0] - xd[:, :K - j, 1], xd[:, :K - j, 0] - xd[:, j:, 1])
-            k = np.nonzero(np.any(gap > 0.0, axis=(0, 2)))[0]
-            if not k.size:
-                continue
-            tau, inv_tau2, e4, four_a = _constants_of(j, t_s, a)
+            chosen = np.any(gap > 0.0, axis=(0, 2))
+            if times is None:
+                k = np.nonzero(chosen)[0]
+                if not k.size:
+                    continue
+                tau, inv_tau2, e4, four_a = _constants_of(j, t_s, a)
+            else:
+                # (*) needs tau > 0: a pair whose enclosure is not positive is skipped, its boxes kept as they
+                # are (sound, merely not contracted); NaN cannot reach here, the times are finite
+                lo, hi = _taus(times, j)
+                k = np.nonzero(chosen & (lo > 0.0))[0]
+                if not k.size:
+                    continue
+                tau, inv_tau2, e4, four_a = _constants_of_tau((lo[k, None], hi[k, None]), a)
             if compiled:
+                P = k.size
                 half = I.scale(0.5, *tau)
-                per_axis = (np.ascontiguousarray(np.broadcast_to(v, (n,)), np.float64) for v in (e4, *four_a))
-                pair_kernel(x, xd, k.astype(np.int64), j, float(tau[0]), float(tau[1]), float(inv_tau2[0]),
-                            float(inv_tau2[1]), float(half[0]), float(half[1]), *per_axis, np.empty((k.size, 8)),
-                            empty)
+                per_pair = (_per_pair(v, P) for v in (*tau, *inv_tau2, *half))
+                per_axis = (np.ascontiguousarray(np.broadcast_to(v, (n,)), np.float64) for v in four_a)
+                pair_kernel(x, xd, k.astype(np.int64), j, *per_pair, _per_pair(e4, P, (n,)), *per_axis,
+                            np.empty((P, 8)), empty)
             else:
                 neg = _pair(x, xd, k, k + j, tau, inv_tau2, e4, four_a)
                 empty |= neg.any(axis=(1, 2))

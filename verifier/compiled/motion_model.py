@@ -25,9 +25,11 @@ _POSE = np.int64(4)
 def pair_kernel(x, xd, k, j, tau_lo, tau_hi, it_lo, it_hi, half_lo, half_hi, e4, fa_lo, fa_hi, new, dead):
     """Contract the boxes of samples ``k`` and ``k + j`` of tubes ``x``, ``xd`` ``(R, K, 2, n)`` in place.
 
-    ``tau``, ``it`` (``2 / tau``) and ``half`` (``tau / 2``) are enclosures; ``e4`` ``(n,)`` the upper
-    bound of ``a tau^2 / 4``, ``fa`` ``(n,)`` the enclosure of ``4 a``.  ``new`` ``(len(k), 8)`` is
-    scratch; ``dead`` ``(R,)`` is set where a remainder bound is negative.
+    Per pair ``i`` (the pair ``(k[i], k[i] + j)``): ``tau``, ``it`` (``2 / tau``) and ``half``
+    (``tau / 2``) are enclosures, arrays ``(len(k),)``; ``e4`` ``(len(k), n)`` the upper bound of
+    ``a tau^2 / 4``.  Per pair, because sampled at stamped times each pair has a ``tau`` of its own; on
+    a constant step the caller repeats the same values.  ``fa`` ``(n,)`` is the enclosure of ``4 a``.
+    ``new`` ``(len(k), 8)`` is scratch; ``dead`` ``(R,)`` is set where a remainder bound is negative.
     """
     R, n, P = x.shape[0], x.shape[3], k.shape[0]
     for r in range(R):
@@ -40,19 +42,19 @@ def pair_kernel(x, xd, k, j, tau_lo, tau_hi, it_lo, it_hi, half_lo, half_hi, e4,
                 dl, dh = sub(vll, vlh, vkl, vkh)
                 d2 = sqr(dl, dh)[0]
                 q = div(d2, d2, fa_lo[c], fa_hi[c])[0]
-                rem = sub(e4[c], e4[c], q, q)[1]
+                rem = sub(e4[i, c], e4[i, c], q, q)[1]
                 if rem < 0.0:
                     dead[r] = True
                 # velocities
-                sl, sh = mul(*sub(xll, xlh, xkl, xkh), it_lo, it_hi)
-                r2 = mul(rem, rem, it_lo, it_hi)[1]
+                sl, sh = mul(*sub(xll, xlh, xkl, xkh), it_lo[i], it_hi[i])
+                r2 = mul(rem, rem, it_lo[i], it_hi[i])[1]
                 tl, th = sub(sl, sh, vll, vlh)
                 vkl, vkh = intersect(vkl, vkh, *add(tl, th, -r2, r2))
                 tl, th = sub(sl, sh, vkl, vkh)
                 vll, vlh = intersect(vll, vlh, *add(tl, th, -r2, r2))
                 # positions
                 ml, mh = add(vkl, vkh, vll, vlh)
-                ml, mh = mul(ml, mh, half_lo, half_hi)
+                ml, mh = mul(ml, mh, half_lo[i], half_hi[i])
                 tl, th = add(xkl, xkh, ml, mh)
                 xll, xlh = intersect(xll, xlh, *add(tl, th, -rem, rem))
                 tl, th = sub(xll, xlh, ml, mh)
