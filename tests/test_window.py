@@ -157,8 +157,8 @@ def test_early_stop_is_reported(settings, monkeypatch):
 
     real = P.run_pass
 
-    def emptied(config, q, x0, xi_rows, prior):
-        x, xd, md, bad, xi = real(config, q, x0, xi_rows, prior)
+    def emptied(config, q, x0, xi_rows, prior, clock=None):
+        x, xd, md, bad, xi = real(config, q, x0, xi_rows, prior, clock)
         return (x, xd, md, np.zeros_like(bad) if prior is not None else bad, xi)
 
     run = simulate(1.0, False, 0)

@@ -30,7 +30,28 @@ from crosscert.robots.errors import TrajectoryFileError
 from . import interval as I
 from .constants import for_step
 
-__all__ = ["SampleClock"]
+__all__ = ["SampleClock", "step_tolerance", "TIME_STEP_RTOL", "STAMP_ULPS", "JITTER_RTOL"]
+
+#: Relative tolerance on the sampling step (time stamps written in decimal).
+TIME_STEP_RTOL = 1e-6
+#: Spacings of doubles at the time stamps' magnitude added to that tolerance:
+#: an absolute (Unix epoch) stamp of 1.7e9 s is only known to 2.4e-7 s, so a
+#: step between two of them is off by up to two such spacings however even
+#: the clock was (two more for the period the steps are compared with).
+STAMP_ULPS = 4
+#: Largest relative step deviation read as imprecise stamps rather than a changed period: float32 stamps
+#: near 1000 s are 6e-5 s apart (6 % of a 1 ms period); clock jitter is far smaller.
+JITTER_RTOL = 0.1
+
+
+def step_tolerance(t_prev: float, t: float, t_s: float) -> float:
+    """Largest ``|(t - t_prev) - t_s|`` (s) a constant-period recording may show.
+
+    ``TIME_STEP_RTOL * t_s`` for the decimal writing of the stamps, plus
+    :data:`STAMP_ULPS` spacings of doubles at the stamps' magnitude (absolute
+    time stamps).
+    """
+    return TIME_STEP_RTOL * t_s + STAMP_ULPS * float(np.spacing(max(abs(t_prev), abs(t))))
 
 
 class SampleClock:
@@ -52,9 +73,7 @@ class SampleClock:
     """
 
     def __init__(self, t_s: float, stamp_error: float = 0.0, *, name: str = "the recording"):
-        t_s, stamp_error = float(t_s), float(stamp_error)
-        if not (np.isfinite(t_s) and t_s > 0.0):
-            raise TrajectoryFileError(f"the sampling period must be a positive number of s, got {t_s!r}")
+        t_s, stamp_error = float(t_s), float(stamp_error)  # t_s: the validated settings' (robots.assumptions)
         if not (np.isfinite(stamp_error) and stamp_error >= 0.0):
             raise TrajectoryFileError(f"--stamp-error must be a finite number of s >= 0, got {stamp_error!r}")
         self.t_s, self.stamp_error, self.name = t_s, stamp_error, name
@@ -116,8 +135,6 @@ class SampleClock:
 
     def _periods(self, last: float, t: float, at: str) -> int:
         """The whole number of periods the step ``t - last`` is, or an error naming ``--stamp-error``."""
-        from .trajfile import JITTER_RTOL, step_tolerance
-
         step = t - last
         m = max(1, int(round(step / self.t_s)))
         off = abs(step - m * self.t_s)

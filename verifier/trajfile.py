@@ -33,19 +33,13 @@ import numpy as np
 
 from crosscert.robots.errors import TrajectoryFileError
 
+from .clock import JITTER_RTOL, STAMP_ULPS, TIME_STEP_RTOL, SampleClock, step_tolerance
 from .files import atomic_write
 from .trajectory import Trajectory
 
 __all__ = ["Trajectory", "SampleReader", "TrajectoryReader", "open_trajectory", "checked_path", "read_trajectory", "write_trajectory",
            "step_tolerance", "parse_number", "TIME_STEP_RTOL", "STAMP_ULPS"]
 
-#: Relative tolerance on the sampling step (time stamps written in decimal).
-TIME_STEP_RTOL = 1e-6
-#: Spacings of doubles at the time stamps' magnitude added to that tolerance:
-#: an absolute (Unix epoch) stamp of 1.7e9 s is only known to 2.4e-7 s, so a
-#: step between two of them is off by up to two such spacings however even
-#: the clock was (two more for the period the steps are compared with).
-STAMP_ULPS = 4
 #: What a reading error adds when the data start with the gzip magic bytes.
 GZIP_HINT = " (the data look gzip-compressed: decompress them first, e.g. zcat FILE.gz | crosscert monitor -)"
 #: Rows read per block by :func:`read_trajectory` (memory grows by blocks, not rows).
@@ -68,27 +62,12 @@ def parse_number(text: str) -> float:
     return float(t)
 
 
-#: Largest relative step deviation read as imprecise stamps rather than a changed period: float32 stamps
-#: near 1000 s are 6e-5 s apart (6 % of a 1 ms period); clock jitter is far smaller.
-JITTER_RTOL = 0.1
-
-
 def _unit_hint(step: float, t_s: float) -> str:
     """`` (times in ms?)`` when ``step`` is ``t_s`` written in ms or us, else an empty string."""
     for factor, unit in ((1e3, "ms"), (1e6, "us")):
         if abs(step - factor * t_s) <= 1e-6 * factor * t_s:
             return f" (the time column seems to be in {unit}: convert it to seconds)"
     return ""
-
-
-def step_tolerance(t_prev: float, t: float, t_s: float) -> float:
-    """Largest ``|(t - t_prev) - t_s|`` (s) a constant-period recording may show.
-
-    ``TIME_STEP_RTOL * t_s`` for the decimal writing of the stamps, plus
-    :data:`STAMP_ULPS` spacings of doubles at the stamps' magnitude (absolute
-    time stamps).
-    """
-    return TIME_STEP_RTOL * t_s + STAMP_ULPS * float(np.spacing(max(abs(t_prev), abs(t))))
 
 
 def checked_path(path, *, folder: bool = False) -> Path:
@@ -296,8 +275,6 @@ class SampleReader:
     def _clocked(self, t_prev: float, t: float, line: int) -> None:
         """Steps of whole periods (dropped samples) or, with a positive stamp error, any positive ones:
         :class:`~verifier.clock.SampleClock` checks each as it is read."""
-        from .clock import SampleClock
-
         try:
             if self.clock is None:
                 self.clock = SampleClock(self.t_s, self.stamp_error, name=self.name)

@@ -132,9 +132,8 @@ class Hypothesis:
         other = ((last != 0) & (last != self.m)) | ((first != 0) & (first != self.m0))
         s = self.finals.s
         # empty tubes, or tubes no motion within a_max fits (contracted between samples: step 8)
-        uneven = {} if times is None else {"times": times}
         dead = (bad >= 0) | contract_tubes(x, xd, s.t_s, s.a_max, compiled=self.finals.backend == Backend.COMPILED,
-                                           **uneven)
+                                           times=times)
         live = ~dead & ~other
         self.tx, self.txd = x, xd
         # the pass started from these sub-boxes and only contracted them; intersecting is exact and keeps
