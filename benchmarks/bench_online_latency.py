@@ -6,14 +6,17 @@ draws, every other at a corner; 0.5 s at rest after), each run fed four ways, in
 - ``tracker``: :meth:`Tracker.update` alone;
 - ``alone``: :meth:`OnlineMonitor.update` without a window (``window=False``);
 - ``process``: the monitor with its window in a worker process (the default);
-- ``thread``: the monitor with its window on a thread (``worker="thread"``).
+- ``thread``: the monitor with its window on a thread (``worker="thread"``);
+- ``tracker-stamped``, ``process-stamped``: ``tracker`` and ``process`` with every reading's stamp
+  (``update(q, t)`` on a :class:`~verifier.clock.SampleClock`, as ``crosscert monitor`` feeds them): the
+  clock's cost on the update path (steps of one period, so the same boxes).
 
 Prints mean, median, 99th percentile and max (µs) over every sample and over the samples at which the
 ``process`` run had a window open (the same samples for the four), and the sample at which each windowed
 run reported the change.  The CPU and the load average are on the first and last lines: on shared cores
 the figures move from run to run, their ratios less.
 
-Run: ``python benchmarks/bench_online_latency.py [--seeds 1,2,3] [--rounds 4]`` (about 15 s per round and
+Run: ``python benchmarks/bench_online_latency.py [--seeds 1,2,3] [--rounds 4]`` (about 20 s per round and
 seed).
 """
 
@@ -34,13 +37,14 @@ from crosscert.planner.simulate import random_geometry, simulate_crossing  # noq
 from crosscert.planner.sweep import cruise_for  # noqa: E402
 from crosscert.robots import DEXTAR, KinematicModel  # noqa: E402
 from crosscert.robots.dextar import benchmark_crossing  # noqa: E402
+from crosscert.verifier.clock import SampleClock  # noqa: E402
 from crosscert.verifier.model import IntervalModel  # noqa: E402
 from crosscert.verifier.settings import TrackerSettings  # noqa: E402
 from crosscert.verifier.step import Event  # noqa: E402
 from crosscert.verifier.tracker import Tracker, initial_box_from_mode  # noqa: E402
 from crosscert.verifier.window import OnlineMonitor, WindowState  # noqa: E402
 
-KINDS = ("tracker", "alone", "process", "thread")
+KINDS = ("tracker", "alone", "process", "thread", "tracker-stamped", "process-stamped")
 
 
 def _crossing(kin, seed):
@@ -50,8 +54,9 @@ def _crossing(kin, seed):
                              working_guess=b.q_point, seed=seed, cruise=cruise_for(1.1))
 
 
-def _paced(update, q, t_s):
-    """``update`` on every reading at its time (sleeping until then): latencies (µs) and results."""
+def _paced(update, q, t_s, stamped=False):
+    """``update`` on every reading at its time (sleeping until then; with ``stamped``, given its stamp
+    ``k t_s``): latencies (µs) and results."""
     lat, out = np.empty(len(q)), []
     t0 = time.perf_counter()
     for k, qk in enumerate(q):
@@ -59,18 +64,20 @@ def _paced(update, q, t_s):
         if wait > 0:
             time.sleep(wait)
         a = time.perf_counter_ns()
-        out.append(update(qk))
+        out.append(update(qk, k * t_s) if stamped else update(qk))
         lat[k] = (time.perf_counter_ns() - a) / 1e3
     return lat, out
 
 
 def _feed(kind, model, s, q, x0):
     """One run fed ``kind``'s way: latencies, window-open flags (None without a window), change sample."""
-    if kind == "tracker":
-        return _paced(Tracker(model, s, x0).update, q, s.t_s)[0], None, None
-    worker = {"alone": True, "process": "process", "thread": "thread"}[kind]
-    mon = OnlineMonitor(model, s, x0, worker=worker, window=kind != "alone")
-    lat, res = _paced(mon.update, q, s.t_s)
+    stamped = kind.endswith("-stamped")
+    clock = SampleClock(s.t_s) if stamped else None
+    if kind.startswith("tracker"):
+        return _paced(Tracker(model, s, x0, clock=clock).update, q, s.t_s, stamped)[0], None, None
+    worker = {"alone": True, "process": "process", "thread": "thread"}[kind.removesuffix("-stamped")]
+    mon = OnlineMonitor(model, s, x0, worker=worker, window=kind != "alone", clock=clock)
+    lat, res = _paced(mon.update, q, s.t_s, stamped)
     mon.close()
     changed = [e.k for r in res for e in r.events if e.event is Event.MODE_CHANGED]
     return lat, np.array([r.window is WindowState.OPEN for r in res]), (changed[0] if changed else None)
@@ -88,7 +95,7 @@ def main() -> None:
     print(f"CPU: {_cpu()}; load average {os.getloadavg()[0]:.2f}; 1.1 m/s, fed at 1 kHz", flush=True)
     _feed("tracker", model, s, runs[0].q_meas[:50], x0s[0])  # kernels loaded
     lat = {k: [] for k in KINDS}
-    opened, changes = [], {"process": [], "thread": []}
+    opened, changes = [], {"process": [], "thread": [], "process-stamped": []}
     for rnd in range(a.rounds):
         for r, x0 in zip(runs, x0s):
             got = {k: _feed(k, model, s, r.q_meas, x0) for k in (KINDS if rnd % 2 == 0 else KINDS[::-1])}

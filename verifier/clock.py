@@ -108,15 +108,14 @@ class SampleClock:
         """The next sample's stamp ``t`` (s, strictly later than the last); ``where`` names its position in
         messages (``sample k`` by default)."""
         t = float(t)
-        k, last = len(self), self._last
-        at = f"{self.name}, {where or f'sample {k}'}"
+        last = self._last
         if last is not None and not t > last:
-            raise TrajectoryFileError(f"{at}: time {t!r} does not increase (previous {last!r})")
+            raise TrajectoryFileError(f"{self._at(where)}: time {t!r} does not increase (previous {last!r})")
         if self.stamp_error == 0.0:
             if last is None:
                 self._ticks.append(0)
             else:
-                m = self._periods(last, t, at)
+                m = self._periods(last, t, where)
                 self.even &= m == 1
                 self._ticks.append(self._ticks[-1] + m)
         else:
@@ -125,7 +124,7 @@ class SampleClock:
             lo, hi = I.sub(t, t, e, e)[0], I.add(t, t, e, e)[1]
             if self._hi and not I.sub(lo, lo, self._hi[-1], self._hi[-1])[0] > 0.0:
                 raise TrajectoryFileError(
-                    f"{at}: stamps {last!r} and {t!r} s are closer than twice --stamp-error "
+                    f"{self._at(where)}: stamps {last!r} and {t!r} s are closer than twice --stamp-error "
                     f"({self.stamp_error:.3g} s): the step between them may be zero; state a smaller stamp error if "
                     "the stamps are better than that")
             self._lo.append(lo)
@@ -133,7 +132,11 @@ class SampleClock:
         self._stamps.append(t)
         self._last = t
 
-    def _periods(self, last: float, t: float, at: str) -> int:
+    def _at(self, where: str | None) -> str:
+        """Where a refused stamp is, for its message."""
+        return f"{self.name}, {where or f'sample {len(self)}'}"
+
+    def _periods(self, last: float, t: float, where: str | None) -> int:
         """The whole number of periods the step ``t - last`` is, or an error naming ``--stamp-error``."""
         step = t - last
         m = max(1, int(round(step / self.t_s)))
@@ -143,7 +146,7 @@ class SampleClock:
                    if off <= JITTER_RTOL * self.t_s else
                    "a fixed-period controller drops samples, it does not shift them")
             raise TrajectoryFileError(
-                f"{at}: the step {step:.9g} s is not a whole number of periods of {self.t_s:.9g} s ({why}): if the "
+                f"{self._at(where)}: the step {step:.9g} s is not a whole number of periods of {self.t_s:.9g} s ({why}): if the "
                 "stamps jitter, state their error bound with --stamp-error (s); never resample the readings")
         return m
 
