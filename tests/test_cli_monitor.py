@@ -73,6 +73,20 @@ def test_forward_verdict_and_events_equal_track(monkeypatch, capsys, csv_text, n
     assert 0 < last["latency_us_mean"] <= last["latency_us_p99"] <= last["latency_us_max"]
 
 
+def test_a_dropped_line_is_a_step_of_two_periods_online(monkeypatch, capsys, csv_text):
+    """A stream that lost one sample: tracked as a step of two periods, with the stream's verdict, and the
+    events still name the samples' own times and lines."""
+    lines = csv_text("crossing_1458").splitlines()
+    del lines[151]  # sample 150
+    code, out, _ = _monitor(monkeypatch, capsys, "\n".join(lines) + "\n", "-", *FLAGS, "--reasoning", "forward")
+    *events, last = out
+    assert code == 0 and last["verdict"] == "mode-changed" and last["steps"] == len(lines) - 1
+    run = run_of(CATALOGUE["crossing_1458"])
+    for e in events:
+        true_k = e["k"] + (e["k"] >= 150)  # the samples after the gap are one later in the recording
+        assert e["t"] == pytest.approx(run.t[true_k]) and e["line"] == e["k"] + 2
+
+
 def test_text_output_from_a_named_pipe(tmp_path, capsys, csv_text):
     run = run_of(CATALOGUE["crossing_1458"])
     x, y = run.x_true[0]
