@@ -98,16 +98,17 @@ def _box(values, widen=0.0, rng=None):
     return np.stack([lo, hi], axis=1)
 
 
-def _tubes(seed, rows=4, K=60, dwell=(1.1, 3.0), widen_x=0.0, widen_v=0.0):
-    """Rows of exact motions (both coordinates at their ``A_MAX``) and their tubes ``(R, K, 2, n)``."""
-    rng = np.random.default_rng(seed)
+def _tubes(seed, rows=4, K=60, dwell=(1.1, 3.0), widen_x=0.0, widen_v=0.0, *, rng=None, at=None):
+    """Rows of exact motions (both coordinates at their ``A_MAX``) and their tubes ``(R, K, 2, n)``, sampled
+    every ``T_S`` or at the times ``at`` (s from the first); ``rng`` instead of a new generator of ``seed``."""
+    rng = np.random.default_rng(seed) if rng is None else rng
     n = len(A_MAX)
     x, xd = np.empty((rows, K, 2, n)), np.empty((rows, K, 2, n))
     truth = []
     for r in range(rows):
         row = []
         for c in range(n):
-            xs, vs = _exact_motion(rng, K, A_MAX[c], rng.uniform(-0.1, 0.1), rng.uniform(-1.5, 1.5), dwell)
+            xs, vs = _exact_motion(rng, K, A_MAX[c], rng.uniform(-0.1, 0.1), rng.uniform(-1.5, 1.5), dwell, at)
             x[r, :, :, c] = _box(xs, widen_x, rng)
             xd[r, :, :, c] = _box(vs, widen_v, rng)
             row.append((xs, vs))
@@ -320,18 +321,7 @@ def _stamped_run(seed, delta=DELTA, rows=4, K=40, widen_x=1e-9, widen_v=1e-7):
     grid = [m for m in range(K + 1) if m != drop]
     true = [ORIGIN + Fraction(T_S) * m + d * Fraction(int(rng.integers(-1000, 1001)), 1000) for m in grid]
     stamps = np.array([float(t + d * int(rng.choice([-1, 1])) * (1 - Fraction(1, 10**6))) for t in true])
-    at = [t - true[0] for t in true]
-    n = len(A_MAX)
-    x, xd = np.empty((rows, K, 2, n)), np.empty((rows, K, 2, n))
-    truth = []
-    for r in range(rows):
-        row = []
-        for c in range(n):
-            xs, vs = _exact_motion(rng, K, A_MAX[c], rng.uniform(-0.1, 0.1), rng.uniform(-1.5, 1.5), (1.1, 3.0), at)
-            x[r, :, :, c] = _box(xs, widen_x, rng)
-            xd[r, :, :, c] = _box(vs, widen_v, rng)
-            row.append((xs, vs))
-        truth.append(row)
+    x, xd, truth = _tubes(None, rows, K, (1.1, 3.0), widen_x, widen_v, rng=rng, at=[t - true[0] for t in true])
     return x, xd, truth, stamps, true
 
 
