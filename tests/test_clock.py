@@ -6,12 +6,17 @@
   geometries; :mod:`adversarial`) sampled at jittered true times, with dropped samples and stamps off
   the truth by ``delta`` in the worst alternating pattern: the truth stays inside every box.  The same
   run with the stamp error ignored lets it out (the removal check of ``delta``).
+* ``joint-fd`` on a model whose pose is its joints, in exact arithmetic: the truth at (or within
+  the truncation's share of) the ends of the prediction's ``[step] [xd]`` and of the rate box's
+  ``2 eps_q / [step]``, so that either term taken at one end of the step lets it out.
 * The numpy reference and the compiled kernels agree on such a run, and the clock refuses what it
   cannot enclose (a step that is not a whole number of periods without ``--stamp-error``, stamps closer
   than ``2 delta``).
 """
 
 from __future__ import annotations
+
+from fractions import Fraction
 
 import numpy as np
 import pytest
@@ -21,8 +26,9 @@ from problems import interval_model
 from crosscert.robots.errors import InputError, TrajectoryFileError
 from crosscert.verifier.clock import SampleClock
 from crosscert.verifier.constants import for_step, pack_constants
-from crosscert.verifier.tracker import Tracker, initial_box_from_mode, track_batch
-from test_containment import _violations
+from crosscert.verifier.model import IntervalModel
+from crosscert.verifier.tracker import Tracker, TrackerSettings, initial_box_from_mode, track_batch
+from test_containment import BACKENDS, _Joints, _violations
 
 #: Jitter of the true sample times and stamp error bound, s: stamps alternate at +-delta around the truth,
 #: so that ignoring delta misreads every step by 2 delta (0.1 t_s).
@@ -99,6 +105,60 @@ def test_the_stamp_error_is_needed(jittered, settings):
     sc, stamps = jittered
     res, rec = _run(sc, settings, SampleClock.from_stamps(stamps, settings.t_s, 1e-15))
     assert _violations(sc, res, rec)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_joint_fd_on_jittered_stamps_spends_the_step_interval(backend):
+    """``joint-fd``, pose = joints, stamps ``delta`` off the jittered true times: the step's interval spent in full.
+
+    The stamps alternate at ``+-delta`` around the truth, so that each true step lies at an end of its
+    enclosure ``[lo, hi]``: ``lo`` at even samples, ``hi`` at odd ones.  The readings err by ``eps_q`` (less
+    1e-12 of it) with alternating signs; joint 0 accelerates at ``+g`` forward, joint 1 brakes at ``-g``
+    (``g = a_max = qdd_bound``).  Checked in exact rational arithmetic: the truth inside every box, and
+
+    * joint 0's rate box: its upper end at even samples is the truth's but for the truncation's
+      ``g (hi - lo) / 2`` (``(t / 2) [qdd]`` at ``t = hi``): its quantisation ``2 eps_q / t`` is spent at
+      ``t = lo``, the readings' errors pushing the finite difference up;
+    * the prediction ``x + [lo, hi] [xd]``: joint 0's upper end at odd samples (``t = hi``, a forward
+      joint) and joint 1's lower end at even samples (``t = lo``, a braking joint) are closer to the
+      truth than ``(hi - lo) |xd|``, which scaling ``[xd]`` by ``lo`` alone, or ``hi`` alone, takes off.
+    """
+    ts, eps, g = 1e-3, 1e-4, 100.0  # s, rad, rad/s^2 (g < 4 eps / t^2: the quantisation's share of [lo, hi] wins)
+    n_samples = 40
+    settings = TrackerSettings(t_s=ts, eps_q=eps, a_max=(g, g), xd0=(1.0, 6.0), xi_splits=None,
+                               velocity_model="joint-fd", qdd_bound=g)
+    rng = np.random.default_rng(4302)
+    t_true = np.arange(n_samples) * ts + rng.uniform(-JITTER, JITTER, n_samples)
+    t_true[0] = 0.0
+    T, G, E = [Fraction(float(v)) for v in t_true], Fraction(g), Fraction(eps) * (1 - Fraction(1, 10**12))
+    sign = [(-1) ** k for k in range(n_samples)]
+    stamps = np.array([float(T[k] + sign[k] * Fraction(DELTA) * (1 - Fraction(1, 10**9))) for k in range(n_samples)])
+    c0 = [Fraction(float(v)) for v in rng.uniform(-0.3, 0.3, 2)]  # rad
+    v0 = [Fraction(float(rng.uniform(0.5, 0.9))), Fraction(float(rng.uniform(5.0, 5.5)))]  # rad/s, inside xd0
+    acc = (G, -G)
+    q_true = [[c0[i] + v0[i] * T[k] + acc[i] * T[k] ** 2 / 2 for i in range(2)] for k in range(n_samples)]
+    rate = [[v0[i] + acc[i] * T[k] for i in range(2)] for k in range(n_samples)]
+    q = np.array([[float(q_true[k][i] - sign[k] * E) for i in range(2)] for k in range(n_samples)])
+    x0 = (q[0] - 0.01, q[0] + 0.01)  # holds the truth x(0) = q(0)
+    clock = SampleClock.from_stamps(stamps, ts, DELTA)
+    res, rec = track_batch(IntervalModel(_Joints()), q[None], settings, (x0[0][None], x0[1][None]), record=True,
+                           backend=backend, clock=clock)
+    assert res.inconsistent_at_step[0] < 0
+    for key, truth in (("x", q_true), ("xd", rate)):
+        for k in range(1, n_samples):
+            for i in range(2):
+                lo, hi = Fraction(rec[f"{key}_lo"][0, k, i]), Fraction(rec[f"{key}_hi"][0, k, i])
+                assert lo <= truth[k][i] <= hi, (backend, key, k, i, float(lo), float(truth[k][i]), float(hi))
+    # not vacuous: the ends named above are as close to the truth as claimed
+    for k in range(2, n_samples):
+        step = [Fraction(v) for v in clock.span(k, k - 1)]
+        assert abs(T[k] - T[k - 1] - step[k % 2]) < Fraction(1, 10**12)  # the true step at the end named
+        shift = [(step[1] - step[0]) * abs(rate[k - 1][i]) for i in range(2)]
+        if k % 2 == 0:
+            assert Fraction(rec["xd_hi"][0, k, 0]) - rate[k][0] <= G * (step[1] - step[0]) / 2 + Fraction(1, 10**9)
+            assert q_true[k][1] - Fraction(rec["x_lo"][0, k, 1]) < shift[1]
+        else:
+            assert Fraction(rec["x_hi"][0, k, 0]) - q_true[k][0] < shift[0]
 
 
 def test_numpy_and_compiled_agree_on_a_jittered_run(settings):
