@@ -23,6 +23,8 @@ Times are in s, from any common origin.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from crosscert.robots.errors import TrajectoryFileError
@@ -51,7 +53,7 @@ def step_tolerance(t_prev: float, t: float, t_s: float) -> float:
     :data:`STAMP_ULPS` spacings of doubles at the stamps' magnitude (absolute
     time stamps).
     """
-    return TIME_STEP_RTOL * t_s + STAMP_ULPS * float(np.spacing(max(abs(t_prev), abs(t))))
+    return TIME_STEP_RTOL * t_s + STAMP_ULPS * math.ulp(max(abs(t_prev), abs(t)))  # numpy's spacing, no call cost
 
 
 class SampleClock:
@@ -120,7 +122,7 @@ class SampleClock:
                 self._ticks.append(self._ticks[-1] + m)
         else:
             # the stamp's float within one spacing of the written value, the true time within delta of that
-            e = I.add(self.stamp_error, self.stamp_error, float(np.spacing(abs(t))), float(np.spacing(abs(t))))[1]
+            e = I.add(self.stamp_error, self.stamp_error, math.ulp(t), math.ulp(t))[1]
             lo, hi = I.sub(t, t, e, e)[0], I.add(t, t, e, e)[1]
             if self._hi and not I.sub(lo, lo, self._hi[-1], self._hi[-1])[0] > 0.0:
                 raise TrajectoryFileError(

@@ -53,6 +53,7 @@ from .linalg import linear_enclosure
 from .state import TrackerState
 
 __all__ = ["Backend", "StepConfig", "TrackerState", "StepResult", "Event", "configure", "init_state", "partition_xi", "step",
+           "checked_sample",
            "advance", "pose_solutions", "pose_solution_arrays", "reading_box", "kernel_array", "StepImpl", "NumpyStep",
            "CompiledStep"]
 
@@ -517,18 +518,25 @@ def kernel_array(a, dtype=np.float64):
     return a if a.flags.writeable else a.copy()
 
 
-def step(config: StepConfig, state: TrackerState, q) -> None:
-    """Advance ``state`` by one sample of readings ``q`` ``(B, n)``, rad, in place.
+def checked_sample(config: StepConfig, state: TrackerState, q):
+    """Readings ``q`` of one sample as the kernels take them ``(B, 1, n)``, or :class:`InputError` for a
+    reading of the wrong shape or not finite."""
+    q = np.asarray(q, dtype=np.float64)
+    if q.shape != (state.batch, config.model.n) or not np.isfinite(q).all():
+        raise InputError(f"sample {state.k}: expected {state.batch}x{config.model.n} finite joint values, "
+                         f"got shape {q.shape}")
+    return kernel_array(q[:, None, :])
+
+
+def step(config: StepConfig, state: TrackerState, q, const=None) -> None:
+    """Advance ``state`` by one sample of readings ``q`` ``(B, n)``, rad, in place, with the step's constants
+    ``const`` (``config.const`` when None: a step of ``t_s``).
 
     The new boxes, modes and widths are in ``state`` (``x_hull``, ``xd_hull``,
     ``mode``, ...).  Raises :class:`InputError` for a reading of the wrong
     shape or not finite (the state is then unchanged).
     """
-    q = np.asarray(q, dtype=np.float64)
-    if q.shape != (state.batch, config.model.n) or not np.isfinite(q).all():
-        raise InputError(f"sample {state.k}: expected {state.batch}x{config.model.n} finite joint values, "
-                         f"got shape {q.shape}")
-    config.impl.advance(config, state, kernel_array(q[:, None, :]))
+    config.impl.advance(config, state, checked_sample(config, state, q), None, None, const)
 
 
 def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None, clock=None) -> None:

@@ -50,7 +50,8 @@ from . import interval as I
 from crosscert.robots.errors import InputError
 from .settings import TrackerSettings, Verdict, VelocityModel
 from .state import ROW_FIELDS, SCENARIO_FIELDS
-from .step import Backend, Event, StepResult, advance, configure, init_state, kernel_array, pose_solutions, step
+from .step import (Backend, Event, StepResult, advance, checked_sample, configure, init_state, kernel_array,
+                   pose_solutions, step)
 
 __all__ = [
     "Verdict",
@@ -485,8 +486,10 @@ class Tracker:
                 raise InputError("a stamp t needs a tracker made with a clock (Tracker(..., clock=SampleClock(t_s)))")
             step(self.config, st, q)
         else:
+            q = checked_sample(self.config, st, q)  # before the stamp is taken: a refused reading changes nothing
             self._tick(t)
-            advance(self.config, st, q[:, None], clock=self.clock)
+            c = self.clock.constants(self.config.const, self.config.settings, st.k)
+            self.config.impl.advance(self.config, st, q, None, None, None if c is self.config.const else c)
         k = st.k - 1
         mode = int(st.mode[0])
         consistent = bool(st.bad_at[0] < 0)
