@@ -87,6 +87,24 @@ def test_a_dropped_line_is_a_step_of_two_periods_online(monkeypatch, capsys, csv
         assert e["t"] == pytest.approx(run.t[true_k]) and e["line"] == e["k"] + 2
 
 
+def test_check_draws_a_dropped_sample_at_its_time(tmp_path, capsys, csv_text, monkeypatch):
+    """``check --plot`` of a recording that lost a sample: the figure's time axis is the stamps'."""
+    import crosscert.planner.cli.track as T
+
+    lines = csv_text("crossing_1458").splitlines()
+    del lines[151]
+    path, png = tmp_path / "gap.csv", tmp_path / "gap.png"
+    path.write_text("\n".join(lines) + "\n")
+    drawn = {}
+    real = T.plot_run
+    monkeypatch.setattr(T, "plot_run", lambda *args, **kw: (drawn.update(kw), real(*args, **kw)))
+    assert main(["check", str(path), "--initial-mode", "1", "--json", "--plot", str(png), "--reasoning", "forward"]) == 0
+    capsys.readouterr()
+    t = drawn["t"]
+    assert png.stat().st_size > 0 and len(t) == len(lines) - 1
+    assert t[150] - t[149] == pytest.approx(2 * (t[1] - t[0]))  # sample 150 was dropped
+
+
 def test_text_output_from_a_named_pipe(tmp_path, capsys, csv_text):
     run = run_of(CATALOGUE["crossing_1458"])
     x, y = run.x_true[0]

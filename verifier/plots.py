@@ -63,7 +63,7 @@ def _save(plt, fig, path, title, bounds):
     plt.close(fig)
 
 
-def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="", bounds="", truth="true"):
+def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="", bounds="", truth="true", t=None):
     """Write a 2x2 figure: pose boxes in the plane, velocity enclosure of the last
     coordinate and its integral, the displacement enclosure ``[Δ]`` (Fig. 4),
     and the widths of the pose (mm) and velocity (m/s) boxes (Fig. 5).
@@ -86,19 +86,22 @@ def plot_run(path, t_s, boxes, x_true=None, xd_true=None, k_sing=None, title="",
         The bounds the run assumed (eps_q, a_max, t_s...), printed under the title.
     truth : str
         What ``x_true``/``xd_true`` are, for the legend (``"true"``, ``"planned"``).
+    t : array (K,), optional
+        The samples' times, s from the first (an uneven recording: dropped samples, jittered stamps);
+        ``k t_s`` by default.
     """
     plt = _pyplot()
     xl, xh, vl, vh = (np.asarray(boxes[k], dtype=float) for k in ("x_lo", "x_hi", "xd_lo", "xd_hi"))
     K, n = xl.shape
-    t = np.arange(K) * t_s
+    t = np.arange(K) * t_s if t is None else np.asarray(t, dtype=float) - float(t[0])
     fig, ax = plt.subplots(2, 2, figsize=(11, 8.5))
     _run_pose_panel(ax[0, 0], xl, xh, boxes["mode"], x_true, truth)
     _run_velocity_panel(ax[0, 1], t, vl, vh, xd_true, truth)
-    _run_displacement_panel(ax[1, 0], t, t_s, vl, vh, x_true, truth)
+    _run_displacement_panel(ax[1, 0], t, vl, vh, x_true, truth)
     _run_width_panel(ax[1, 1], t, xl, xh, vl, vh)
     for a in (ax[0, 1], ax[1, 0], ax[1, 1]):
         if k_sing is not None:
-            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
+            a.axvline(t[k_sing], color="k", lw=1, ls=":", label="singular instant")
     if k_sing is not None:
         ax[0, 1].legend(loc="best", fontsize=8)
         ax[1, 0].legend(loc="best", fontsize=8)
@@ -134,12 +137,14 @@ def _run_velocity_panel(a, t, vl, vh, xd_true, truth):
     a.legend(loc="best", fontsize=8)
 
 
-def _run_displacement_panel(a, t, t_s, vl, vh, x_true, truth):
-    """:func:`plot_run`'s displacement enclosure ``[Δ]`` (mm) of the last coordinate since the first sample."""
+def _run_displacement_panel(a, t, vl, vh, x_true, truth):
+    """:func:`plot_run`'s displacement enclosure ``[Δ]`` (mm) of the last coordinate since the first sample
+    (samples at times ``t``, s)."""
     n = vl.shape[1]
-    # displacement enclosure: sum of t_s * velocity over each step (eq. 8)
-    dl = np.concatenate([[0.0], np.cumsum(t_s * vl[1:, -1])])
-    dh = np.concatenate([[0.0], np.cumsum(t_s * vh[1:, -1])])
+    # displacement enclosure: sum of the step times velocity over each step (eq. 8)
+    h = np.diff(t)
+    dl = np.concatenate([[0.0], np.cumsum(h * vl[1:, -1])])
+    dh = np.concatenate([[0.0], np.cumsum(h * vh[1:, -1])])
     lo, hi, cut = _clip(dl, dh, DISPLACEMENT_CLIP)
     a.fill_between(t, lo * 1e3, hi * 1e3, color="tab:green", alpha=0.4, label=r"displacement enclosure $[\Delta]$")
     if x_true is not None:
@@ -211,7 +216,7 @@ def plot_certificate(path, t_s, forward, window, x_plan=None, xd_plan=None, k_si
     _certificate_width_panel(ax[1, 0], t, fl, fh, fvl, fvh, alive, forward_label)
     for a in (ax[0, 1], ax[1, 0]):
         if k_sing is not None:
-            a.axvline(k_sing * t_s, color="k", lw=1, ls=":", label="singular instant")
+            a.axvline(t[k_sing], color="k", lw=1, ls=":", label="singular instant")
         a.legend(loc="best", fontsize=8)
     _reasoning_panel(ax[1, 1], window)
     _save(plt, fig, path, title, bounds)

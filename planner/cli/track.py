@@ -168,8 +168,9 @@ def check(a) -> int:
         # after the verdict: a figure that cannot be written must not cost it
         sys.stdout.flush()
         try:
-            plot_run(a.plot, run.t_s, run.recorded(), title=f"{Path(name).name}: {out['verdict']}",
-                     bounds=run.bounds_text())
+            rec = run.recorded()
+            plot_run(a.plot, run.t_s, rec, title=f"{Path(name).name}: {out['verdict']}", bounds=run.bounds_text(),
+                     t=rec.pop("t"))
         except (CrosscertError, OSError) as exc:
             print(f"crosscert: error: the verdict above stands, but the figure was not written: {exc}",
                   file=sys.stderr)
@@ -256,7 +257,7 @@ class Monitor:
         self.envelope_latency = LatencyStats()
         self.catch_up_latency = LatencyStats()  # --certificate: the held samples, tracked once the envelope is left
         self.backlog = []  # --certificate: (line, t, q) held while the certificate answers
-        self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": []}
+        self.boxes = {"x_lo": [], "x_hi": [], "xd_lo": [], "xd_hi": [], "mode": [], "t": []}
 
     def _start(self, t_s: float) -> None:
         settings = self.make_settings(t_s)
@@ -301,7 +302,7 @@ class Monitor:
         latency.add(time.perf_counter_ns() - t0)
         self.times[r.k] = (t, line)
         if self.record:
-            for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode)):
+            for key, v in zip(self.boxes, (*r.x, *r.xd, r.mode, t)):
                 self.boxes[key].append(v)
         self._events(r.events)
         # a window's event is about a sample at most a horizon back
@@ -368,7 +369,8 @@ class Monitor:
             self.online.close(None if wait else 0.0)
 
     def recorded(self) -> dict:
-        """The kept boxes as arrays: ``x_lo, x_hi, xd_lo, xd_hi`` (K, n), m and m/s, and ``mode`` (K,)."""
+        """The kept boxes as arrays: ``x_lo, x_hi, xd_lo, xd_hi`` (K, n), m and m/s, ``mode`` (K,), and the
+        samples' stamps ``t`` (K,), s."""
         return {k: np.array(v) for k, v in self.boxes.items()}
 
     def bounds_text(self) -> str:
