@@ -9,6 +9,8 @@
 * ``joint-fd`` on a model whose pose is its joints, in exact arithmetic: the truth at (or within
   the truncation's share of) the ends of the prediction's ``[step] [xd]`` and of the rate box's
   ``2 eps_q / [step]``, so that either term taken at one end of the step lets it out.
+* The window over such a run (its passes on the clock and the reversed clock, its pairs' time
+  enclosures) decides a crossing the forward pass leaves open, the truth inside its tubes.
 * The numpy reference and the compiled kernels agree on such a run, and the clock refuses what it
   cannot enclose (a step that is not a whole number of periods without ``--stamp-error``, stamps closer
   than ``2 delta``).
@@ -28,6 +30,8 @@ from crosscert.verifier.clock import SampleClock
 from crosscert.verifier.constants import for_step, pack_constants
 from crosscert.verifier.model import IntervalModel
 from crosscert.verifier.tracker import Tracker, TrackerSettings, initial_box_from_mode, track_batch
+from crosscert.verifier.settings import Verdict
+from crosscert.verifier.window import track_window
 from test_containment import BACKENDS, _Joints, _violations
 
 #: Jitter of the true sample times and stamp error bound, s: stamps alternate at +-delta around the truth,
@@ -217,3 +221,26 @@ def test_spans_enclose_the_true_steps():
     for k in range(1, 20):
         lo, hi = rev.span(k, k - 1)
         assert lo <= t_true[29 - k + 1] - t_true[29 - k] <= hi
+
+
+@pytest.mark.parametrize("seed", [1, 2, 4])
+def test_the_window_runs_on_the_stamps(settings, seed):
+    """A crossing at 1.0-1.15 m/s sampled at jittered true times, stamps ``DELTA`` off them, cut 6 ms past the
+    locus (the last reading does not decide: the hypotheses' passes run) with a sample dropped just after
+    the locus: the window's forward passes on the clock, its backward passes on the reversed clock and its
+    pairs on their time enclosures keep the truth inside the tubes (a window whose passes ignore the clock,
+    or whose backward passes read the stamps as exact, lets it out on these seeds) and never decide
+    wrongly."""
+    rng = np.random.default_rng(seed)
+    t_true = np.arange(K) * settings.t_s + rng.uniform(-JITTER, JITTER, K)
+    t_true[0] = 0.0
+    sc = near_scenarios(2, seed, t_end=0.2, v_cross=(1.0, 1.15), times=t_true)[0]
+    cut = int(np.flatnonzero(sc.mode != sc.mode[0])[0]) + 6
+    keep = np.setdiff1d(np.arange(cut), [cut - 4])
+    stamps = t_true + (DELTA - 1e-9) * np.where(np.arange(K) % 2 == 0, 1.0, -1.0)
+    res = track_window(interval_model(), sc.q_meas[keep], settings, initial_mode=int(sc.mode[0]),
+                       clock=SampleClock.from_stamps(stamps[keep], settings.t_s, DELTA))
+    assert res.forward_verdict is Verdict.UNKNOWN and sum(h.passes for h in res.hypotheses) > 2
+    assert res.verdict in (Verdict.MODE_CHANGED, Verdict.UNKNOWN)
+    for lo, hi, truth in ((res.x_lo, res.x_hi, sc.x[keep]), (res.xd_lo, res.xd_hi, sc.xd[keep])):
+        assert np.all((lo <= truth) & (truth <= hi))
