@@ -51,7 +51,7 @@ from crosscert.robots.errors import InputError
 from .settings import TrackerSettings, Verdict, VelocityModel
 from .state import ROW_FIELDS, SCENARIO_FIELDS
 from .step import (Backend, Event, StepResult, advance, checked_sample, configure, init_state, kernel_array,
-                   pose_solutions, step)
+                   pose_solutions)
 
 __all__ = [
     "Verdict",
@@ -480,16 +480,10 @@ class Tracker:
         """Advance by one reading ``q`` ``(n,)``, rad, stamped ``t`` (s; only with a :attr:`clock`); returns
         the new boxes and events."""
         st = self.state
-        q = np.asarray(q, dtype=np.float64).reshape(1, -1)
-        if self.clock is None:
-            if t is not None:
-                raise InputError("a stamp t needs a tracker made with a clock (Tracker(..., clock=SampleClock(t_s)))")
-            step(self.config, st, q)
-        else:
-            q = checked_sample(self.config, st, q)  # before the stamp is taken: a refused reading changes nothing
-            self._tick(t)
-            c = self.clock.constants(self.config.const, self.config.settings, st.k)
-            self.config.impl.advance(self.config, st, q, None, None, None if c is self.config.const else c)
+        if self.clock is None and t is not None:
+            raise InputError("a stamp t needs a tracker made with a clock (Tracker(..., clock=SampleClock(t_s)))")
+        # the reading checked before its stamp is taken: a refused reading changes nothing
+        self._advance(checked_sample(self.config, st, np.asarray(q, dtype=np.float64).reshape(1, -1)), t)
         k = st.k - 1
         mode = int(st.mode[0])
         consistent = bool(st.bad_at[0] < 0)
@@ -509,12 +503,19 @@ class Tracker:
                           xd=(st.xd_hull[0, 0].copy(), st.xd_hull[0, 1].copy()), mode=mode,
                           consistent=consistent, events=tuple(events))
 
-    def _tick(self, t) -> None:
-        """Append stamp ``t`` to the clock (which keeps the last ``depth`` samples' times only)."""
+    def _advance(self, q, t) -> None:
+        """One checked reading ``q`` ``(1, 1, n)`` through the kernels; with a clock, stamped ``t`` (s) and with
+        the constants of its step (kept to the last ``depth`` samples' times)."""
+        if self.clock is None:
+            self.config.impl.advance(self.config, self.state, q)
+            return
         if t is None:
             raise InputError("this tracker has a clock: give each reading's stamp t (s)")
         self.clock.append(t)
         self.clock.forget_before(self.state.k - self.config.depth)
+        c = self.clock.constants(self.config.const, self.config.settings, self.state.k)
+        # a step of one period: the constant period's constants, the same call as without a clock
+        self.config.impl.advance(self.config, self.state, q, None, None, None if c is self.config.const else c)
 
     def step_reading(self, q, t: float | None = None) -> tuple:
         """:meth:`update` for a caller that checked the reading (:class:`~verifier.window.OnlineMonitor`):
@@ -524,14 +525,7 @@ class Tracker:
         st = self.state
         if q.dtype != np.float64 or not (q.flags.c_contiguous and q.flags.writeable):  # the kernel's one signature
             q = kernel_array(q)
-        if self.clock is None:
-            self.config.impl.advance(self.config, st, q.reshape(1, 1, -1))
-        else:
-            self._tick(t)
-            c = self.clock.constants(self.config.const, self.config.settings, st.k)
-            # a step of one period: the constant period's constants, the same call as without a clock
-            self.config.impl.advance(self.config, st, q.reshape(1, 1, -1), None, None,
-                                     None if c is self.config.const else c)
+        self._advance(q.reshape(1, 1, -1), t)
         mode, consistent = int(st.mode[0]), bool(st.bad_at[0] < 0)
         self._mode, self._consistent = mode, consistent
         return st.k - 1, mode, consistent
