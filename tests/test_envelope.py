@@ -171,6 +171,19 @@ def test_check_with_the_certificate_reports_its_verdict(certified, tmp_path, cap
     assert out["certified_at_step"] == len(plan.q) - 1 and out["final_mode"] == -1
 
 
+def test_check_with_the_certificate_refuses_a_dropped_sample(certified, tmp_path, capsys):
+    """The envelope pairs the readings with the plan's samples by index: a recording that lost one is refused
+    (one line, exit 2), not checked against the wrong samples."""
+    folder, plan, cert = certified
+    keep = np.setdiff1d(np.arange(len(plan.q)), [20])
+    rec = tmp_path / "gap.csv"
+    write_trajectory(rec, np.asarray(plan.t)[keep], np.asarray(plan.q)[keep])
+    assert main(["check", str(rec), "--initial-mode", "1", "--certificate", str(cert), "--certified-plan",
+                 str(folder / "plan.csv"), "--json", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "line 22: a sample was dropped before this one" in err and "\n" not in err, err
+
+
 def test_monitor_with_the_certificate_falls_back_when_a_reading_leaves(certified, tmp_path, capsys):
     folder, plan, cert = certified
     q = np.array(plan.q)
