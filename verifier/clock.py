@@ -83,8 +83,7 @@ class SampleClock:
         self._ticks: list[int] = []  # stamp_error = 0: periods since the first sample
         self._lo: list[float] = []  # stamp_error > 0: the true time's enclosure
         self._hi: list[float] = []
-        self._stamps: list[float] = []  # as given
-        self._last: float | None = None
+        self._stamps: list[float] = []  # as given (forget_before keeps the last)
         self._base = 0  # samples forgotten (forget_before): the lists start at this sample
 
     def __len__(self) -> int:
@@ -110,7 +109,7 @@ class SampleClock:
         """The next sample's stamp ``t`` (s, strictly later than the last); ``where`` names its position in
         messages (``sample k`` by default)."""
         t = float(t)
-        last = self._last
+        last = self._stamps[-1] if self._stamps else None
         if last is not None and not t > last:
             raise TrajectoryFileError(f"{self._at(where)}: time {t!r} does not increase (previous {last!r})")
         if self.stamp_error == 0.0:
@@ -132,7 +131,6 @@ class SampleClock:
             self._lo.append(lo)
             self._hi.append(hi)
         self._stamps.append(t)
-        self._last = t
 
     def _at(self, where: str | None) -> str:
         """Where a refused stamp is, for its message."""

@@ -568,11 +568,11 @@ def advance(config: StepConfig, state: TrackerState, q, record=None, prior=None,
     if clock is None:
         config.impl.advance(config, state, kernel_array(q), record, prior)
         return
+    consts = [clock.constants(config.const, config.settings, state.k + i) for i in range(Kc)]
     start = 0
     while start < Kc:
-        const = clock.constants(config.const, config.settings, state.k)
-        stop = start + 1
-        while stop < Kc and const is config.const and clock.constants(config.const, config.settings, state.k + stop - start) is const:
+        const, stop = consts[start], start + 1
+        while stop < Kc and const is config.const and consts[stop] is const:
             stop += 1  # one call for a run of one-period steps
         part = slice(start, stop)
         rec = None if record is None else tuple(np.empty(a[:, part].shape, a.dtype) for a in record)
