@@ -26,13 +26,27 @@ def _clip(lo, hi, limit):
 
 
 def _pose_boxes(ax, lo, hi, step, color_of, ls="-"):
-    """Outline every ``step``-th box ``[lo_k, hi_k]`` in the (x1, x_n) plane, mm, in colour ``color_of(k)``."""
-    from matplotlib.patches import Rectangle
+    """Outline every ``step``-th box ``[lo_k, hi_k]`` in the (x1, x_n) plane, mm, in colour ``color_of(k)``.
 
-    for k in range(0, lo.shape[0], step):
-        if np.all(np.isfinite([lo[k, 0], hi[k, 0], lo[k, -1], hi[k, -1]])):
-            ax.add_patch(Rectangle((lo[k, 0] * 1e3, lo[k, -1] * 1e3), (hi[k, 0] - lo[k, 0]) * 1e3,
-                                   (hi[k, -1] - lo[k, -1]) * 1e3, fill=False, lw=0.5, ec=color_of(k), ls=ls))
+    One polygon collection per run of consecutive boxes of one colour (drawn in the boxes' order): a
+    patch per box made the figure's rendering seconds long."""
+    from matplotlib.collections import PolyCollection
+
+    ks = [k for k in range(0, lo.shape[0], step)
+          if np.all(np.isfinite([lo[k, 0], hi[k, 0], lo[k, -1], hi[k, -1]]))]
+    runs = []  # [colour, [k, ...]]
+    for k in ks:
+        color = color_of(k)
+        if runs and runs[-1][0] == color:
+            runs[-1][1].append(k)
+        else:
+            runs.append([color, [k]])
+    for color, idx in runs:
+        x0, x1 = lo[idx, 0] * 1e3, hi[idx, 0] * 1e3
+        y0, y1 = lo[idx, -1] * 1e3, hi[idx, -1] * 1e3
+        corners = np.stack([np.stack(c, axis=1) for c in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))], axis=1)
+        ax.add_collection(PolyCollection(corners, closed=True, facecolors="none", edgecolors=color, linewidths=0.5,
+                                         linestyles=ls))
 
 
 def _pyplot():
@@ -53,6 +67,35 @@ def _fit_pose_axes(a, ref):
     if fin.any():
         a.set_xlim(lo_all[fin, 0].min() * 1e3 - 5, hi_all[fin, 0].max() * 1e3 + 5)
         a.set_ylim(lo_all[fin, -1].min() * 1e3 - 5, hi_all[fin, -1].max() * 1e3 + 5)
+
+
+#: The legend's candidate places in a pose panel, in order of preference, and the part of the axes each
+#: legend covers there (fractions of the width and height).
+_LEGEND_CORNERS = (("upper right", 1, 1), ("upper left", 0, 1), ("lower left", 0, 0), ("lower right", 1, 0))
+_LEGEND_SPAN = (0.4, 0.3)
+
+
+def _pose_legend(a, bands, points=()):
+    """The pose panel's legend in the corner that the fewest boxes of ``bands`` (``[(lo, hi)]``, ``(K, n)``,
+    m) and ``points`` (``[(K, n)]``, m) reach, under the axes' limits: matplotlib's ``"best"`` tests every
+    box outline one by one, which took longer than drawing them."""
+    (x0, x1), (y0, y1) = a.get_xlim(), a.get_ylim()
+    wx, wy = _LEGEND_SPAN[0] * (x1 - x0), _LEGEND_SPAN[1] * (y1 - y0)
+    best, fewest = "upper right", None
+    for loc, right, top in _LEGEND_CORNERS:
+        cx0, cx1 = (x1 - wx, x1) if right else (x0, x0 + wx)
+        cy0, cy1 = (y1 - wy, y1) if top else (y0, y0 + wy)
+        count = 0
+        for lo, hi in bands:
+            with np.errstate(invalid="ignore"):
+                count += int(np.sum((lo[:, 0] * 1e3 <= cx1) & (hi[:, 0] * 1e3 >= cx0)
+                                    & (lo[:, -1] * 1e3 <= cy1) & (hi[:, -1] * 1e3 >= cy0)))
+        for p in points:
+            count += int(np.sum((p[:, 0] * 1e3 >= cx0) & (p[:, 0] * 1e3 <= cx1)
+                                & (p[:, -1] * 1e3 >= cy0) & (p[:, -1] * 1e3 <= cy1)))
+        if fewest is None or count < fewest:
+            best, fewest = loc, count
+    a.legend(loc=best, fontsize=8)
 
 
 def _save(plt, fig, path, title, bounds):
@@ -117,8 +160,8 @@ def _run_pose_panel(a, xl, xh, mode, x_true, truth):
         a.plot([], [], color=color, lw=1, label=f"pose box, {label}")
     if x_true is not None:
         a.plot(x_true[:, 0] * 1e3, x_true[:, -1] * 1e3, "k-", lw=0.8, label=f"{truth} pose")
-    a.legend(loc="best", fontsize=8)
     _fit_pose_axes(a, [(xl, xh)])
+    _pose_legend(a, [(xl, xh)], [] if x_true is None else [x_true])
     a.set_xlabel("x1 (mm)")
     a.set_ylabel(f"x{n} (mm)")
     a.set_title(f"pose boxes, every {step} sample(s)")
@@ -239,7 +282,7 @@ def _certificate_pose_panel(a, fl, fh, alive, x_plan, forward_label):
     a.set_xlabel("x1 (mm)")
     a.set_ylabel(f"x{n} (mm)")
     a.set_title(f"pose boxes, every {step} sample(s)")
-    a.legend(loc="best", fontsize=8)
+    _pose_legend(a, [(lo, hi) for _, _, _, lo, hi in layers], [] if x_plan is None else [x_plan])
 
 
 def _certificate_velocity_panel(a, t, fvl, fvh, alive, xd_plan, forward_label):
