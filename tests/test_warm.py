@@ -370,6 +370,46 @@ def test_one_child_at_a_time_compiles_the_lanes_driver(monkeypatch, tmp_path):
     assert not warm.lanes_compiling()
 
 
+def test_only_the_lanes_driver_missing_starts_a_child_nobody_waits_for(monkeypatch):
+    """The per-row driver and the one-motion kernels cached, the lanes driver not: the child compiles the lanes
+    driver alone (``lanes``), and the command has no child to wait for; with the one-motion kernels missing
+    too, the full child (it compiles them beside the command)."""
+    from crosscert.verifier.compiled.step import run_slot
+
+    class Exited:  # a child that has already exited, with no output
+        stdout = None
+
+        def __init__(self, args, **kwargs):
+            started.append(args[len(warm.CHILD):])
+
+        def poll(self):
+            return 0
+
+    started = []
+    monkeypatch.setattr(warm.subprocess, "Popen", Exited)
+    monkeypatch.setenv(warm.DISABLE, "1")
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)  # the lanes driver is missing
+    monkeypatch.setattr(warm, "lanes_cached", lambda: False)
+    monkeypatch.setattr(warm, "lanes_compiling", lambda: False)
+    monkeypatch.setattr(warm, "_in_cache", lambda dispatcher, sig: dispatcher is run_slot)
+    monkeypatch.setattr(warm, "one_motion_cached", lambda: True)
+    assert not warm.start("sound") and warm.pending() == [] and warm.wait(SOUND) is None
+    assert started == [["lanes"]]
+    monkeypatch.setattr(warm, "one_motion_cached", lambda: False)
+    assert warm.start("sound") and started[-1] == [str(SOUND)]
+    assert warm.wait(SOUND) == 0  # the (exited) full child, waited for
+
+
+def test_one_motion_cached_reads_the_kernels_signatures(monkeypatch):
+    from crosscert.verifier.compiled import one_motion
+
+    seen = []
+    monkeypatch.setattr(warm, "_in_cache", lambda dispatcher, sig: seen.append((dispatcher, len(sig))) or True)
+    assert warm.one_motion_cached()
+    assert [d for d, _ in seen] == [one_motion.dual_bound, one_motion.taylor_rows]
+    assert [n for _, n in seen] == [17, 14]
+
+
 def test_a_batch_that_finds_the_lanes_driver_missing_asks_once_for_a_child(monkeypatch):
     """Outside a command (a script's batches), the first batch that would run in lanes but finds the driver
     missing starts one child compiling it alone (argument ``lanes``); later batches do not ask again; none

@@ -203,11 +203,9 @@ def taylor_rows(c, r, Flo, Fhi, Jlo, Jhi, Hlo, Hhi, Jc, blo, bhi, v, plo, phi):
             bhi[s, i] = hi
 
 
-def compile_kernels() -> None:
-    """Compile (or load from numba's disk cache) both kernels for the argument types
-    :mod:`verifier.one_motion` passes (C-contiguous float64 and int64 arrays), by calling them on tiny
-    arrays: the compilation child of a first run (:mod:`verifier.compiled.warm`) does it beside the
-    parent's work."""
+def example_arguments() -> tuple:
+    """``((kernel, arguments), ...)``: each kernel with tiny arrays of the argument types
+    :mod:`verifier.one_motion` passes (C-contiguous float64 and int64 arrays)."""
     import numpy as np
 
     f, i = np.float64, np.int64
@@ -215,7 +213,15 @@ def compile_kernels() -> None:
     def z(*shape, dtype=f):
         return np.zeros(shape, dtype)
 
-    dual_bound(z(1, dtype=i), z(1, dtype=i), z(1), z(1), z(1), z(1), z(1, 1), z(1, 1), z(1, dtype=i), z(1, dtype=i),
-               z(2, dtype=i), z(1, dtype=i), z(4), z(4), z(1), z(1), z(1))
-    taylor_rows(z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1, 1), z(1, 1, 1), z(1, 1, 1, 1), z(1, 1, 1, 1), z(1, 1, 1),
-                z(1, 1), z(1, 1), z(1), z(1), z(1))
+    return ((dual_bound, (z(1, dtype=i), z(1, dtype=i), z(1), z(1), z(1), z(1), z(1, 1), z(1, 1), z(1, dtype=i),
+                          z(1, dtype=i), z(2, dtype=i), z(1, dtype=i), z(4), z(4), z(1), z(1), z(1))),
+            (taylor_rows, (z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1, 1), z(1, 1, 1), z(1, 1, 1, 1), z(1, 1, 1, 1),
+                           z(1, 1, 1), z(1, 1), z(1, 1), z(1), z(1), z(1))))
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's disk cache) both kernels for the argument types
+    :mod:`verifier.one_motion` passes, by calling them on :func:`example_arguments`: the compilation child
+    of a first run (:mod:`verifier.compiled.warm`) does it beside the parent's work."""
+    for kernel, args in example_arguments():
+        kernel(*args)

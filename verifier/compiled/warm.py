@@ -42,8 +42,8 @@ import numpy as np
 from ..constants import AXIS_DTYPE, BASELINE_DTYPE, JOINT_FD, PAPER, SOUND, StepConstants, velocity_model_code
 
 __all__ = ["CHILD", "DISABLE", "WAIT_S", "POLL_S", "READY", "ONE_MOTION_READY", "LOADAVG", "PROBES", "PROBE_S",
-           "example_arguments", "signature", "lanes_signature", "cached", "lanes_cached", "runnable_now", "core_free",
-           "start", "start_lanes", "wait", "finish", "pending", "main"]
+           "example_arguments", "signature", "lanes_signature", "cached", "lanes_cached", "one_motion_cached",
+           "runnable_now", "core_free", "start", "start_lanes", "wait", "finish", "pending", "main"]
 
 #: The child's command before its arguments (tests replace it by one that fails).
 CHILD = [sys.executable, "-m", "crosscert.verifier.compiled.warm"]
@@ -185,6 +185,15 @@ def lanes_cached() -> bool:
     return _LANES_LOOKED[1]
 
 
+def one_motion_cached() -> bool:
+    """Whether the window's one-motion kernels are compiled in this process or in numba's disk cache."""
+    import numba
+
+    from .one_motion import example_arguments
+
+    return all(_in_cache(k, tuple(numba.typeof(a) for a in args)) for k, args in example_arguments())
+
+
 def start(velocity_model="sound") -> bool:
     """Start a child compiling the driver of ``velocity_model`` (a name, a
     :class:`verifier.settings.VelocityModel` or its code) into numba's disk cache, unless it is cached, a
@@ -210,8 +219,12 @@ def start(velocity_model="sound") -> bool:
                 return False
             from .step import run_slot
 
-            if _in_cache(run_slot, signature(code)) and lanes_compiling():  # only the lanes driver is missing,
-                return False  # and another child compiles it
+            if _in_cache(run_slot, signature(code)):  # only the lanes driver is missing: nothing to wait for
+                if lanes_compiling():  # another child compiles it
+                    return False
+                if one_motion_cached():  # a niced child for it alone, which no command waits for
+                    start_lanes()
+                    return False
             child = subprocess.Popen([*CHILD, str(code)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL)
             _CHILDREN[code] = child
