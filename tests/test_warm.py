@@ -72,11 +72,18 @@ def test_the_child_compiles_the_lanes_signature_the_tracker_calls(name, monkeypa
     assert warm.lanes_signature() == tuple(numba.typeof(v) for v in args)
 
 
+def _after_an_install(monkeypatch):
+    """Nothing in numba's cache, as after an install (whatever this machine's cache holds): a child compiles
+    the driver, and the command waits for it."""
+    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    monkeypatch.setattr(warm, "_in_cache", lambda dispatcher, sig: False)
+
+
 def test_a_child_past_the_one_motion_kernels_is_left_to_compile_the_lanes_driver(monkeypatch):
     """The child says the driver is cached, then the one-motion kernels: the one-motion wait (``finish``) ends
     on that line, and at exit the child, compiling the lanes driver that nobody waits for, is not stopped;
     a child that has not said it is stopped."""
-    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    _after_an_install(monkeypatch)
     monkeypatch.setenv(warm.DISABLE, "1")
     say = (f"import sys, time; print({warm.READY!r}, sys.argv[1], flush=True); time.sleep(0.3); "
            f"print({warm.ONE_MOTION_READY!r}, flush=True); sys.stdout.close(); time.sleep(%s)")
@@ -130,7 +137,7 @@ def test_a_failing_child_changes_nothing_but_the_time(monkeypatch, simulated_rec
     wait = warm.wait
     monkeypatch.setattr(warm, "wait", lambda *a, **k: codes.append(wait(*a, **k)))
     monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import sys; sys.exit(1)"])
-    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)  # as after an install
+    _after_an_install(monkeypatch)
     monkeypatch.setenv(warm.DISABLE, "1")
     assert main(argv) == 0
     got = json.loads(capsys.readouterr().out)
@@ -142,7 +149,7 @@ def test_a_failing_child_changes_nothing_but_the_time(monkeypatch, simulated_rec
 
 def test_a_hanging_child_is_stopped(monkeypatch):
     monkeypatch.setattr(warm, "CHILD", [sys.executable, "-c", "import time; time.sleep(600)"])
-    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    _after_an_install(monkeypatch)
     monkeypatch.setenv(warm.DISABLE, "1")
     assert warm.start("sound") and warm.pending() == [SOUND]
     assert warm.wait(SOUND, timeout=0.5) is None  # not finished: stopped, the caller compiles
@@ -203,7 +210,7 @@ def test_by_default_a_child_only_when_a_core_is_free(monkeypatch, tmp_path):
     be read, when the one-minute load average is below their number."""
     started = []
     monkeypatch.setattr(warm.subprocess, "Popen", lambda *a, **k: started.append(a) or _Done())
-    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    _after_an_install(monkeypatch)
     monkeypatch.setattr(warm.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
     monkeypatch.setattr(warm, "PROBE_S", 0.0)
     loadavg = tmp_path / "loadavg"
@@ -268,7 +275,7 @@ def test_the_wait_ends_once_the_driver_is_cached_and_the_child_is_stopped_at_exi
     """The child says the driver is cached, then goes on (the one-motion kernels): ``wait`` returns 0 then,
     without waiting for its exit, and the exit handler stops it and joins the thread reading its output.  A
     line for another velocity model, or none, does not end the wait."""
-    monkeypatch.setattr(warm, "cached", lambda code=SOUND: False)
+    _after_an_install(monkeypatch)
     monkeypatch.setenv(warm.DISABLE, "1")
     say = f"import sys, time; print({warm.READY!r}, int(sys.argv[1]) + 1, flush=True); time.sleep(%s); " \
           f"print({warm.READY!r}, sys.argv[1], flush=True); time.sleep(600)"

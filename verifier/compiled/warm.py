@@ -219,7 +219,7 @@ def start(velocity_model="sound") -> bool:
                 return False
             from .step import run_slot
 
-            if _in_cache(run_slot, signature(code)):  # only the lanes driver is missing: nothing to wait for
+            if _in_cache(run_slot, signature(code)):  # the driver cached: the lanes driver is missing
                 if lanes_compiling():  # another child compiles it
                     return False
                 if one_motion_cached():  # a niced child for it alone, which no command waits for
