@@ -30,18 +30,14 @@ def _pose_boxes(ax, lo, hi, step, color_of, ls="-"):
 
     One polygon collection per run of consecutive boxes of one colour (drawn in the boxes' order): a
     patch per box made the figure's rendering seconds long."""
+    from itertools import groupby
+
     from matplotlib.collections import PolyCollection
 
-    ks = [k for k in range(0, lo.shape[0], step)
-          if np.all(np.isfinite([lo[k, 0], hi[k, 0], lo[k, -1], hi[k, -1]]))]
-    runs = []  # [colour, [k, ...]]
-    for k in ks:
-        color = color_of(k)
-        if runs and runs[-1][0] == color:
-            runs[-1][1].append(k)
-        else:
-            runs.append([color, [k]])
-    for color, idx in runs:
+    ks = np.arange(0, lo.shape[0], step)
+    ends = np.concatenate([lo[ks][:, [0, -1]], hi[ks][:, [0, -1]]], axis=1)
+    for color, run in groupby(ks[np.isfinite(ends).all(1)], key=color_of):
+        idx = list(run)
         x0, x1 = lo[idx, 0] * 1e3, hi[idx, 0] * 1e3
         y0, y1 = lo[idx, -1] * 1e3, hi[idx, -1] * 1e3
         corners = np.stack([np.stack(c, axis=1) for c in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))], axis=1)
@@ -78,7 +74,7 @@ _LEGEND_SPAN = (0.4, 0.3)
 def _pose_legend(a, bands, points=()):
     """The pose panel's legend in the corner that the fewest boxes of ``bands`` (``[(lo, hi)]``, ``(K, n)``,
     m) and ``points`` (``[(K, n)]``, m) reach, under the axes' limits: matplotlib's ``"best"`` tests every
-    box outline one by one, which took longer than drawing them."""
+    box one by one, which took longer than drawing them."""
     (x0, x1), (y0, y1) = a.get_xlim(), a.get_ylim()
     wx, wy = _LEGEND_SPAN[0] * (x1 - x0), _LEGEND_SPAN[1] * (y1 - y0)
     best, fewest = "upper right", None
