@@ -11,6 +11,7 @@
   or second-order term fails containment; dropping one of its roundings (a product ``r_j r_l``, a sum, the
   last subtraction) fails only the agreement: every such step is followed by another outward one that
   covers half an ulp (removal checks, 2026-12-04);
+* :func:`evaluate` (a tape over many boxes, as lanes) gives :meth:`Tape.evaluate`'s enclosures bit for bit;
 * the window's one-motion step gives the same rows, refutations and sub-boxes with either backend.
 
 The containment of the truth itself (true solutions at box corners, adversarial motions never refuted) is
@@ -215,6 +216,36 @@ def test_loop_closure_rows_are_the_same_with_either_backend_on_every_robot(name)
         assert all(_bits_equal(a, b) for a, b in zip(got, want)), (name, w)
 
 
+@pytest.mark.parametrize("name", available_robots())
+def test_the_tapes_over_lanes_are_numpys_bit_for_bit(name):
+    """:func:`verifier.compiled.one_motion.evaluate` gives :meth:`Tape.evaluate`'s enclosures bit for bit: every
+    tape the one-motion step and the window's split evaluate, on point boxes, narrow and wide ones (sines and
+    cosines over their extrema), unbounded boxes, more boxes than one sweep's lanes,
+    an input shared by every box (broadcast), and no box at all."""
+    from crosscert.verifier.compiled import one_motion as kernels
+
+    im = interval_model() if name == "dextar" else IntervalModel(get_entry(name).robot)
+    rng = np.random.default_rng(11)
+    xi_lo, xi_hi = im.xi_box()
+    S = kernels.LANES + 37
+    x = rng.normal(size=(S, im.n)) * 0.1
+    q = rng.normal(size=(S, im.n))
+    w = np.where(rng.random((S, 1)) < 0.25, 0.0, 10.0 ** rng.integers(-9, 1, (S, 1)))
+    w[1], w[2] = 50.0, np.inf  # boxes far out of any pose, unbounded: the products' general path, infinities
+    X, Q = (x - w, x + w), (q - w, q + w)
+    cases = [[X, Q, (xi_lo, xi_hi)],  # the geometry box shared by every box
+             [X, Q, (np.broadcast_to(xi_lo, (S, im.m)), np.broadcast_to(xi_hi, (S, im.m)))],
+             [(x[:0], x[:0]), (q[:0], q[:0]), (xi_lo, xi_hi)]]
+    for tape in (im.tape_f, im.tape_jx, im.tape_jac, im.tape_hess):
+        for inputs in cases:
+            want = tape.evaluate(inputs)
+            got = kernels.evaluate(tape, inputs)
+            assert len(got) == len(want)
+            for (gl, gh), (wl, wh) in zip(got, want):
+                assert gl.shape == wl.shape and _bits_equal(gl, wl) and _bits_equal(gh, wh), (name, tape.name)
+    assert not np.isfinite(kernels.evaluate(im.tape_hess, cases[0])[0][0][2]).all()
+
+
 def _exact_taylor(c, r, F, J, H, s, i, Jc):
     """Exact ``(lo, hi)`` of row ``(s, i)``'s formula from the same float enclosures and ``Jc``."""
     N = c.shape[1]
@@ -283,11 +314,12 @@ def test_the_compilation_child_builds_the_signatures_the_step_uses(scenarios):
     """:func:`verifier.compiled.one_motion.compile_kernels` (run by the first run's compilation child) compiles
     each kernel for exactly the argument types of the step's calls: after it, a call adds no signature."""
     from crosscert.robots import DEXTAR
-    from crosscert.verifier.compiled.one_motion import compile_kernels, dual_bound, taylor_rows
+    from crosscert.verifier.compiled.one_motion import compile_kernels, dual_bound, tape_points, taylor_rows
     from crosscert.verifier.settings import TrackerSettings
 
     compile_kernels()
-    before = (list(dual_bound.signatures), list(taylor_rows.signatures))
+    kernels = (dual_bound, taylor_rows, tape_points)
+    before = [list(k.signatures) for k in kernels]
     im = interval_model()
     sc = scenarios[0]
     X = np.stack([sc.x - 1e-3, sc.x + 1e-3], axis=1)
@@ -295,5 +327,5 @@ def test_the_compilation_child_builds_the_signatures_the_step_uses(scenarios):
     lo, hi = im.xi_box()
     OM.one_motion_rows(im, TrackerSettings.for_robot(DEXTAR), sc.q_meas, (lo[None], hi[None]), X[None], XD[None],
                        compiled=True)
-    assert (list(dual_bound.signatures), list(taylor_rows.signatures)) == before
-    assert len(before[0]) == len(before[1]) == 1
+    assert [list(k.signatures) for k in kernels] == before
+    assert [len(b) for b in before] == [1, 1, 1]

@@ -85,6 +85,12 @@ def _sum_up(v):
     return v[..., 0]
 
 
+def evaluate_tape(tape, inputs, compiled: bool = False):
+    """``tape.evaluate(inputs)`` (:meth:`verifier.tape.Tape.evaluate`); ``compiled``: by
+    :func:`verifier.compiled.one_motion.evaluate` (the same floats, the boxes as lanes)."""
+    return one_motion_kernels().evaluate(tape, inputs) if compiled else tape.evaluate(inputs)
+
+
 def loop_closure_rows(model, X, Q, XI, *, compiled: bool = False):
     """Linear inequalities implied by ``f(x_k, q_k, ξ) = 0`` for every ``(x_k, q_k, ξ)`` of the boxes.
 
@@ -97,8 +103,8 @@ def loop_closure_rows(model, X, Q, XI, *, compiled: bool = False):
         The geometry box (shared by the samples, or one per sample: the rows of several window rows are
         computed in one call).
     compiled : bool
-        The rows from the tapes' enclosures by :func:`verifier.compiled.one_motion.taylor_rows` (the same
-        floats).
+        The tapes' enclosures by :func:`evaluate_tape`, the rows from them by
+        :func:`verifier.compiled.one_motion.taylor_rows` (the same floats).
 
     Returns
     -------
@@ -129,9 +135,9 @@ def loop_closure_rows(model, X, Q, XI, *, compiled: bool = False):
         c = I.midpoint(lo, hi)
         r = np.maximum(I.sub(c, c, lo, lo)[1], I.sub(hi, hi, c, c)[1])  # >= |z - c| on the box
         cx, cq, cxi = np.split(c, np.cumsum([n, n]), axis=1)
-        F = model.tape_f.evaluate([(cx, cx), (cq, cq), (cxi, cxi)])[0]
-        Jp = model.tape_jac.evaluate([(cx, cx), (cq, cq), (cxi, cxi)])[0]
-        Hlo, Hhi = model.tape_hess.evaluate([(X[0], X[1]), (Q[0], Q[1]), XIb])[0]
+        F = evaluate_tape(model.tape_f, [(cx, cx), (cq, cq), (cxi, cxi)], compiled)[0]
+        Jp = evaluate_tape(model.tape_jac, [(cx, cx), (cq, cq), (cxi, cxi)], compiled)[0]
+        Hlo, Hhi = evaluate_tape(model.tape_hess, [(X[0], X[1]), (Q[0], Q[1]), XIb], compiled)[0]
         Hlo, Hhi = Hlo.reshape(S, n, N, N), Hhi.reshape(S, n, N, N)
     return (_taylor_rows_compiled if compiled else _taylor_rows)(c, r, F, Jp, Hlo, Hhi)
 

@@ -3,7 +3,9 @@
 * :func:`dual_bound`: the weak-duality bounds that prove a row refuted or a geometry bound
   (``verifier.certified_lp._dual_bound``);
 * :func:`taylor_rows`: the loop closure's linear rows from its enclosures over the boxes
-  (the part of ``verifier.one_motion.loop_closure_rows`` after the tapes).
+  (the part of ``verifier.one_motion.loop_closure_rows`` after the tapes);
+* :func:`tape_points` (:func:`evaluate`): those enclosures, a tape over many boxes
+  (:meth:`verifier.tape.Tape.evaluate`), the boxes as lanes.
 
 Each computes what the numpy function computes, operation for operation, with the scalar interval
 operations of :mod:`verifier.compiled.interval` (numpy's floats bit for bit, docs/rounding.md): the same
@@ -17,8 +19,13 @@ only, so that the numpy backend never loads numba.
 from __future__ import annotations
 
 import math
+import weakref
+
+import numpy as np
 
 from .interval import add, cached_jit, dn0, jit, maxn, midpoint, mul, sub, up, up0
+from .lanes.tape import forward as lane_forward
+from .tape import Program, trig_memo
 
 
 @jit
@@ -203,11 +210,88 @@ def taylor_rows(c, r, Flo, Fhi, Jlo, Jhi, Hlo, Hhi, Jc, blo, bhi, v, plo, phi):
             bhi[s, i] = hi
 
 
+#: Points per sweep of :func:`tape_points`: the node bounds of one sweep, ``(n_nodes, LANES)`` twice, stay small
+#: (a Hessian tape of a few thousand nodes: a few MiB) whatever the number of points.
+LANES = 128
+
+
+@cached_jit
+def tape_points(prog, in_lo, in_hi, out_lo, out_hi, lo, hi, clo, chi, mk, mv, flag):
+    """Enclose the dense outputs of tape 0 of the :class:`~verifier.compiled.tape.Program` ``prog`` over ``P``
+    input boxes: inputs ``in_lo, in_hi`` ``(inputs, P)``, the tape's dense output entries into ``out_lo, out_hi``
+    ``(E, P)`` (a structural zero ``[0, 0]``).  The points run ``W`` at a time as the lanes of
+    :func:`verifier.compiled.lanes.tape.forward` (node for node the floats of :meth:`verifier.tape.Tape.evaluate`),
+    ``W`` the width of the scratch ``lo, hi`` ``(n_nodes, W)``, ``clo, chi`` ``(inputs, W)`` and ``flag``
+    ``(W,)``; ``mk, mv`` a memo of sines and cosines (:func:`verifier.compiled.tape.trig_memo`)."""
+    n_in, P = in_lo.shape
+    W = lo.shape[1]
+    E = out_lo.shape[0]
+    o0 = prog.meta[0, 2]
+    for s in range(0, P, W):
+        L = min(W, P - s)
+        for a in range(n_in):
+            for r in range(L):
+                clo[a, r] = in_lo[a, s + r]
+                chi[a, r] = in_hi[a, s + r]
+        lane_forward(prog, 0, clo, chi, lo, hi, L, mk, mv, flag)
+        for e in range(E):
+            node = prog.outs[o0 + e]
+            for r in range(L):
+                if node < 0:
+                    out_lo[e, s + r] = 0.0
+                    out_hi[e, s + r] = 0.0
+                else:
+                    out_lo[e, s + r] = lo[node, r]
+                    out_hi[e, s + r] = hi[node, r]
+
+
+_PROGRAMS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _program(tape) -> Program:
+    """``tape`` (:class:`verifier.tape.Tape`) alone as a :class:`Program` for :func:`tape_points`, built once per
+    tape (no straight-line code: the lanes interpret it)."""
+    prog = _PROGRAMS.get(tape)
+    if prog is None:
+        a = tape.arrays()
+        prog = _PROGRAMS[tape] = Program(code=np.ascontiguousarray(a.code), value=np.ascontiguousarray(a.value),
+                                         outs=np.ascontiguousarray(a.out_nodes),
+                                         meta=np.array([[0, len(a.code), 0]], np.int64),
+                                         n_nodes=max(len(a.code), 1), fns=np.zeros((2, 1), np.int64))
+    return prog
+
+
+def evaluate(tape, inputs):
+    """:meth:`verifier.tape.Tape.evaluate` by :func:`tape_points`: the same inputs, the same outputs, the same
+    floats (its points as lanes: one dispatch per instruction for up to :data:`LANES` points)."""
+    inputs = [(np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)) for lo, hi in inputs]
+    bs = np.broadcast_shapes(*(np.shape(lo)[:-1] for lo, _ in inputs)) if inputs else ()
+    P = int(np.prod(bs, dtype=np.int64))
+    if inputs:
+        in_lo, in_hi = (np.ascontiguousarray(np.concatenate(
+            [np.broadcast_to(v[k], bs + v[k].shape[-1:]).reshape(P, v[k].shape[-1]) for v in inputs], axis=1).T)
+            for k in (0, 1))
+    else:
+        in_lo = in_hi = np.zeros((0, P))
+    prog = _program(tape)
+    E = len(prog.outs)
+    out_lo, out_hi = np.empty((E, P)), np.empty((E, P))
+    if P:
+        W = min(LANES, P)
+        mk, mv = trig_memo()
+        tape_points(prog, in_lo, in_hi, out_lo, out_hi, np.empty((prog.n_nodes, W)), np.empty((prog.n_nodes, W)),
+                    np.empty((len(in_lo), W)), np.empty((len(in_lo), W)), mk, mv, np.empty(W, np.bool_))
+    result, e0 = [], 0
+    for rows, cols in tape.out_shapes:
+        shape = bs + ((rows,) if cols == 1 else (rows, cols))
+        result.append(tuple(np.ascontiguousarray(v[e0:e0 + rows * cols].T).reshape(shape) for v in (out_lo, out_hi)))
+        e0 += rows * cols
+    return result
+
+
 def example_arguments() -> tuple:
     """``((kernel, arguments), ...)``: each kernel with tiny arrays of the argument types
     :mod:`verifier.one_motion` passes (C-contiguous float64 and int64 arrays)."""
-    import numpy as np
-
     f, i = np.float64, np.int64
 
     def z(*shape, dtype=f):
@@ -216,11 +300,14 @@ def example_arguments() -> tuple:
     return ((dual_bound, (z(1, dtype=i), z(1, dtype=i), z(1), z(1), z(1), z(1), z(1, 1), z(1, 1), z(1, dtype=i),
                           z(1, dtype=i), z(2, dtype=i), z(1, dtype=i), z(4), z(4), z(1), z(1), z(1))),
             (taylor_rows, (z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1, 1), z(1, 1, 1), z(1, 1, 1, 1), z(1, 1, 1, 1),
-                           z(1, 1, 1), z(1, 1), z(1, 1), z(1), z(1), z(1))))
+                           z(1, 1, 1), z(1, 1), z(1, 1), z(1), z(1), z(1))),
+            (tape_points, (Program(z(1, 3, dtype=i), z(1), z(1, dtype=i), z(1, 3, dtype=i), 1, z(2, 1, dtype=i)),
+                           z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 1), z(1, 3, dtype=i),
+                           z(1, 2), z(1, dtype=np.bool_))))
 
 
 def compile_kernels() -> None:
-    """Compile (or load from numba's disk cache) both kernels for the argument types
+    """Compile (or load from numba's disk cache) the kernels for the argument types
     :mod:`verifier.one_motion` passes, by calling them on :func:`example_arguments`: the compilation child
     of a first run (:mod:`verifier.compiled.warm`) does it beside the parent's work."""
     for kernel, args in example_arguments():

@@ -15,7 +15,7 @@ import numpy as np
 from .. import interval as I
 from ..linalg import point_inverse
 from ..motion_model import contract_tubes
-from ..one_motion import one_motion_rows
+from ..one_motion import evaluate_tape, one_motion_rows
 from ..step import Backend
 from .explain import Explanation
 from .passes import tube_hull
@@ -38,7 +38,7 @@ def _width(x, xd):
     return float(w)
 
 
-def _pose_spread(model, x, q, xi_lo, xi_hi):
+def _pose_spread(model, x, q, xi_lo, xi_hi, compiled: bool = False):
     """How wide each parameter's width alone makes the pose, per geometry sub-box: ``(R, m)``, m.
 
     For row ``r`` and parameter ``i``: ``|C| w(f(x_r, q_r, xi_i))`` summed over the pose coordinates, ``f``
@@ -46,7 +46,8 @@ def _pose_spread(model, x, q, xi_lo, xi_hi):
     parameter ``i``, which keeps its width, with the reading ``q`` (``(n,)``, or ``(R, n)``: one per row), and
     ``C`` the inverse of ``J_x`` there (the first-order pose error of that parameter's uncertainty).  A
     heuristic for where to split: it decides no box.  Every operation is elementwise over the rows, so a
-    row's result does not depend on the rows evaluated with it.
+    row's result does not depend on the rows evaluated with it.  ``compiled``: the tapes by
+    :func:`verifier.one_motion.evaluate_tape`'s compiled kernel (the same floats).
     """
     R, m = xi_lo.shape
     n = model.n
@@ -56,8 +57,8 @@ def _pose_spread(model, x, q, xi_lo, xi_hi):
     lo, hi = np.repeat(mid, m, axis=0), np.repeat(mid, m, axis=0)
     one = np.tile(np.eye(m, dtype=bool), (R, 1))
     lo[one], hi[one] = xi_lo.reshape(-1), xi_hi.reshape(-1)
-    F = model.tape_f.evaluate([(xm, xm), (qm, qm), (lo, hi)])[0]
-    J = model.tape_jx.evaluate([(xm, xm), (qm, qm), (np.repeat(mid, m, axis=0),) * 2])[0]
+    F = evaluate_tape(model.tape_f, [(xm, xm), (qm, qm), (lo, hi)], compiled)[0]
+    J = evaluate_tape(model.tape_jx, [(xm, xm), (qm, qm), (np.repeat(mid, m, axis=0),) * 2], compiled)[0]
     C = point_inverse(I.midpoint(*J))
     w = (F[1] - F[0]).reshape(R * m, n)
     return np.einsum("rij,rj->r", np.abs(C), w).reshape(R, m)
@@ -184,7 +185,8 @@ class Hypothesis:
                                  np.broadcast_to(np.asarray(self.finals.q_last, dtype=np.float64), (R, n))])
         with I.quiet_fp():
             both = _pose_spread(model, np.concatenate([self.tx[:, 0], self.tx[:, -1]]), q_ends,
-                                np.concatenate([self.xlo, self.xlo]), np.concatenate([self.xhi, self.xhi]))
+                                np.concatenate([self.xlo, self.xlo]), np.concatenate([self.xhi, self.xhi]),
+                                compiled=self.finals.backend == Backend.COMPILED)
             spread = both[:R] + both[R:]
         self.xlo, self.xhi = _bisect(self.xlo, self.xhi, full_w, spread)
         self.tx, self.txd = np.concatenate([self.tx, self.tx]), np.concatenate([self.txd, self.txd])
