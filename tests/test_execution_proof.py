@@ -129,6 +129,26 @@ def test_offset_split_rounds_outward():
         assert Fraction(c_lo[k]) <= Fraction(r_lo[k]) + M and Fraction(r_hi[k]) + M <= Fraction(c_hi[k])
 
 
+@pytest.mark.parametrize("name", ["dextar", "3rpr"])
+def test_the_proof_is_the_same_with_the_tapes_compiled_or_in_numpy(name, monkeypatch):
+    """The proof's tapes evaluated by the compiled kernel (the default) or by numpy: the same class, bit for
+    bit (the kernel computes numpy's floats; tests/test_one_motion_compiled.py checks it tape by tape)."""
+    entry = get_entry(name)
+    robot = entry.robot
+    plan = plan_crossing(KinematicModel(robot), problems.PLANNING[f"{name}_benchmark"].task(), 1.2,
+                         PlanningBounds())
+    tapes = execution_search.loop_closure_tapes(robot)[0][0]
+    assert tapes.compiled
+    proofs = []
+    for compiled in (True, False):
+        monkeypatch.setattr(tapes, "compiled", compiled)
+        proofs.append(prove_cartesian_class(robot, plan.x, plan.q, plan.xi_plan))
+    a, b = proofs
+    assert a.proved and b.proved, (a.reason, b.reason)
+    assert (a.drift, a.step, a.boxes) == (b.drift, b.step, b.boxes)
+    assert np.array_equal(a.c_lo, b.c_lo) and np.array_equal(a.c_hi, b.c_hi)
+
+
 def test_root_boxes_are_only_used_once_proved(plan, kin):
     """Removal check of the inflation's proof condition: a radius too small for the roots' motion over
     [xi] is not proved in one attempt; grown until proved, the box holds the corners' roots."""

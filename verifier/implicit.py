@@ -20,7 +20,8 @@ and parameters ``p`` in a box ``[p]``:
   the slopes at two samples without the cancellation of two wide enclosures.
 
 Every operation is the outward-rounded interval arithmetic of
-:mod:`verifier.interval`; batches are rows, as in :mod:`verifier.contractors`.
+:mod:`verifier.interval` (the tapes optionally by a kernel that computes the same
+floats, :class:`ImplicitTapes`); batches are rows, as in :mod:`verifier.contractors`.
 Nothing here names a robot.
 """
 
@@ -31,6 +32,7 @@ import numpy as np
 
 from . import interval as I
 from .linalg import imat_ivec, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
+from .one_motion import evaluate_tape
 from .tape import Tape
 
 __all__ = ["ImplicitTapes", "krawczyk", "strictly_inside", "inflate_roots", "contract_roots", "root_gradient",
@@ -46,9 +48,12 @@ class ImplicitTapes:
         Column symbols of sizes ``n_x``, ``n``, ``n_p``.
     g : casadi.SX
         ``(n,)`` expression in them.
+    compiled : bool
+        Evaluate the tapes by :func:`verifier.one_motion.evaluate_tape`'s compiled kernel (the same floats).
     """
 
-    def __init__(self, x, u, p, g, columns=None):
+    def __init__(self, x, u, p, g, columns=None, *, compiled: bool = False):
+        self.compiled = compiled
         g = ca.vec(g)
         self.n = int(u.numel())
         ju, jp = ca.jacobian(g, u), ca.jacobian(g, p)
@@ -69,11 +74,16 @@ class ImplicitTapes:
         self.tape_slope_change = Tape(ca.Function("slope_change", [x, u, p, xd, ud, G], [dF]))
 
 
+    def evaluate(self, tape, inputs):
+        """``tape.evaluate(inputs)`` for one of these tapes, by the kernel when :attr:`compiled`."""
+        return evaluate_tape(tape, inputs, self.compiled)
+
+
 def krawczyk(tapes: ImplicitTapes, X, U, P):
     """The Krawczyk image ``K(U)`` (rows of boxes ``(B, n)``); ``X`` points as ``(lo, hi)``, ``P`` boxes."""
     m = I.midpoint(*U)
-    G = tapes.tape_g.evaluate([X, (m, m), P])[0]
-    Ju = tapes.tape_ju.evaluate([X, U, P])[0]
+    G = tapes.evaluate(tapes.tape_g, [X, (m, m), P])[0]
+    Ju = tapes.evaluate(tapes.tape_ju, [X, U, P])[0]
     C = point_inverse(I.midpoint(*Ju))
     CJl, CJh = pmat_imat(C, *Ju)
     eye = np.eye(tapes.n)
@@ -141,7 +151,7 @@ def root_gradient(tapes: ImplicitTapes, X, U, P, columns):
     -------
     (lo, hi) of shape ``(B, n, len(columns))``.
     """
-    Ju, Jp = tapes.tape_jac.evaluate([X, U, P])
+    Ju, Jp = tapes.evaluate(tapes.tape_jac, [X, U, P])
     cols = list(columns)
     return _solve_columns(Ju, (-Jp[1][:, :, cols], -Jp[0][:, :, cols]))
 
@@ -167,12 +177,12 @@ def slope_change(tapes: ImplicitTapes, X, dX, U, P, G):
     and an integral over ``[0, 1]`` of a function with values in a box lies
     in that box.
     """
-    Ju, JxdX = tapes.tape_path.evaluate([X, U, P, dX])
+    Ju, JxdX = tapes.evaluate(tapes.tape_path, [X, U, P, dX])
     ud = linear_enclosure(Ju[0], Ju[1], -JxdX[1], -JxdX[0], sweeps=2)
     ud = (np.where(np.isnan(ud[0]), -np.inf, ud[0]), np.where(np.isnan(ud[1]), np.inf, ud[1]))
     B, n, c = G[0].shape
     flat = [np.transpose(g, (0, 2, 1)).reshape(B, n * c) for g in G]  # CasADi's column-major order
-    dF = tapes.tape_slope_change.evaluate([X, U, P, dX, ud, flat])[0]
+    dF = tapes.evaluate(tapes.tape_slope_change, [X, U, P, dX, ud, flat])[0]
     return _solve_columns(Ju, (-dF[1], -dF[0]))
 
 
