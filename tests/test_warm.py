@@ -413,8 +413,8 @@ def test_one_motion_cached_reads_the_kernels_signatures(monkeypatch):
     seen = []
     monkeypatch.setattr(warm, "_in_cache", lambda dispatcher, sig: seen.append((dispatcher, len(sig))) or True)
     assert warm.one_motion_cached()
-    assert [d for d, _ in seen] == [one_motion.dual_bound, one_motion.taylor_rows]
-    assert [n for _, n in seen] == [17, 14]
+    assert [d for d, _ in seen] == [one_motion.dual_bound, one_motion.taylor_rows, one_motion.tape_points]
+    assert [n for _, n in seen] == [17, 14, 12]
 
 
 def test_a_batch_that_finds_the_lanes_driver_missing_asks_once_for_a_child(monkeypatch):

@@ -77,6 +77,25 @@ def _constants_remembered(j: int, t_s: float, shape: tuple, a_bytes: bytes):
     return _constants(j, t_s, np.frombuffer(a_bytes, dtype=np.float64).reshape(shape))
 
 
+def _kernel_constants(tau, inv_tau2, e4, four_a, P: int, n: int) -> tuple:
+    """:func:`verifier.compiled.motion_model.pair_kernel`'s constants after ``(x, xd, k, j)``: the enclosures
+    of ``tau``, ``2 / tau`` and ``tau / 2`` per pair ``(P,)`` each, ``e4`` ``(P, n)`` and ``4 a`` ``(n,)``
+    (``tau`` ... ``four_a`` as :func:`_constants` or :func:`_constants_of_tau` give them)."""
+    half = I.scale(0.5, *tau)
+    per_pair = (_per_pair(v, P) for v in (*tau, *inv_tau2, *half))
+    per_axis = (np.ascontiguousarray(np.broadcast_to(v, (n,)), np.float64) for v in four_a)
+    return (*per_pair, _per_pair(e4, P, (n,)), *per_axis)
+
+
+@functools.lru_cache(maxsize=64)
+def _kernel_constants_remembered(j: int, t_s: float, shape: tuple, a_bytes: bytes, K: int, n: int) -> tuple:
+    """:func:`_kernel_constants` of a constant step for every pair of ``K`` samples ``j`` apart (at most
+    ``K - j`` pairs: the kernel reads the first ``P`` entries of each), remembered like
+    :func:`_constants_of` (the window contracts with the same ones after every pass).  Shared by the calls:
+    the kernel only reads them (writable all the same: a read-only array is another type to numba)."""
+    return _kernel_constants(*_constants_remembered(j, t_s, shape, a_bytes), K - j, n)
+
+
 def _remainder(vk, vl, e4, four_a):
     """Upper bound of ``a tau^2 / 4 - (v_l - v_k)^2 / (4 a)`` over the velocity boxes ``vk``, ``vl``: the
     square's lower bound, divided by ``4 a`` downwards, subtracted upwards (negative: no motion within
@@ -211,11 +230,11 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
                 tau, inv_tau2, e4, four_a = _constants_of_tau((lo[k, None], hi[k, None]), a)
             if compiled:
                 P = k.size
-                half = I.scale(0.5, *tau)
-                per_pair = (_per_pair(v, P) for v in (*tau, *inv_tau2, *half))
-                per_axis = (np.ascontiguousarray(np.broadcast_to(v, (n,)), np.float64) for v in four_a)
-                pair_kernel(x, xd, k.astype(np.int64), j, *per_pair, _per_pair(e4, P, (n,)), *per_axis,
-                            np.empty((P, 8)), empty)
+                if times is None:  # the same constants for every pair, remembered (their numpy cost is per call)
+                    consts = _kernel_constants_remembered(int(j), float(t_s), a.shape, a.tobytes(), K, n)
+                else:
+                    consts = _kernel_constants(tau, inv_tau2, e4, four_a, P, n)
+                pair_kernel(x, xd, k.astype(np.int64), j, *consts, np.empty((P, 8)), empty)
             else:
                 neg = _pair(x, xd, k, k + j, tau, inv_tau2, e4, four_a)
                 empty |= neg.any(axis=(1, 2))
