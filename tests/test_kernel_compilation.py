@@ -28,7 +28,7 @@ from numba.core.registry import CPUDispatcher
 
 import crosscert.verifier.compiled as compiled_pkg
 
-MODULES = ("interval", "tape", "linalg", "contractors", "step", "vectorized", "motion_model", "one_motion")
+MODULES = ("interval", "tape", "linalg", "contractors", "step", "vectorized", "motion_model", "one_motion", "implicit")
 
 
 def _literal(node) -> bool:

@@ -76,3 +76,20 @@ def test_enclosure_of_a_point_system_is_tight():
     y = _solve_refined(Al[point], bl[point]).astype(np.float64)
     scale = np.abs(y).max(axis=1, keepdims=True)
     assert np.all(hi - lo <= 1e-12 * scale), (hi - lo) / scale
+
+
+def test_a_system_holding_a_singular_matrix_is_unbounded():
+    """``A(t) = [[1, 1], [1, t]]``, ``t`` in ``[0.9, 1.1]``, ``b = (1, 1.05)``: ``y_2 = 0.05 / (t - 1)`` is a true
+    solution for every ``t != 1`` of the box, of any size.  With no start box the enclosure has no bound to
+    give: ``[-inf, inf]``, never the largest float (a finite claim the solutions at ``t`` near 1 exceed; the
+    reference gave it until 2026-12-08), in numpy and in the compiled kernels alike."""
+    from crosscert.verifier.compiled.implicit import scratch_size, solve_columns
+
+    Al = np.array([[[1.0, 1.0], [1.0, 0.9]]])
+    Ah = np.array([[[1.0, 1.0], [1.0, 1.1]]])
+    bl = bh = np.array([[1.0, 1.05]])
+    lo, hi = linear_enclosure(Al, Ah, bl, bh)
+    assert np.all(lo == -np.inf) and np.all(hi == np.inf), (lo, hi)
+    yl, yh = np.empty((1, 1, 2)), np.empty((1, 1, 2))
+    solve_columns(Al, Ah, bl[:, None], bh[:, None], yl, yh, 2, np.empty(scratch_size(2)))
+    assert np.all(yl == -np.inf) and np.all(yh == np.inf), (yl, yh)

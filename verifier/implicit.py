@@ -33,6 +33,7 @@ import numpy as np
 from . import interval as I
 from .linalg import imat_ivec, linear_enclosure, pmat_imat, pmat_ivec, point_inverse
 from .one_motion import evaluate_tape
+from .step import kernel_array
 from .tape import Tape
 
 __all__ = ["ImplicitTapes", "krawczyk", "strictly_inside", "inflate_roots", "contract_roots", "root_gradient",
@@ -49,7 +50,8 @@ class ImplicitTapes:
     g : casadi.SX
         ``(n,)`` expression in them.
     compiled : bool
-        Evaluate the tapes by :func:`verifier.one_motion.evaluate_tape`'s compiled kernel (the same floats).
+        Evaluate the tapes by :func:`verifier.one_motion.evaluate_tape`'s compiled kernel and solve the linear
+        systems by :func:`verifier.compiled.implicit.solve_columns` (the same floats).
     """
 
     def __init__(self, x, u, p, g, columns=None, *, compiled: bool = False):
@@ -153,7 +155,7 @@ def root_gradient(tapes: ImplicitTapes, X, U, P, columns):
     """
     Ju, Jp = tapes.evaluate(tapes.tape_jac, [X, U, P])
     cols = list(columns)
-    return _solve_columns(Ju, (-Jp[1][:, :, cols], -Jp[0][:, :, cols]))
+    return _solve_columns(Ju, (-Jp[1][:, :, cols], -Jp[0][:, :, cols]), tapes.compiled)
 
 
 def slope_change(tapes: ImplicitTapes, X, dX, U, P, G):
@@ -178,20 +180,30 @@ def slope_change(tapes: ImplicitTapes, X, dX, U, P, G):
     in that box.
     """
     Ju, JxdX = tapes.evaluate(tapes.tape_path, [X, U, P, dX])
-    ud = linear_enclosure(Ju[0], Ju[1], -JxdX[1], -JxdX[0], sweeps=2)
-    ud = (np.where(np.isnan(ud[0]), -np.inf, ud[0]), np.where(np.isnan(ud[1]), np.inf, ud[1]))
+    ud = _solve_columns(Ju, (-JxdX[1][..., None], -JxdX[0][..., None]), tapes.compiled)
+    ud = (ud[0][..., 0], ud[1][..., 0])
     B, n, c = G[0].shape
     flat = [np.transpose(g, (0, 2, 1)).reshape(B, n * c) for g in G]  # CasADi's column-major order
     dF = tapes.evaluate(tapes.tape_slope_change, [X, U, P, dX, ud, flat])[0]
-    return _solve_columns(Ju, (-dF[1], -dF[0]))
+    return _solve_columns(Ju, (-dF[1], -dF[0]), tapes.compiled)
 
 
-def _solve_columns(A, R):
-    """Enclose ``Y`` with ``A Y = R`` column by column: ``A`` boxes (B, n, n), ``R`` boxes (B, n, c)."""
+def _solve_columns(A, R, compiled: bool = False):
+    """Enclose ``Y`` with ``A Y = R`` column by column: ``A`` boxes (B, n, n), ``R`` boxes (B, n, c); a NaN
+    bound (the arithmetic lost) is unbounded.  ``compiled``: by
+    :func:`verifier.compiled.implicit.solve_columns` (the same floats)."""
     # one matrix per row broadcast over the c right-hand sides: preconditioned once, not c times
     bl = np.transpose(R[0], (0, 2, 1))
     bh = np.transpose(R[1], (0, 2, 1))
-    yl, yh = linear_enclosure(A[0][:, None], A[1][:, None], bl, bh, sweeps=2)
+    if compiled:
+        from .compiled.implicit import scratch_size, solve_columns  # numba loaded on first use only
+
+        B, c, n = bl.shape
+        yl, yh = np.empty((B, c, n)), np.empty((B, c, n))
+        k = kernel_array
+        solve_columns(k(A[0]), k(A[1]), k(bl), k(bh), yl, yh, 2, np.empty(scratch_size(n)))
+    else:
+        yl, yh = linear_enclosure(A[0][:, None], A[1][:, None], bl, bh, sweeps=2)
     yl = np.where(np.isnan(yl), -np.inf, yl)
     yh = np.where(np.isnan(yh), np.inf, yh)
     return np.transpose(yl, (0, 2, 1)), np.transpose(yh, (0, 2, 1))

@@ -149,8 +149,9 @@ def linear_enclosure(Al, Ah, bl, bh, yl=None, yh=None, sweeps: int = 2):
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         denom = I.sub(1.0, 1.0, beta, beta)[0]  # lower bound of 1 - beta
         r = I.div(cmag, cmag, denom, denom)[1]
+    # no bound (NaN included) is +inf itself: never the largest float, which the true solutions of a
+    # system holding a singular matrix exceed
     r = np.where((beta < 1.0) & (denom > 0.0) & np.isfinite(r), r, np.inf)
-    r = np.nan_to_num(r, nan=np.inf)
     if yl is None:
         yl = np.broadcast_to(-r[..., None], cl.shape)
         yh = np.broadcast_to(r[..., None], cl.shape)

@@ -24,6 +24,7 @@ import weakref
 import numpy as np
 
 from .interval import add, cached_jit, dn0, jit, maxn, midpoint, mul, sub, up, up0
+from .contractors import I0
 from .lanes.tape import forward as lane_forward
 from .tape import Program, trig_memo
 
@@ -233,7 +234,7 @@ def tape_points(prog, in_lo, in_hi, out_lo, out_hi, lo, hi, clo, chi, mk, mv, fl
             for r in range(L):
                 clo[a, r] = in_lo[a, s + r]
                 chi[a, r] = in_hi[a, s + r]
-        lane_forward(prog, 0, clo, chi, lo, hi, L, mk, mv, flag)
+        lane_forward(prog, I0, clo, chi, lo, hi, L, mk, mv, flag)
         for e in range(E):
             node = prog.outs[o0 + e]
             for r in range(L):
