@@ -102,6 +102,7 @@ def check(_args) -> list[tuple[str, str]]:
         _timed(cc + ["simulate", "--v-sing", "1.458", "-o", csv])
         _timed(cc + ["check", csv, "--initial-mode", "1", "--no-progress"])  # kernels loaded from the cache once
         r = _timed(cc + ["check", csv, "--initial-mode", "1", "--json", "--no-progress"])
+        _timed(cc + ["sweep", "--no-progress", "--out", str(Path(tmp) / "sweep0")])  # its own kernels, once
         sweep = _timed(cc + ["sweep", "--no-progress", "--out", str(Path(tmp) / "sweep")])
     verdict = json.loads(r["stdout"].strip().splitlines()[-1])["verdict"]
     return [("`crosscert check crossing.csv --initial-mode 1` (1.458 m/s simulated), whole command",
