@@ -88,12 +88,12 @@ def _kernel_constants(tau, inv_tau2, e4, four_a, P: int, n: int) -> tuple:
 
 
 @functools.lru_cache(maxsize=64)
-def _kernel_constants_remembered(j: int, t_s: float, shape: tuple, a_bytes: bytes, K: int, n: int) -> tuple:
-    """:func:`_kernel_constants` of a constant step for every pair of ``K`` samples ``j`` apart (at most
-    ``K - j`` pairs: the kernel reads the first ``P`` entries of each), remembered like
-    :func:`_constants_of` (the window contracts with the same ones after every pass).  Shared by the calls:
-    the kernel only reads them (writable all the same: a read-only array is another type to numba)."""
-    return _kernel_constants(*_constants_remembered(j, t_s, shape, a_bytes), K - j, n)
+def _kernel_constants_remembered(j: int, t_s: float, shape: tuple, a_bytes: bytes, size: int, n: int) -> tuple:
+    """:func:`_kernel_constants` of a constant step for ``size`` pairs ``j`` samples apart (the kernel reads the
+    first ``P`` entries of each), remembered like :func:`_constants_of` (the window contracts with the same ones
+    after every pass).  Shared by the calls: the kernel only reads them (writable all the same: a read-only
+    array is another type to numba)."""
+    return _kernel_constants(*_constants_remembered(j, t_s, shape, a_bytes), size, n)
 
 
 def _remainder(vk, vl, e4, four_a):
@@ -231,7 +231,9 @@ def contract_tubes(x, xd, t_s: float, a_max, offsets=MOTION_OFFSETS, *, compiled
             if compiled:
                 P = k.size
                 if times is None:  # the same constants for every pair, remembered (their numpy cost is per call)
-                    consts = _kernel_constants_remembered(int(j), float(t_s), a.shape, a.tobytes(), K, n)
+                    # for the power of two of pairs at or above K - j: a window growing sample by sample hits too
+                    size = 1 << (K - j - 1).bit_length()
+                    consts = _kernel_constants_remembered(int(j), float(t_s), a.shape, a.tobytes(), size, n)
                 else:
                     consts = _kernel_constants(tau, inv_tau2, e4, four_a, P, n)
                 pair_kernel(x, xd, k.astype(np.int64), j, *consts, np.empty((P, 8)), empty)
