@@ -27,12 +27,12 @@ from problems import CATALOGUE, default_settings, interval_model, run_of, simula
 from crosscert.verifier import interval as I
 from crosscert.verifier.compiled.interval import NO_WRAPPERS, Kernel
 
-MODULES = ("interval", "tape", "linalg", "contractors", "step", "motion_model", "vectorized", "one_motion")
+MODULES = ("interval", "tape", "linalg", "contractors", "step", "motion_model", "vectorized", "one_motion", "implicit")
 
 #: The dispatchers called from Python, with numba's wrappers and cached on disk with all they call.
 ENTRY_POINTS = {
     "contractors.pose_solutions", "motion_model.pair_kernel", "step.run_slot", "step.run_hypotheses_parallel",
-    "one_motion.dual_bound", "one_motion.taylor_rows",
+    "one_motion.dual_bound", "one_motion.taylor_rows", "one_motion.tape_points", "implicit.solve_columns",
     "vectorized._unary_loop", "vectorized._binary_loop", "vectorized._scalar_loop", "vectorized._scale_loop",
     "vectorized._pown_loop",
 }
