@@ -20,8 +20,8 @@ and parameters ``p`` in a box ``[p]``:
   the slopes at two samples without the cancellation of two wide enclosures.
 
 Every operation is the outward-rounded interval arithmetic of
-:mod:`verifier.interval` (the tapes optionally by a kernel that computes the same
-floats, :class:`ImplicitTapes`); batches are rows, as in :mod:`verifier.contractors`.
+:mod:`verifier.interval` (the tapes and the linear systems optionally by kernels that
+compute the same floats, :class:`ImplicitTapes`); batches are rows, as in :mod:`verifier.contractors`.
 Nothing here names a robot.
 """
 
